@@ -3,12 +3,27 @@
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import sys
+
+from shm_ros import __version__
+from shm_ros.commands import COMMANDS
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="shm-ros", description=__doc__)
-    parser.add_subparsers(dest="command", required=True)
+    parser = argparse.ArgumentParser(
+        prog="shm-ros",
+        description="Structural health monitoring on ROS 2: recordings -> windows -> modes -> "
+        "tracked modes -> calibrated model -> predictions -> missing physics.",
+    )
+    parser.add_argument("--version", action="version", version=f"shm-ros {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        module_name = f"shm_ros.commands.{name}"
+        if importlib.util.find_spec(module_name) is None:
+            continue  # stage not shipped in this build
+        importlib.import_module(module_name).add_parser(sub)
     return parser
 
 

@@ -1,0 +1,1 @@
+"""Outside formats: rosbag2 bags, structure YAML, importers of other recording formats."""

@@ -1,0 +1,184 @@
+"""rosbag2 bags (MCAP or sqlite3) in and out, without a ROS installation, through ``rosbags``.
+
+Topics follow contracts section 1: ``<prefix>/accel/<sensor_id>`` (``sensor_msgs/msg/Imu``, one
+sample per message), ``<prefix>/accel_block`` (``shm_interfaces/msg/AccelBlock``) and
+``<prefix>/temperature/<sensor_id>`` (``sensor_msgs/msg/Temperature``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from shm_ros.io.typestore import typestore
+
+IMU = "sensor_msgs/msg/Imu"
+TEMPERATURE = "sensor_msgs/msg/Temperature"
+ACCEL_BLOCK = "shm_interfaces/msg/AccelBlock"
+
+
+class BagError(RuntimeError):
+    """A bag cannot be read or written; the message names the bag and what is wrong."""
+
+
+def split_ns(t_ns: int) -> tuple[int, int]:
+    sec, nsec = divmod(int(t_ns), 1_000_000_000)
+    return sec, nsec
+
+
+def stamp_ns(stamp: Any) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+class BagWriter:
+    """Writes contract topics (and any registered type) into a new rosbag2 bag.
+
+    ``storage`` is ``"mcap"`` (default, what ``ros2 bag record`` writes) or ``"sqlite3"``;
+    ``compress=True`` zstd-compresses MCAP chunks (``--storage-preset-profile zstd_fast``).
+    """
+
+    def __init__(self, path: str | Path, *, storage: str = "mcap", compress: bool = False,
+                 frame_id: str = "") -> None:
+        from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
+
+        self.path = Path(path)
+        plugin = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}.get(storage)
+        if plugin is None:
+            raise BagError(f"{self.path}: unknown storage {storage!r} (mcap or sqlite3)")
+        self._writer = Writer(self.path, version=9, storage_plugin=plugin)
+        if compress:
+            mode = CompressionMode.STORAGE if storage == "mcap" else CompressionMode.MESSAGE
+            self._writer.set_compression(mode, CompressionFormat.ZSTD)
+        self._ts = typestore()
+        self._connections: dict[str, Any] = {}
+        self._frame_id = frame_id
+        self._types = self._ts.types
+
+    def __enter__(self) -> BagWriter:
+        self._writer.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._writer.close()
+
+    def connection(self, topic: str, msgtype: str) -> Any:
+        conn = self._connections.get(topic)
+        if conn is None:
+            conn = self._writer.add_connection(
+                topic, msgtype, typestore=self._ts, rihs01=self._ts.hash_rihs01(msgtype)
+            )
+            self._connections[topic] = conn
+        return conn
+
+    def write(self, topic: str, msgtype: str, t_ns: int, msg: Any) -> None:
+        """Write any message object of the typestore."""
+        self._writer.write(self.connection(topic, msgtype), int(t_ns), self._ts.serialize_cdr(msg, msgtype))
+
+    def write_cdr(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
+        self._writer.write(self.connection(topic, msgtype), int(t_ns), data)
+
+    def header(self, t_ns: int) -> Any:
+        sec, nsec = split_ns(t_ns)
+        return self._types["std_msgs/msg/Header"](
+            stamp=self._types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),
+            frame_id=self._frame_id,
+        )
+
+    def accel_block(self, topic: str, t_ns: int, sample_rate_hz: float,
+                    channel_names: Sequence[str], samples: np.ndarray, units: str = "m/s^2") -> None:
+        """One ``AccelBlock``: ``samples`` is (n_samples, n_channels); ``t_ns`` the first sample."""
+        samples = np.ascontiguousarray(samples, dtype=np.float64)
+        if samples.ndim != 2 or samples.shape[1] != len(channel_names):
+            raise BagError(f"{self.path}: {topic}: samples must be (n, {len(channel_names)})")
+        msg = self._types[ACCEL_BLOCK](
+            header=self.header(t_ns), sample_rate_hz=float(sample_rate_hz),
+            channel_names=list(channel_names), samples=samples.reshape(-1), units=units,
+        )
+        self.write(topic, ACCEL_BLOCK, t_ns, msg)
+
+    def imu_series(self, topic: str, stamps_ns: np.ndarray, accel_xyz: np.ndarray,
+                   receive_ns: np.ndarray | None = None) -> None:
+        """One ``Imu`` message per sample; ``accel_xyz`` is (n, 3) in m/s^2."""
+        Imu = self._types[IMU]
+        V3 = self._types["geometry_msgs/msg/Vector3"]
+        Q = self._types["geometry_msgs/msg/Quaternion"]
+        zeros9 = np.zeros(9)
+        cov_unknown = np.zeros(9)
+        cov_unknown[0] = -1.0  # REP-145: orientation not provided
+        receive_ns = stamps_ns if receive_ns is None else receive_ns
+        conn = self.connection(topic, IMU)
+        ser = self._ts.serialize_cdr
+        for t, rt, (ax, ay, az) in zip(stamps_ns.tolist(), receive_ns.tolist(), accel_xyz.tolist()):
+            msg = Imu(
+                header=self.header(t), orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=cov_unknown, angular_velocity=V3(x=0.0, y=0.0, z=0.0),
+                angular_velocity_covariance=zeros9, linear_acceleration=V3(x=ax, y=ay, z=az),
+                linear_acceleration_covariance=zeros9,
+            )
+            self._writer.write(conn, int(rt), ser(msg, IMU))
+
+    def temperature(self, topic: str, t_ns: int, value_c: float, variance: float = 0.0) -> None:
+        msg = self._types[TEMPERATURE](header=self.header(t_ns), temperature=float(value_c),
+                                      variance=float(variance))
+        self.write(topic, TEMPERATURE, t_ns, msg)
+
+
+@dataclass
+class BagMessage:
+    topic: str
+    msgtype: str
+    receive_ns: int
+    data: bytes
+
+    def decode(self) -> Any:
+        return typestore().deserialize_cdr(self.data, self.msgtype)
+
+
+def topic_kind(topic: str, msgtype: str) -> tuple[str, str] | None:
+    """``("imu", sensor_id)``, ``("block", "")``, ``("temperature", sensor_id)`` or None (ignored)."""
+    parts = topic.rstrip("/").split("/")
+    if msgtype == IMU and len(parts) >= 2 and parts[-2] == "accel":
+        return "imu", parts[-1]
+    if msgtype == ACCEL_BLOCK and parts[-1] == "accel_block":
+        return "block", ""
+    if msgtype == TEMPERATURE and len(parts) >= 2 and parts[-2] == "temperature":
+        return "temperature", parts[-1]
+    return None
+
+
+def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
+    """Raw messages of a bag in receive-time order (CDR bytes; ``decode()`` when needed).
+
+    Unknown message types are skipped; a truncated or unreadable bag raises :class:`BagError`
+    naming the bag, after every message read so far has been yielded.
+    """
+    from rosbags.highlevel import AnyReader  # handles sqlite3 and MCAP, compressed or not
+
+    path = Path(path)
+    if not path.exists():
+        raise BagError(f"{path}: no such bag")
+    wanted = None if topics is None else set(topics)
+    try:
+        with AnyReader([path], default_typestore=typestore()) as reader:
+            conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+            for conn, t_ns, raw in reader.messages(connections=conns):
+                yield BagMessage(conn.topic, conn.msgtype, int(t_ns), bytes(raw))
+    except BagError:
+        raise
+    except Exception as exc:  # rosbags raises several error types for damaged bags
+        raise BagError(f"{path}: cannot read bag: {exc}") from exc
+
+
+def bag_topics(path: str | Path) -> dict[str, str]:
+    """``{topic: msgtype}`` of a bag."""
+    from rosbags.highlevel import AnyReader
+
+    try:
+        with AnyReader([Path(path)], default_typestore=typestore()) as reader:
+            return {c.topic: c.msgtype for c in reader.connections}
+    except Exception as exc:
+        raise BagError(f"{path}: cannot read bag: {exc}") from exc
