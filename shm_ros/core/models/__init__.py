@@ -1,0 +1,1 @@
+"""Structural models: girder on bearings, shear building, user matrices; reduction and expansion."""
