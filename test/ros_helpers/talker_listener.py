@@ -1,0 +1,48 @@
+"""A minimal talker/listener pair for the DDS smoke test (one process each).
+
+``talk N`` publishes N sensor_msgs/Imu with increasing stamps once a listener is matched;
+``listen N`` prints the stamps it received, in order, then exits.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+
+def main(role: str, n: int) -> int:
+    import rclpy
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import Imu
+
+    qos = QoSProfile(depth=n, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE)
+    rclpy.init()
+    node = rclpy.create_node(f"smoke_{role}")
+    deadline = time.monotonic() + 60
+    if role == "talk":
+        pub = node.create_publisher(Imu, "/smoke/accel/s1", qos)
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        for k in range(n):
+            msg = Imu()
+            msg.header.stamp.sec = 1_700_000_000 + k
+            msg.linear_acceleration.z = 9.80665 + k * 1e-3
+            pub.publish(msg)
+        # stay until the listener is gone (it leaves after receiving everything)
+        while pub.get_subscription_count() > 0 and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        ok = time.monotonic() < deadline
+    else:
+        got: list[int] = []
+        node.create_subscription(Imu, "/smoke/accel/s1", lambda m: got.append(m.header.stamp.sec), qos)
+        while len(got) < n and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.1)
+        print(" ".join(str(s) for s in got))
+        ok = len(got) == n
+    node.destroy_node()
+    rclpy.shutdown()
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1], int(sys.argv[2])))
