@@ -1,0 +1,27 @@
+"""`shm-ros run CONFIG.yaml`: start the node graph (one process per node, or all in one)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="start the node graph from a YAML config", description=__doc__)
+    p.add_argument("config", help="graph config (see config/pipeline.yaml)")
+    p.add_argument("--single-process", action="store_true",
+                   help="run every node in this process (overrides graph.mode)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from shm_ros.ros.supervisor import ConfigError, Supervisor, load_graph_config, run_single_process
+
+    try:
+        config = load_graph_config(args.config)
+    except ConfigError as exc:
+        print(f"shm-ros run: {exc}", file=sys.stderr)
+        return 2
+    if args.single_process or config.mode == "single":
+        return run_single_process(config)
+    return Supervisor(config, log=lambda s: print(s, flush=True)).run()

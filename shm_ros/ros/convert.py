@@ -1,0 +1,135 @@
+"""Message <-> dataclass conversion, in one place.
+
+Works on rclpy message classes (``shm_interfaces.msg``); numpy arrays are assigned to array fields
+directly (no per-element Python loops on the 6 MB windows).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from shm_ros.core.types import ModalEstimate, Mode, Window
+
+NS = 1_000_000_000
+
+
+def time_to_ns(t: Any) -> int:
+    return int(t.sec) * NS + int(t.nanosec)
+
+
+def ns_to_time(t_ns: int, cls: type | None = None) -> Any:
+    if cls is None:
+        from builtin_interfaces.msg import Time as cls
+    sec, nsec = divmod(int(t_ns), NS)
+    return cls(sec=sec, nanosec=nsec)
+
+
+def _set_temperature(msg: Any, temperature_c: float | None) -> None:
+    msg.has_temperature = temperature_c is not None and math.isfinite(temperature_c)
+    msg.temperature_c = float(temperature_c) if msg.has_temperature else float("nan")
+
+
+def _get_temperature(msg: Any) -> float | None:
+    return float(msg.temperature_c) if msg.has_temperature else None
+
+
+def window_to_msg(w: Window, frame_id: str = "") -> Any:
+    from shm_interfaces.msg import Window as WindowMsg
+
+    msg = WindowMsg()
+    msg.header.stamp = ns_to_time(w.start_ns)
+    msg.header.frame_id = frame_id
+    msg.window_id = w.window_id
+    msg.start = ns_to_time(w.start_ns)
+    msg.end = ns_to_time(w.end_ns)
+    msg.sample_rate_hz = float(w.sample_rate_hz)
+    msg.channel_names = list(w.channel_names)
+    msg.n_samples = w.n_samples
+    msg.samples = np.ascontiguousarray(w.samples, dtype=np.float64).reshape(-1)
+    if w.flags is not None and np.any(w.flags):
+        msg.flags = np.ascontiguousarray(w.flags, dtype=np.uint8).reshape(-1)
+    msg.channel_status = list(w.channel_status or [])
+    _set_temperature(msg, w.temperature_c)
+    msg.is_event = bool(w.is_event)
+    msg.pga_m_s2 = float(w.pga_m_s2)
+    msg.input_channel = w.input_channel or ""
+    msg.notes = list(w.notes)
+    return msg
+
+
+def window_from_msg(msg: Any) -> Window:
+    n, c = int(msg.n_samples), len(msg.channel_names)
+    samples = np.frombuffer(msg.samples, dtype=np.float64) if len(msg.samples) else np.zeros(0)
+    if samples.size != n * c:
+        raise ValueError(f"Window {msg.window_id!r}: samples has {samples.size} values, "
+                         f"expected n_samples*channels = {n}*{c}")
+    flags = None
+    if len(msg.flags):
+        flags = np.frombuffer(msg.flags, dtype=np.uint8)
+        if flags.size != n * c:
+            raise ValueError(f"Window {msg.window_id!r}: flags has {flags.size} values, expected {n * c}")
+        flags = flags.reshape(n, c).copy()
+    return Window(
+        window_id=msg.window_id,
+        start_ns=time_to_ns(msg.start),
+        sample_rate_hz=float(msg.sample_rate_hz),
+        channel_names=list(msg.channel_names),
+        samples=samples.reshape(n, c).copy(),
+        flags=flags,
+        channel_status=list(msg.channel_status) or None,
+        temperature_c=_get_temperature(msg),
+        is_event=bool(msg.is_event),
+        pga_m_s2=float(msg.pga_m_s2),
+        input_channel=msg.input_channel or None,
+        notes=list(msg.notes),
+    )
+
+
+def mode_to_msg(m: Mode) -> Any:
+    from shm_interfaces.msg import Mode as ModeMsg
+
+    return ModeMsg(
+        frequency_hz=float(m.frequency_hz), damping_ratio=float(m.damping_ratio), mpc=float(m.mpc),
+        frequency_std_hz=float(m.frequency_std_hz), damping_std=float(m.damping_std),
+        n_poles=int(m.n_poles), mode_shape=np.asarray(m.mode_shape, dtype=np.float64),
+        mode_number=int(m.mode_number),
+    )
+
+
+def mode_from_msg(msg: Any) -> Mode:
+    return Mode(
+        frequency_hz=msg.frequency_hz, damping_ratio=msg.damping_ratio,
+        mode_shape=np.array(msg.mode_shape, dtype=np.float64), mpc=msg.mpc,
+        frequency_std_hz=msg.frequency_std_hz, damping_std=msg.damping_std,
+        n_poles=int(msg.n_poles), mode_number=int(msg.mode_number),
+    )
+
+
+def estimate_to_msg(e: ModalEstimate, frame_id: str = "") -> Any:
+    from shm_interfaces.msg import ModalEstimate as EstimateMsg
+
+    msg = EstimateMsg()
+    msg.header.stamp = ns_to_time(e.start_ns)
+    msg.header.frame_id = frame_id
+    msg.window_id = e.window_id
+    msg.start = ns_to_time(e.start_ns)
+    msg.end = ns_to_time(e.end_ns)
+    _set_temperature(msg, e.temperature_c)
+    msg.method = e.method
+    msg.sensor_ids = list(e.sensor_ids)
+    msg.modes = [mode_to_msg(m) for m in e.modes]
+    msg.covariate_names = list(e.covariates)
+    msg.covariate_values = [float(v) for v in e.covariates.values()]
+    return msg
+
+
+def estimate_from_msg(msg: Any) -> ModalEstimate:
+    return ModalEstimate(
+        window_id=msg.window_id, start_ns=time_to_ns(msg.start), end_ns=time_to_ns(msg.end),
+        sensor_ids=list(msg.sensor_ids), modes=[mode_from_msg(m) for m in msg.modes],
+        method=msg.method, temperature_c=_get_temperature(msg),
+        covariates=dict(zip(msg.covariate_names, (float(v) for v in msg.covariate_values))),
+    )

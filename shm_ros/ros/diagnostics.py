@@ -1,0 +1,44 @@
+"""``/diagnostics`` publishing shared by every node (diagnostic_msgs/DiagnosticArray)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+LEVELS = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN, "error": DiagnosticStatus.ERROR,
+          "stale": DiagnosticStatus.STALE}
+
+
+class Diagnostics:
+    """Collects status entries of one node and publishes them as one DiagnosticArray."""
+
+    def __init__(self, node: Any, hardware_id: str = "shm_ros") -> None:
+        from shm_ros.ros.qos import pipeline_qos
+
+        self._node = node
+        self._pub = node.create_publisher(DiagnosticArray, "/diagnostics", pipeline_qos())
+        self._hardware_id = hardware_id
+        self._pending: list[DiagnosticStatus] = []
+
+    def report(self, level: str, message: str, name: str = "", **values: Any) -> None:
+        """Queue one status; ``name`` says what it is about (a topic, a field, a stage)."""
+        status = DiagnosticStatus(
+            level=LEVELS[level], name=f"{self._node.get_name()}: {name}" if name else self._node.get_name(),
+            message=message[:500], hardware_id=self._hardware_id,
+            values=[KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
+        )
+        self._pending.append(status)
+        log = {"ok": self._node.get_logger().info, "warn": self._node.get_logger().warning}.get(
+            level, self._node.get_logger().error)
+        if level != "ok":
+            log(f"{name}: {message}" if name else message)
+
+    def publish(self) -> None:
+        if not self._pending:
+            return
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        msg.status = self._pending
+        self._pub.publish(msg)
+        self._pending = []

@@ -1,0 +1,60 @@
+"""recorder: writes pipeline topics (CDR as received) into an output bag."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from rclpy.node import Node
+
+from shm_ros.io.bags import BagWriter
+from shm_ros.ros import topics
+from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.qos import latched_qos, pipeline_qos
+
+DEFAULT_TOPICS = [topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES, topics.POSTERIOR,
+                  topics.PREDICTION, topics.VERDICT, topics.DIAGNOSTICS]
+LATCHED = {topics.POSTERIOR, topics.VERDICT}
+
+
+class RecorderNode(Node):
+    def __init__(self, name: str = "recorder", parameters: dict[str, Any] | None = None) -> None:
+        super().__init__(name, parameter_overrides=overrides(parameters))
+        self.declare_parameter("output", "shm_output_bag")
+        self.declare_parameter("topics", DEFAULT_TOPICS)
+        self.declare_parameter("storage", "mcap")
+        out = Path(self.get_parameter("output").value)
+        self.writer = BagWriter(out, storage=self.get_parameter("storage").value)
+        self.writer.__enter__()
+        self.count = 0
+        for topic in self.get_parameter("topics").value:
+            msgtype = topics.TYPES.get(topic)
+            if msgtype is None:
+                self.get_logger().error(f"parameter topics: no known type for {topic!r}; not recorded")
+                continue
+            qos = latched_qos() if topic in LATCHED else pipeline_qos()
+            self.create_subscription(topics.message_class(msgtype), topic,
+                                     self._writer_for(topic, msgtype), qos, raw=True)
+        self.get_logger().info(f"recording to {out}")
+
+    def _writer_for(self, topic: str, msgtype: str):
+        def write(data: bytes) -> None:
+            self.writer.write_cdr(topic, msgtype, self.get_clock().now().nanoseconds, data)
+            self.count += 1
+        return write
+
+    def close(self) -> None:
+        self.writer.__exit__(None, None, None)
+        self.get_logger().info(f"recorded {self.count} messages")
+
+
+def make_node(name: str, parameters: dict[str, Any]) -> RecorderNode:
+    return RecorderNode(name, parameters)
+
+
+def main(args: list[str] | None = None) -> int:
+    return spin(lambda: RecorderNode(), args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

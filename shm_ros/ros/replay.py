@@ -1,0 +1,133 @@
+"""Replay a rosbag2 bag through the running graph, in real time, xN, or as fast as it keeps up.
+
+Messages are published as the CDR bytes stored in the bag (no decode/re-encode). Flow control: the
+ingest node publishes how many recording messages it has taken (``/shm/ingest/received``); with
+``rate=0`` the replayer keeps at most ``credit`` messages in flight, so nothing overflows a queue and
+nothing is dropped even on best-effort subscriptions. Publishing flat out with KEEP_LAST would drop
+silently once the subscriber lags.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String, UInt64
+
+from shm_ros.io.bags import bag_topics, read_messages, topic_kind
+from shm_ros.ros import topics
+from shm_ros.ros.qos import latched_qos, pipeline_qos
+
+
+@dataclass
+class ReplayResult:
+    published: int = 0
+    acknowledged: int = 0
+    skipped_topics: dict[str, str] = field(default_factory=dict)
+    wall_s: float = 0.0
+    bag_span_s: float = 0.0
+
+    @property
+    def lost(self) -> int:
+        return max(self.published - self.acknowledged, 0)
+
+
+class Replayer(Node):
+    def __init__(self, credit: int = 2000) -> None:
+        super().__init__("shm_replay")
+        self.credit = credit
+        self.acknowledged = 0
+        self.ack_seen = False
+        self.create_subscription(UInt64, topics.INGEST_RECEIVED, self._on_ack, pipeline_qos())
+        self.done_pub = self.create_publisher(String, topics.REPLAY_DONE, latched_qos())
+        self.pubs: dict[str, object] = {}
+
+    def _on_ack(self, msg: UInt64) -> None:
+        self.ack_seen = True
+        self.acknowledged = max(self.acknowledged, int(msg.data))
+
+    def publisher(self, topic: str, msgtype: str):
+        pub = self.pubs.get(topic)
+        if pub is None:
+            cls = topics.message_class(msgtype)
+            # Reliable, deep: matches best-effort (sensor-data) and reliable subscriptions.
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(self.credit, 10),
+                             reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+            pub = self.create_publisher(cls, topic, qos)
+            self.pubs[topic] = pub
+        return pub
+
+
+def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 2000, wait_s: float = 10.0,
+               drain_timeout_s: float = 60.0, recording_only: bool = True,
+               progress: bool = False) -> ReplayResult:
+    """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
+
+    ``rate``: 1.0 = real time, N = N x real time, 0 = as fast as the graph acknowledges.
+    ``recording_only``: replay only contract recording topics (accelerometers, blocks, temperature).
+    """
+    node = Replayer(credit)
+    result = ReplayResult()
+    try:
+        # Publishers first (ingest discovers recording topics by polling the graph), then wait for
+        # every recording topic to have a subscriber and for the ingest node's acknowledgements.
+        for topic, msgtype in bag_topics(path).items():
+            if recording_only and topic_kind(topic, msgtype) is None:
+                result.skipped_topics[topic] = msgtype
+                continue
+            try:
+                node.publisher(topic, msgtype)
+            except (ImportError, AttributeError):
+                result.skipped_topics[topic] = f"{msgtype} (type not available)"
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.05)
+            if all(p.get_subscription_count() > 0 for p in node.pubs.values()) and (
+                    rate > 0 or node.ack_seen or node.count_publishers(topics.INGEST_RECEIVED) > 0):
+                break
+        flow = rate <= 0 and node.count_publishers(topics.INGEST_RECEIVED) > 0
+        if rate <= 0 and not flow:
+            node.get_logger().warning("no ingest acknowledgements: replaying without flow control")
+        t0_wall = time.monotonic()
+        t0_bag = last_bag = None
+        start_ack = node.acknowledged
+        last_report = t0_wall
+        for k, m in enumerate(read_messages(path, topics=list(node.pubs))):
+            t0_bag = m.receive_ns if t0_bag is None else t0_bag
+            last_bag = m.receive_ns
+            if rate > 0:
+                due = t0_wall + (m.receive_ns - t0_bag) / 1e9 / rate
+                while (delay := due - time.monotonic()) > 0:
+                    rclpy.spin_once(node, timeout_sec=min(delay, 0.05))
+            elif flow:
+                while result.published - (node.acknowledged - start_ack) >= credit:
+                    rclpy.spin_once(node, timeout_sec=0.01)
+            node.pubs[m.topic].publish(m.data)
+            result.published += 1
+            if k % 200 == 0:
+                rclpy.spin_once(node, timeout_sec=0)
+            if progress and time.monotonic() - last_report > 2.0:
+                last_report = time.monotonic()
+                node.get_logger().info(f"replayed {k + 1} messages")
+        # Drain: wait until the graph has taken everything that was sent.
+        if flow or node.ack_seen:
+            end = time.monotonic() + drain_timeout_s
+            while node.acknowledged - start_ack < result.published and time.monotonic() < end:
+                rclpy.spin_once(node, timeout_sec=0.05)
+            result.acknowledged = node.acknowledged - start_ack
+        else:
+            result.acknowledged = result.published
+        result.wall_s = time.monotonic() - t0_wall
+        if t0_bag is not None:
+            result.bag_span_s = (last_bag - t0_bag) / 1e9
+        node.done_pub.publish(String(data=str(path)))
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            rclpy.spin_once(node, timeout_sec=0.05)
+    finally:
+        node.destroy_node()
+    return result

@@ -1,0 +1,197 @@
+"""Start the node graph from a YAML config: one process per node (restarted if it crashes), or all
+nodes in one process. There is no ``ros2 launch`` here, so this plays its part.
+
+Config::
+
+    graph: {mode: processes, restart: true, max_restarts: 5}
+    nodes:
+      ingest:   {parameters: {structure: bridge.yaml, window_s: 600.0}}
+      identify: {parameters: {method: ssi-cov}}
+
+Each node runs as ``python -m shm_ros.ros.<kind>_node --ros-args --params-file FILE``; ``kind``
+defaults to the key (``kind:`` overrides it, so two identify nodes can run side by side).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+NODE_KINDS = ("ingest", "identify", "recorder")
+
+
+class ConfigError(ValueError):
+    """The graph config is invalid; the message names the file and the field."""
+
+
+@dataclass
+class NodeSpec:
+    name: str
+    kind: str
+    parameters: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class GraphConfig:
+    nodes: list[NodeSpec]
+    mode: str = "processes"
+    restart: bool = True
+    max_restarts: int = 5
+    source: str = "<dict>"
+
+
+def load_graph_config(path_or_dict: str | Path | dict) -> GraphConfig:
+    if isinstance(path_or_dict, dict):
+        raw, source = path_or_dict, "<dict>"
+    else:
+        source = str(path_or_dict)
+        try:
+            raw = yaml.safe_load(Path(path_or_dict).read_text()) or {}
+        except (OSError, yaml.YAMLError) as exc:
+            raise ConfigError(f"{source}: cannot read graph config: {exc}") from exc
+    graph = raw.get("graph", {}) or {}
+    mode = graph.get("mode", "processes")
+    if mode not in ("processes", "single"):
+        raise ConfigError(f"{source}: graph.mode must be 'processes' or 'single', not {mode!r}")
+    nodes = []
+    for name, spec in (raw.get("nodes") or {}).items():
+        spec = spec or {}
+        kind = spec.get("kind", name)
+        if kind not in NODE_KINDS:
+            raise ConfigError(f"{source}: nodes.{name}.kind: unknown node kind {kind!r} "
+                              f"(known: {', '.join(NODE_KINDS)})")
+        params = spec.get("parameters", {}) or {}
+        if not isinstance(params, dict):
+            raise ConfigError(f"{source}: nodes.{name}.parameters must be a mapping")
+        nodes.append(NodeSpec(name, kind, params))
+    if not nodes:
+        raise ConfigError(f"{source}: no nodes")
+    return GraphConfig(nodes, mode, bool(graph.get("restart", True)),
+                       int(graph.get("max_restarts", 5)), source)
+
+
+class Supervisor:
+    """Runs each node as a child process; restarts a crashed one; SIGINT stops all cleanly."""
+
+    def __init__(self, config: GraphConfig, log=print) -> None:
+        self.config = config
+        self.log = log
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.restarts: dict[str, int] = {n.name: 0 for n in config.nodes}
+        self._stopping = False
+        self._tmp = tempfile.TemporaryDirectory(prefix="shm-ros-graph-")
+
+    def _params_file(self, node: NodeSpec) -> Path:
+        path = Path(self._tmp.name) / f"{node.name}.yaml"
+        path.write_text(yaml.safe_dump({node.name: {"ros__parameters": node.parameters}}))
+        return path
+
+    def command(self, node: NodeSpec) -> list[str]:
+        return [sys.executable, "-m", f"shm_ros.ros.{node.kind}_node", "--ros-args",
+                "-r", f"__node:={node.name}", "--params-file", str(self._params_file(node))]
+
+    def start(self, node: NodeSpec) -> None:
+        self.procs[node.name] = subprocess.Popen(self.command(node), env=dict(os.environ))
+        self.log(f"[supervisor] started {node.name} (pid {self.procs[node.name].pid})")
+
+    def start_all(self) -> None:
+        for node in self.config.nodes:
+            self.start(node)
+
+    def poll(self) -> None:
+        """Restart nodes that died while the graph is not being stopped."""
+        for node in self.config.nodes:
+            proc = self.procs.get(node.name)
+            if proc is None or proc.poll() is None or self._stopping:
+                continue
+            code = proc.returncode
+            if self.config.restart and self.restarts[node.name] < self.config.max_restarts:
+                self.restarts[node.name] += 1
+                self.log(f"[supervisor] {node.name} exited with {code}; restarting "
+                         f"({self.restarts[node.name]}/{self.config.max_restarts})")
+                self.start(node)
+            else:
+                self.log(f"[supervisor] {node.name} exited with {code}; not restarting")
+                self.procs.pop(node.name)
+
+    def stop_all(self, timeout: float = 10.0) -> int:
+        """SIGINT every child, wait, escalate; 0 when all stopped cleanly."""
+        self._stopping = True
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        worst = 0
+        end = time.monotonic() + timeout
+        for name, proc in self.procs.items():
+            try:
+                code = proc.wait(timeout=max(end - time.monotonic(), 0.1))
+            except subprocess.TimeoutExpired:
+                proc.terminate()
+                try:
+                    code = proc.wait(timeout=3)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    code = proc.wait()
+                self.log(f"[supervisor] {name} did not stop on SIGINT")
+                worst = 1
+            if code not in (0, -signal.SIGINT, 130):
+                self.log(f"[supervisor] {name} stopped with exit code {code}")
+                worst = 1
+        self._tmp.cleanup()
+        return worst
+
+    def run(self) -> int:
+        """Start, watch, and stop on SIGINT/SIGTERM; returns the exit code."""
+        stop = {"flag": False}
+
+        def _on_signal(signum, frame):
+            stop["flag"] = True
+
+        previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            self.start_all()
+            while not stop["flag"]:
+                self.poll()
+                time.sleep(0.2)
+        finally:
+            code = self.stop_all()
+            for s, h in previous.items():
+                signal.signal(s, h)
+        self.log("[supervisor] all nodes stopped")
+        return code
+
+
+def run_single_process(config: GraphConfig) -> int:
+    """All nodes in one process and one executor (small deployments)."""
+    import importlib
+
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    rclpy.init()
+    executor = SingleThreadedExecutor()
+    nodes = []
+    try:
+        for spec in config.nodes:
+            module = importlib.import_module(f"shm_ros.ros.{spec.kind}_node")
+            node = module.make_node(spec.name, spec.parameters)
+            nodes.append(node)
+            executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
