@@ -7,6 +7,10 @@ model kind here is linear in those factors:
 
 (a parameter acts on K, on M, or on neither, e.g. a damping factor). Keeping that form explicit lets
 the updating core evaluate many theta at once and lets IIRS reduction work on the same terms.
+
+Batched helpers (``stiffness_batch``, ``mass_batch``, ``modes_batch``) take ``thetas`` of shape
+``(B, n_parameters)`` and return stacked ``(B, n, n)`` arrays, so likelihoods can evaluate thousands
+of parameter vectors per call.
 """
 
 from __future__ import annotations
@@ -25,11 +29,24 @@ class ModalSolution:
 
 
 @dataclass
+class BatchModalSolution:
+    """Lowest modes for a batch of parameter vectors."""
+
+    frequencies_hz: np.ndarray  # (B, n_modes)
+    shapes: np.ndarray  # (B, n_dof, n_modes), mass-normalised
+
+
+@dataclass
 class AffineModel:
     """A structural model in affine form, with named DOFs and sensor locations.
 
     ``K_terms[i]`` / ``M_terms[i]`` belong to ``parameter_names[i]`` (zero matrices or None where the
     parameter does not act on that matrix). ``theta`` = 1 everywhere is the nominal model.
+
+    Sensors: ``sensor_rows[id]`` is the observation row (n_dof,) that reads a sensor from the DOF
+    vector (a unit row for a sensor at a DOF, Hermite shape-function values for a girder sensor
+    between nodes); ``sensor_dofs[id]`` is filled only for sensors that sit exactly on a DOF.
+    A ground (base) sensor of a building has neither: it is the input, ``input_sensor``.
     """
 
     name: str
@@ -45,6 +62,24 @@ class AffineModel:
     damping_kind: str = "rayleigh"  # "rayleigh" | "modal"
     # Influence vector of a base (ground) acceleration on the DOFs, for buildings under earthquakes.
     base_influence: np.ndarray | None = None
+    sensor_rows: dict[str, np.ndarray] = field(default_factory=dict)  # sensor id -> (n_dof,)
+    input_sensor: str | None = None  # id of the structure's input sensor, if any
+    # damping_factors[i]: indices of damping_ratios that parameter i multiplies (empty: none)
+    damping_factors: list[list[int]] = field(default_factory=list)
+    kind: str = "matrices"  # "girder" | "shear_building" | "matrices"
+    direction: str | None = None  # direction of motion the DOFs describe ("vertical", "x", "y")
+    node_x: np.ndarray | None = None  # girder: node coordinates along the deck (m)
+
+    def __post_init__(self) -> None:
+        if not self.damping_factors:
+            self.damping_factors = [[] for _ in self.parameter_names]
+        for sid, dof in self.sensor_dofs.items():
+            if sid not in self.sensor_rows:
+                row = np.zeros(self.n_dof)
+                row[dof] = 1.0
+                self.sensor_rows[sid] = row
+        self._K_stack: np.ndarray | None = None
+        self._M_stack: np.ndarray | None = None
 
     @property
     def n_dof(self) -> int:
@@ -57,20 +92,62 @@ class AffineModel:
     def nominal_theta(self) -> np.ndarray:
         return np.ones(self.n_parameters)
 
-    def stiffness(self, theta: np.ndarray) -> np.ndarray:
+    def theta_vector(self, values: dict[str, float] | None = None) -> np.ndarray:
+        """Parameter vector from ``{name: value}`` (missing names stay at 1)."""
+        theta = self.nominal_theta()
+        for k, v in (values or {}).items():
+            theta[self.parameter_names.index(k)] = float(v)
+        return theta
+
+    # -- matrices ------------------------------------------------------------------------------
+    def stiffness(self, theta: np.ndarray | None = None) -> np.ndarray:
+        theta = self.nominal_theta() if theta is None else theta
         K = self.K0.copy()
         for t, Ki in zip(theta, self.K_terms):
             if Ki is not None:
                 K += t * Ki
         return K
 
-    def mass(self, theta: np.ndarray) -> np.ndarray:
+    def mass(self, theta: np.ndarray | None = None) -> np.ndarray:
+        theta = self.nominal_theta() if theta is None else theta
         M = self.M0.copy()
         for t, Mi in zip(theta, self.M_terms):
             if Mi is not None:
                 M += t * Mi
         return M
 
+    def _stacks(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._K_stack is None:
+            z = np.zeros_like(self.K0)
+            self._K_stack = np.stack([z if t is None else t for t in self.K_terms]) if self.K_terms else z[None] * 0
+            self._M_stack = np.stack([z if t is None else t for t in self.M_terms]) if self.M_terms else z[None] * 0
+        return self._K_stack, self._M_stack
+
+    def _thetas(self, thetas: np.ndarray) -> np.ndarray:
+        thetas = np.asarray(thetas, dtype=float)
+        if thetas.ndim == 1:
+            thetas = thetas[None, :]
+        if thetas.shape[1] != self.n_parameters:
+            raise ValueError(f"thetas must have {self.n_parameters} columns ({self.parameter_names}), got {thetas.shape}")
+        return thetas
+
+    def stiffness_batch(self, thetas: np.ndarray) -> np.ndarray:
+        """K(theta) for each row of ``thetas`` (B, n_parameters) -> (B, n, n)."""
+        thetas = self._thetas(thetas)
+        Ks, _ = self._stacks()
+        if self.n_parameters == 0:
+            return np.broadcast_to(self.K0, (thetas.shape[0], *self.K0.shape)).copy()
+        return self.K0 + np.tensordot(thetas, Ks, axes=(1, 0))
+
+    def mass_batch(self, thetas: np.ndarray) -> np.ndarray:
+        """M(theta) for each row of ``thetas`` (B, n_parameters) -> (B, n, n)."""
+        thetas = self._thetas(thetas)
+        _, Ms = self._stacks()
+        if self.n_parameters == 0:
+            return np.broadcast_to(self.M0, (thetas.shape[0], *self.M0.shape)).copy()
+        return self.M0 + np.tensordot(thetas, Ms, axes=(1, 0))
+
+    # -- modes ---------------------------------------------------------------------------------
     def modes(self, theta: np.ndarray | None = None, n_modes: int = 6) -> ModalSolution:
         """Lowest ``n_modes`` by the generalised symmetric eigensolver (selected eigenvalues only)."""
         from scipy.linalg import eigh
@@ -80,9 +157,126 @@ class AffineModel:
         w2, phi = eigh(self.stiffness(theta), self.mass(theta), subset_by_index=(0, n - 1))
         return ModalSolution(np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi), phi)
 
+    def modes_batch(self, thetas: np.ndarray, n_modes: int = 6) -> BatchModalSolution:
+        """Lowest ``n_modes`` of the full model for each row of ``thetas`` (batched numpy eigh)."""
+        return generalized_modes_batch(self.stiffness_batch(thetas), self.mass_batch(thetas), n_modes)
+
+    # -- damping -------------------------------------------------------------------------------
+    def damping_ratios_at(self, theta: np.ndarray | None = None) -> np.ndarray:
+        """The nominal damping ratios with the factors of damping parameters applied."""
+        theta = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
+        r = np.asarray(self.damping_ratios, dtype=float).copy()
+        for t, idx in zip(theta, self.damping_factors):
+            for i in idx:
+                r[i] *= t
+        return r
+
+    def modal_damping_ratios(self, theta: np.ndarray | None = None, n_modes: int = 6) -> np.ndarray:
+        """Damping ratio of each of the lowest ``n_modes`` modes under this model's damping."""
+        theta = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
+        z = self.damping_ratios_at(theta)
+        n = min(n_modes, self.n_dof)
+        if self.damping_kind == "modal":
+            return np.array([z[min(k, len(z) - 1)] for k in range(n)])
+        w = 2 * np.pi * self.modes(theta, max(n, 2)).frequencies_hz
+        a0, a1 = rayleigh_coefficients(w[0], w[1], z[0], z[1])
+        return (a0 / (2 * w) + a1 * w / 2)[:n]
+
+    def damping(self, theta: np.ndarray | None = None) -> np.ndarray:
+        """Viscous damping matrix C(theta).
+
+        ``rayleigh``: C = a0 M + a1 K with the ratios met exactly at the first two modes of the model
+        at ``theta``. ``modal``: C = M Phi diag(2 zeta_k omega_k) Phi^T M over all modes (the last
+        ratio repeats for modes beyond the list).
+        """
+        from scipy.linalg import eigh
+
+        theta = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
+        K, M = self.stiffness(theta), self.mass(theta)
+        z = self.damping_ratios_at(theta)
+        if self.damping_kind == "modal":
+            w2, phi = eigh(K, M)
+            w = np.sqrt(np.clip(w2, 0.0, None))
+            zeta = np.array([z[min(k, len(z) - 1)] for k in range(len(w))])
+            Mphi = M @ phi
+            return (Mphi * (2 * zeta * w)) @ Mphi.T
+        w2 = eigh(K, M, eigvals_only=True, subset_by_index=(0, min(1, self.n_dof - 1)))
+        w = np.sqrt(np.clip(w2, 0.0, None))
+        if len(w) < 2:  # one DOF: mass-proportional damping gives the ratio exactly
+            return 2 * z[0] * w[0] * M
+        a0, a1 = rayleigh_coefficients(w[0], w[1], z[0], z[1])
+        return a0 * M + a1 * K
+
+    # -- sensors -------------------------------------------------------------------------------
     def sensor_matrix(self, sensor_ids: list[str]) -> np.ndarray:
-        """Selection matrix (n_sensors, n_dof) that reads the sensors' DOFs."""
+        """Observation matrix (n_sensors, n_dof) that reads the sensors from the DOF vector.
+
+        A selection matrix for sensors located at DOFs; rows of shape-function values for girder
+        sensors between nodes. Raises KeyError naming a sensor the model cannot observe (e.g. the
+        ground sensor of a building, which is the base input).
+        """
         S = np.zeros((len(sensor_ids), self.n_dof))
         for r, sid in enumerate(sensor_ids):
-            S[r, self.sensor_dofs[sid]] = 1.0
+            if sid in self.sensor_rows:
+                S[r] = self.sensor_rows[sid]
+            elif sid in self.sensor_dofs:
+                S[r, self.sensor_dofs[sid]] = 1.0
+            else:
+                raise KeyError(
+                    f"model {self.name!r} has no DOF for sensor {sid!r}"
+                    + (" (it is the base input)" if sid == self.input_sensor else "")
+                )
         return S
+
+    def deck_observation(self, xs) -> np.ndarray:
+        """Girder only: rows (len(xs), n_dof) reading the vertical displacement at any deck ``x``."""
+        if self.node_x is None:
+            raise ValueError(f"model {self.name!r} is not a girder: it has no deck coordinates")
+        from shm_ros.core.models.girder import deck_observation
+
+        return deck_observation(self.node_x, list(xs))
+
+    @property
+    def observed_sensors(self) -> list[str]:
+        """Sensors the model can observe, in structure-file order."""
+        return list(self.sensor_rows)
+
+    def master_dofs(self, sensor_ids: list[str] | None = None) -> list[int]:
+        """DOF indices of sensors located on DOFs (the masters of a reduction), sensor order kept.
+
+        Raises KeyError for a sensor that does not sit on a DOF.
+        """
+        ids = [s for s in self.sensor_dofs] if sensor_ids is None else sensor_ids
+        out = []
+        for sid in ids:
+            if sid not in self.sensor_dofs:
+                raise KeyError(f"sensor {sid!r} of model {self.name!r} is not located on a DOF")
+            out.append(self.sensor_dofs[sid])
+        return out
+
+
+def rayleigh_coefficients(w1: float, w2: float, z1: float, z2: float) -> tuple[float, float]:
+    """a0, a1 of C = a0 M + a1 K giving ratios z1, z2 at circular frequencies w1, w2."""
+    if abs(w2 - w1) <= 1e-12 * max(w1, w2):
+        return 2 * z1 * w1, 0.0  # coincident frequencies: mass-proportional
+    d = w2**2 - w1**2
+    a0 = 2 * w1 * w2 * (z1 * w2 - z2 * w1) / d
+    a1 = 2 * (z2 * w2 - z1 * w1) / d
+    return a0, a1
+
+
+def generalized_modes_batch(K: np.ndarray, M: np.ndarray, n_modes: int) -> BatchModalSolution:
+    """Lowest modes of stacked symmetric pencils (B, n, n) via Cholesky of M and numpy's batched eigh.
+
+    Written out because scipy.linalg.eigh does not take stacked matrices; numpy's ``eigh`` and
+    ``cholesky`` do, which is what makes thousands of small eigenproblems per second possible.
+    """
+    L = np.linalg.cholesky(M)
+    Linv = np.linalg.inv(L)
+    A = Linv @ K @ np.swapaxes(Linv, -1, -2)
+    A = 0.5 * (A + np.swapaxes(A, -1, -2))
+    w2, y = np.linalg.eigh(A)
+    n = min(n_modes, K.shape[-1])
+    w2, y = w2[:, :n], y[:, :, :n]
+    phi = np.swapaxes(Linv, -1, -2) @ y
+    return BatchModalSolution(np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi), phi)
