@@ -75,6 +75,8 @@ class Mode:
     damping_std: float = float("nan")
     n_poles: int = 0
     mode_number: int = 0  # tracked identity, 1-based; 0 = not tracked
+    frequency_spread_hz: float = float("nan")  # std of the frequency across model orders
+    damping_spread: float = float("nan")  # std of the damping ratio across model orders
 
 
 @dataclass

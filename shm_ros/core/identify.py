@@ -1,0 +1,219 @@
+"""One call from a :class:`Window` to a :class:`ModalEstimate`.
+
+``identify_window(window, config)`` = pre-processing -> SSI (cov / data / input-output) -> poles
+of every model order from one factorisation -> stability, two-A, MPC and physical filters ->
+automatic clustering -> real mode shapes labelled by sensor id (contracts section 3).
+``identify_window_detailed`` returns the same plus the stabilization diagram.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.signal as sig
+
+from shm_ros.core import ssi
+from shm_ros.core.preprocess import PreprocessConfig, Prepared, preprocess
+from shm_ros.core.stabilization import (Diagram, PickedMode, PickingConfig, StabilityConfig,
+                                        classify, pick_modes, real_mode_shape)
+from shm_ros.core.types import ModalEstimate, Mode, Window
+
+__all__ = ["IdentifyConfig", "IdentificationResult", "identify_window", "identify_window_detailed",
+           "identify_array", "METHODS"]
+
+METHODS = ("ssi-cov", "ssi-data", "ssi-io")
+
+
+@dataclass
+class IdentifyConfig:
+    method: str = "ssi-cov"  # ssi-cov | ssi-data | ssi-io
+    block_rows: int | None = None  # None: max(20, ceil(max_order / n_refs) + 2)
+    max_order: int = 60
+    min_order: int = 2
+    order_step: int = 2
+    reference_channels: list[str] | None = None  # SSI-cov / SSI-data references (None = all)
+    input_channel: str | None = None  # SSI-io input (None = the window's input_channel)
+    lq: str = "auto"  # SSI-data / SSI-io LQ factor: auto | gram | qr
+    preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
+    stability: StabilityConfig = field(default_factory=StabilityConfig)
+    picking: PickingConfig = field(default_factory=PickingConfig)
+    use_filters: bool = True  # two-A + MPC filters (False = plain stabilization diagram)
+    uncertainty: bool = True  # jackknife over data blocks (SSI-cov)
+    uncertainty_blocks: int = 10
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "IdentifyConfig":
+        d = dict(d)
+        sub = {"preprocess": PreprocessConfig, "stability": StabilityConfig, "picking": PickingConfig}
+        for key, typ in sub.items():
+            if key in d and isinstance(d[key], dict):
+                unknown = set(d[key]) - set(typ.__dataclass_fields__)
+                if unknown:
+                    raise ValueError(f"identify.{key}: unknown option(s) {sorted(unknown)}")
+                d[key] = typ(**d[key])
+        unknown = set(d) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"identify: unknown option(s) {sorted(unknown)}")
+        return cls(**d)
+
+
+@dataclass
+class IdentificationResult:
+    estimate: ModalEstimate
+    diagram: Diagram
+    sample_rate_hz: float
+    channel_names: list[str]
+    notes: list[str]
+
+
+def _block_rows(cfg: IdentifyConfig, n_refs: int) -> int:
+    if cfg.block_rows is not None:
+        return int(cfg.block_rows)
+    return max(20, int(np.ceil(cfg.max_order / n_refs)) + 2)
+
+
+def identify_window(window: Window, config: IdentifyConfig | None = None) -> ModalEstimate:
+    """Modal estimate of one window (modes sorted by frequency, shapes real, max |.| = +1)."""
+    return identify_window_detailed(window, config).estimate
+
+
+def identify_window_detailed(window: Window, config: IdentifyConfig | None = None
+                             ) -> IdentificationResult:
+    cfg = config or IdentifyConfig()
+    if cfg.method not in METHODS:
+        raise ValueError(f"identify.method must be one of {METHODS}, got {cfg.method!r}")
+    prep = preprocess(window.samples, window.sample_rate_hz, window.channel_names, cfg.preprocess,
+                      window.channel_status)
+    notes = list(prep.notes)
+    inp = None
+    if cfg.method == "ssi-io":
+        name = cfg.input_channel or window.input_channel
+        if name is None:
+            raise ValueError("ssi-io needs an input channel (structure file 'input: {sensor: ...}' "
+                             "or IdentifyConfig.input_channel)")
+        if name not in prep.channel_names:
+            raise ValueError(f"ssi-io input channel {name!r} is not among the usable channels "
+                             f"{prep.channel_names}")
+        inp = name
+    result = identify_array(prep, cfg, input_channel=inp)
+    result.notes = notes + result.notes
+    est = result.estimate
+    est.window_id = window.window_id
+    est.start_ns = window.start_ns
+    est.end_ns = window.end_ns
+    est.temperature_c = window.temperature_c
+    if window.is_event or window.pga_m_s2:
+        est.covariates["pga_m_s2"] = float(window.pga_m_s2)
+    return result
+
+
+def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | None = None
+                   ) -> IdentificationResult:
+    """Identification of already pre-processed data (also used by the benchmarks)."""
+    names = list(prep.channel_names)
+    data = prep.data
+    fs = prep.sample_rate_hz
+    notes: list[str] = []
+    if cfg.method == "ssi-io":
+        if input_channel is None:
+            raise ValueError("ssi-io needs input_channel")
+        k = names.index(input_channel)
+        u = data[:, k]
+        out_idx = [j for j in range(len(names)) if j != k]
+        y = data[:, out_idx]
+        out_names = [names[j] for j in out_idx]
+        i = cfg.block_rows or max(20, int(np.ceil(cfg.max_order / len(out_names))) + 2)
+        model = ssi.ssi_io(y, u, fs, i, cfg.max_order, lq="qr" if cfg.lq == "auto" else cfg.lq)
+        refs = None
+    else:
+        y = data
+        out_names = names
+        if cfg.reference_channels:
+            missing = [c for c in cfg.reference_channels if c not in names]
+            if missing:
+                raise ValueError(f"identify.reference_channels: unknown channel(s) {missing}")
+            refs = np.array([names.index(c) for c in cfg.reference_channels])
+        else:
+            refs = np.arange(len(names))
+        i = _block_rows(cfg, refs.size)
+        if cfg.method == "ssi-cov":
+            model = ssi.ssi_cov(y, fs, i, cfg.max_order, refs)
+        else:
+            model = ssi.ssi_data(y, fs, i, cfg.max_order, refs, lq=cfg.lq)
+    orders = np.arange(max(1, cfg.min_order), model.observability.shape[1] + 1, cfg.order_step)
+    poles = ssi.poles_all_orders(model, orders, two_a=cfg.stability.two_a)
+    flags = classify(poles, cfg.stability, fs)
+    picked = pick_modes(poles, flags, cfg.picking, use_filters=cfg.use_filters)
+    std_f = np.full(len(picked), np.nan)
+    std_z = np.full(len(picked), np.nan)
+    if cfg.uncertainty and picked and cfg.method == "ssi-cov":
+        try:
+            std_f, std_z = _jackknife_cov(y, fs, refs, i, model.observability.shape[1], picked,
+                                          cfg.uncertainty_blocks)
+        except ValueError as exc:  # too little data per block
+            notes.append(f"uncertainty skipped: {exc}")
+    modes = [Mode(frequency_hz=p.frequency_hz, damping_ratio=p.damping_ratio,
+                  mode_shape=real_mode_shape(p.mode_shape_complex), mpc=p.mpc,
+                  frequency_std_hz=float(sf), damping_std=float(sz), n_poles=p.n_poles,
+                  frequency_spread_hz=p.frequency_spread_hz, damping_spread=p.damping_spread)
+             for p, sf, sz in zip(picked, std_f, std_z)]
+    est = ModalEstimate(window_id="", start_ns=0, end_ns=int(round(data.shape[0] / fs * 1e9)),
+                        sensor_ids=out_names, modes=modes, method=cfg.method)
+    f_sp, p_sp = sig.welch(y, fs=fs, nperseg=min(4096, y.shape[0]), axis=0)
+    diagram = Diagram(poles=poles, flags=flags, picked=picked, singular_values=model.singular_values,
+                      spectrum_hz=f_sp, spectrum=p_sp.mean(axis=1))
+    return IdentificationResult(est, diagram, fs, out_names, notes)
+
+
+def _jackknife_cov(y: np.ndarray, fs: float, refs: np.ndarray, i: int, max_order: int,
+                   picked: list[PickedMode], n_blocks: int) -> tuple[np.ndarray, np.ndarray]:
+    """Leave-one-block-out jackknife standard deviations of frequency and damping.
+
+    The correlation Hankel matrix is the mean of per-block matrices; each replicate drops one
+    block, redoes the SVD and re-evaluates the mode at its representative order.
+    """
+    n = y.shape[0] // n_blocks
+    if n_blocks < 3 or n < 8 * i:
+        raise ValueError(f"{n_blocks} blocks of {n} samples are too short for {i} block rows")
+    l = y.shape[1]
+    hs = np.stack([ssi.block_hankel_of_correlations(
+        ssi.correlations(y[b * n:(b + 1) * n], refs, 2 * i), i) for b in range(n_blocks)])
+    total = hs.sum(axis=0)
+    fr = np.full((n_blocks, len(picked)), np.nan)
+    zr = np.full((n_blocks, len(picked)), np.nan)
+    for b in range(n_blocks):
+        h = (total - hs[b]) / (n_blocks - 1)
+        u, s, _ = sla.svd(h, full_matrices=False, check_finite=False)
+        o = u[:, :max_order] * np.sqrt(s[:max_order])
+        for k, p in enumerate(picked):
+            nord = p.representative_order
+            up, dn = o[:-l, :nord], o[l:, :nord]
+            a = sla.lstsq(up, dn, check_finite=False)[0]
+            mu, psi = sla.eig(a, check_finite=False)
+            sel = mu.imag > 0
+            if not np.any(sel):
+                continue
+            lam = np.log(mu[sel]) * fs
+            f = np.abs(lam) / (2 * np.pi)
+            z = -lam.real / np.abs(lam)
+            phi = o[:l, :nord] @ psi[:, sel]
+            phi /= np.linalg.norm(phi, axis=0)
+            mac = ssi.mac_matrix(p.mode_shape_complex[None], phi.T)[0]
+            score = np.abs(f - p.frequency_hz) / p.frequency_hz + (1 - mac)
+            j = int(np.argmin(score))
+            if score[j] < 0.1:
+                fr[b, k], zr[b, k] = f[j], z[j]
+    ok = np.sum(np.isfinite(fr), axis=0)
+
+    def jk(v: np.ndarray) -> np.ndarray:
+        mean = np.nanmean(v, axis=0)
+        var = (ok - 1) / np.maximum(ok, 1) * np.nansum((v - mean) ** 2, axis=0)
+        return np.where(ok >= max(3, n_blocks - 2), np.sqrt(var), np.nan)
+
+    with np.errstate(invalid="ignore"):
+        return jk(fr), jk(zr)

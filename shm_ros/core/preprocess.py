@@ -1,0 +1,122 @@
+"""Pre-processing of a window's raw samples before identification (each step can be switched).
+
+Order: channel selection -> offset/trend removal (gravity, drift) -> band-pass (zero-phase
+Butterworth, ``scipy.signal.sosfiltfilt``) -> decimation with anti-alias filter
+(``scipy.signal.decimate``, zero-phase, in stages of at most 10).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.signal as sig
+
+__all__ = ["PreprocessConfig", "Prepared", "preprocess"]
+
+_BAD_STATUS = {"dead", "clipped", "dropped"}
+
+
+@dataclass
+class PreprocessConfig:
+    """Switchable pre-processing; the defaults only remove offsets and linear trends."""
+
+    channels: list[str] | None = None  # channel selection by name; None = all usable channels
+    detrend: str = "linear"  # "none" | "constant" (offsets, e.g. gravity) | "linear" (+ drift)
+    highpass_hz: float | None = None  # band-pass lower corner (None = off)
+    lowpass_hz: float | None = None  # band-pass upper corner (the building paper: 20 Hz)
+    filter_order: int = 8  # Butterworth order of each band edge (zero-phase, so doubled)
+    target_rate_hz: float | None = None  # decimate by the largest integer factor not below it
+    drop_bad_channels: bool = True  # drop channels whose status is dead/clipped/dropped or NaN
+
+
+@dataclass
+class Prepared:
+    data: np.ndarray  # (n_samples, n_channels) float64
+    sample_rate_hz: float
+    channel_names: list[str]
+    notes: list[str] = field(default_factory=list)
+
+
+def _decimate(x: np.ndarray, factor: int) -> np.ndarray:
+    # scipy recommends stages of at most ~13 for its IIR anti-alias filter
+    while factor > 1:
+        divisors = [q for q in range(min(factor, 10), 1, -1) if factor % q == 0]
+        step = divisors[0] if divisors else factor
+        x = sig.decimate(x, step, ftype="iir", axis=0, zero_phase=True)
+        factor //= step
+    return x
+
+
+def preprocess(samples: np.ndarray, fs: float, channel_names: list[str],
+               config: PreprocessConfig | None = None,
+               channel_status: list[str] | None = None) -> Prepared:
+    """Apply ``config`` to raw ``samples`` (n, c); returns the data to identify from."""
+    cfg = config or PreprocessConfig()
+    x = np.asarray(samples, dtype=float)
+    if x.ndim != 2 or x.shape[1] != len(channel_names):
+        raise ValueError(f"samples of shape {x.shape} do not match {len(channel_names)} channel names")
+    if fs <= 0:
+        raise ValueError(f"sample rate must be positive, got {fs}")
+    notes: list[str] = []
+    names = list(channel_names)
+    if cfg.channels is not None:
+        missing = [c for c in cfg.channels if c not in names]
+        if missing:
+            raise ValueError(f"preprocess.channels: no channel named {missing} (have {names})")
+        idx = [names.index(c) for c in cfg.channels]
+    else:
+        idx = list(range(len(names)))
+    if cfg.drop_bad_channels:
+        kept = []
+        for k in idx:
+            status = channel_status[k] if channel_status is not None else "ok"
+            if status in _BAD_STATUS:
+                notes.append(f"channel {names[k]} dropped: status {status}")
+            elif not np.all(np.isfinite(x[:, k])):
+                notes.append(f"channel {names[k]} dropped: contains NaN/inf samples")
+            elif np.ptp(x[:, k]) == 0.0:
+                notes.append(f"channel {names[k]} dropped: constant (dead)")
+            else:
+                kept.append(k)
+        idx = kept
+    if not idx:
+        raise ValueError("no usable channel left after channel selection: " + "; ".join(notes))
+    x = x[:, idx]
+    names = [names[k] for k in idx]
+    if not np.all(np.isfinite(x)):
+        raise ValueError("selected channels contain NaN/inf samples (enable drop_bad_channels)")
+
+    if cfg.detrend not in ("none", "constant", "linear"):
+        raise ValueError(f"preprocess.detrend must be none|constant|linear, got {cfg.detrend!r}")
+    if cfg.detrend != "none":
+        x = sig.detrend(x, axis=0, type=cfg.detrend)
+
+    nyq = fs / 2
+    lo = cfg.highpass_hz
+    hi = cfg.lowpass_hz
+    if hi is not None and hi >= nyq:
+        notes.append(f"low-pass {hi} Hz at or above Nyquist {nyq} Hz: skipped")
+        hi = None
+    if lo is not None and lo <= 0:
+        lo = None
+    if lo is not None and hi is not None:
+        if lo >= hi:
+            raise ValueError(f"preprocess: highpass_hz {lo} must be below lowpass_hz {hi}")
+        sos = sig.butter(cfg.filter_order, [lo, hi], btype="bandpass", fs=fs, output="sos")
+    elif hi is not None:
+        sos = sig.butter(cfg.filter_order, hi, btype="lowpass", fs=fs, output="sos")
+    elif lo is not None:
+        sos = sig.butter(cfg.filter_order, lo, btype="highpass", fs=fs, output="sos")
+    else:
+        sos = None
+    if sos is not None:
+        x = sig.sosfiltfilt(sos, x, axis=0)
+
+    if cfg.target_rate_hz is not None:
+        factor = int(np.floor(fs / cfg.target_rate_hz + 1e-9))
+        if factor > 1:
+            x = _decimate(x, factor)
+            fs = fs / factor
+            notes.append(f"decimated by {factor} to {fs:g} Hz")
+    return Prepared(np.ascontiguousarray(x), float(fs), names, notes)

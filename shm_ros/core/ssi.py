@@ -1,0 +1,387 @@
+"""Stochastic subspace identification: SSI-cov, SSI-data and input-output SSI.
+
+Each method ends in one extended observability matrix ``O`` with ``max_order`` columns, obtained
+from one SVD. Every smaller model order ``n`` uses the first ``n`` columns of the same matrix, and
+the system matrix ``A`` of every order is read off two QR factorisations of the shifted halves of
+``O`` (:func:`poles_all_orders`), so the whole stabilization diagram costs one factorisation.
+
+``A`` is estimated two ways (the building paper's spurious-mode check):
+
+* forward least squares   ``A_f = (O_up^T O_up)^-1 O_up^T O_dn``   (minimises ||O_up A - O_dn||)
+* backward least squares  ``A_b = (O_dn^T O_up)^-1 O_dn^T O_dn``   (inverse of the least-squares
+  solution of ``O_dn A^-1 = O_up``).
+
+Both are consistent for noise-free data and differ when the shift-invariance of ``O`` is only
+approximate, which is where spurious (noise/mathematical) poles live. Note: the expression printed
+as the paper's eq. 13, ``(O_up^T O_dn)^-1 (O_up^T O_up)``, is exactly ``A_f^-1`` and would give
+inverted poles (|mu| > 1); it is provided only as :func:`printed_eq13_estimate` for the test that
+demonstrates this.
+
+The block-Hankel products are never formed as big explicit matrices:
+
+* SSI-cov: output correlations for all lags come from one FFT (:func:`correlations`).
+* SSI-data / input-output: the lower-triangular factor ``L`` of the LQ factorisation
+  ``H / sqrt(j) = L Q^T`` of the data block-Hankel matrix is computed either from the exactly
+  assembled Gram matrix ``H H^T`` (Cholesky; its entries are lag products with exact edge
+  corrections, :func:`hankel_gram`) or by a streamed QR over column chunks of ``H^T``
+  (:func:`hankel_lq_streamed`). Both give the same ``L`` up to column signs; the Gram route is the
+  fast default and falls back to the streamed QR if the Gram matrix is not numerically positive
+  definite.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft
+import scipy.linalg as sla
+
+__all__ = [
+    "SubspaceModel",
+    "PoleSet",
+    "correlations",
+    "hankel_gram",
+    "hankel_lq_streamed",
+    "ssi_cov",
+    "ssi_data",
+    "ssi_io",
+    "poles_all_orders",
+    "printed_eq13_estimate",
+    "forward_backward_A",
+]
+
+
+@dataclass
+class SubspaceModel:
+    """Result of the subspace step: the extended observability matrix of the largest order."""
+
+    observability: np.ndarray  # (n_outputs * n_block_rows, max_order)
+    singular_values: np.ndarray
+    n_outputs: int
+    sample_rate_hz: float
+    method: str
+    block_rows: int
+
+
+@dataclass
+class PoleSet:
+    """All poles of all model orders (one row per pole with positive imaginary part)."""
+
+    order: np.ndarray  # (P,) int
+    frequency_hz: np.ndarray  # (P,)
+    damping_ratio: np.ndarray  # (P,)
+    shape: np.ndarray  # (P, n_outputs) complex, unit 2-norm
+    # The same pole from the second (backward) estimate of A, matched by frequency:
+    frequency_b_hz: np.ndarray  # (P,) nan where A_b has no pole
+    damping_b: np.ndarray  # (P,)
+    mac_b: np.ndarray  # (P,)
+    orders: np.ndarray  # the model orders evaluated
+
+    def __len__(self) -> int:
+        return int(self.order.size)
+
+    def subset(self, mask: np.ndarray) -> "PoleSet":
+        return PoleSet(self.order[mask], self.frequency_hz[mask], self.damping_ratio[mask],
+                       self.shape[mask], self.frequency_b_hz[mask], self.damping_b[mask],
+                       self.mac_b[mask], self.orders)
+
+
+# ----------------------------------------------------------------------------- correlations / LQ
+
+
+def correlations(y: np.ndarray, refs: np.ndarray, n_lags: int) -> np.ndarray:
+    """Unbiased output correlations ``R_k = E[y_{t+k} y_ref,t^T]`` for ``k = 0..n_lags-1``.
+
+    ``y`` is (N, l); returns (n_lags, l, r). Computed with one real FFT per channel (zero-padded,
+    so it is the exact finite sum divided by ``N - k``).
+    """
+    n, l = y.shape
+    if n_lags >= n:
+        raise ValueError(f"{n_lags} correlation lags need more than {n} samples")
+    nfft = scipy.fft.next_fast_len(n + n_lags, real=True)
+    fy = scipy.fft.rfft(y, n=nfft, axis=0)  # (F, l)
+    r = np.empty((n_lags, l, refs.size))
+    for k, ref in enumerate(refs):  # one reference at a time keeps the peak memory small
+        # cross spectrum of y_{t+k} with ref_t: conj(F_ref) * F_y
+        r[:, :, k] = scipy.fft.irfft(fy * np.conj(fy[:, ref])[:, None], n=nfft, axis=0)[:n_lags]
+    r /= (n - np.arange(n_lags))[:, None, None]
+    return r
+
+
+def hankel_gram(z: np.ndarray, n_blocks: int, n_cols: int) -> np.ndarray:
+    """Exact Gram matrix ``H H^T`` of the block-Hankel matrix of ``z`` (N, c).
+
+    ``H`` has ``n_blocks`` block rows ``z[a : a + n_cols]^T`` (a = 0..n_blocks-1). Entry block
+    ``(a, b) = sum_{k<n_cols} z_{a+k} z_{b+k}^T`` is built from full-length lag products (FFT) with
+    exact corrections for the samples beyond the Hankel's columns, then propagated along block
+    diagonals with rank-c updates: O(N c^2 log N + n_blocks^2 c^2) instead of O(N n_blocks^2 c^2).
+    """
+    n, c = z.shape
+    if n_blocks - 1 + n_cols > n:
+        raise ValueError("Hankel matrix larger than the data")
+    nfft = scipy.fft.next_fast_len(n + n_blocks, real=True)
+    fz = scipy.fft.rfft(z, n=nfft, axis=0)
+    full = np.empty((n_blocks, c, c))
+    for p in range(c):
+        full[:, p, :] = scipy.fft.irfft(np.conj(fz[:, p])[:, None] * fz, n=nfft, axis=0)[:n_blocks]
+    # full[d] = sum_{k=0}^{n-1-d} z_k z_{k+d}^T ; first block row needs k < n_cols only
+    g0 = np.empty((n_blocks, c, c))
+    for d in range(n_blocks):
+        tail = z[n_cols:n - d]
+        g0[d] = full[d] - tail.T @ z[n_cols + d:n]
+    gram = np.empty((n_blocks, n_blocks, c, c))
+    gram[0] = g0
+    for a in range(1, n_blocks):
+        # block (a, b) = block (a-1, b-1) - z_{a-1} z_{b-1}^T + z_{a-1+n_cols} z_{b-1+n_cols}^T
+        b = np.arange(a, n_blocks)
+        prev = gram[a - 1, b - 1]
+        lo = np.einsum("i,bj->bij", z[a - 1], z[b - 1])
+        hi = np.einsum("i,bj->bij", z[a - 1 + n_cols], z[b - 1 + n_cols])
+        gram[a, b] = prev - lo + hi
+    # fill the lower triangle by symmetry
+    for a in range(n_blocks):
+        for b in range(a):
+            gram[a, b] = gram[b, a].T
+    return gram.transpose(0, 2, 1, 3).reshape(n_blocks * c, n_blocks * c)
+
+
+def _hankel_rows(z: np.ndarray, rows: np.ndarray, start: int, stop: int) -> np.ndarray:
+    """Columns ``start..stop-1`` of the block-Hankel matrix, transposed: (stop-start, len(rows)).
+
+    ``rows`` holds, per Hankel row, ``block * c + channel``.
+    """
+    c = z.shape[1]
+    block, chan = np.divmod(rows, c)
+    k = np.arange(start, stop)
+    return z[k[:, None] + block[None, :], chan[None, :]]
+
+
+def hankel_lq_streamed(z: np.ndarray, rows: np.ndarray, n_cols: int,
+                       chunk: int = 8192) -> np.ndarray:
+    """Lower-triangular ``L`` with ``H = L Q^T`` for the Hankel rows ``rows`` of ``z``.
+
+    QR of ``H^T`` accumulated over column chunks (R of [R_prev; chunk] each time), so at most one
+    chunk of the Hankel matrix exists in memory.
+    """
+    m = rows.size
+    r = np.zeros((0, m))
+    for start in range(0, n_cols, chunk):
+        stop = min(start + chunk, n_cols)
+        block = np.vstack([r, _hankel_rows(z, rows, start, stop)])
+        r = sla.qr(block, mode="r", overwrite_a=True, check_finite=False)[0][:m]
+    return r.T
+
+
+def _lq_lower(z: np.ndarray, rows: np.ndarray, n_blocks: int, n_cols: int, method: str) -> np.ndarray:
+    """``L`` of the LQ factorisation of the (scaled) Hankel rows, by Gram/Cholesky or streamed QR."""
+    if method not in ("auto", "gram", "qr"):
+        raise ValueError(f"unknown LQ method {method!r} (auto | gram | qr)")
+    if method in ("auto", "gram"):
+        gram = hankel_gram(z, n_blocks, n_cols)[np.ix_(rows, rows)] / n_cols
+        try:
+            return sla.cholesky(gram, lower=True, check_finite=False)
+        except np.linalg.LinAlgError:
+            if method == "gram":
+                raise
+    return hankel_lq_streamed(z, rows, n_cols) / np.sqrt(n_cols)
+
+
+# ----------------------------------------------------------------------------- subspace methods
+
+
+def _check(y: np.ndarray, block_rows: int, max_order: int) -> None:
+    if y.ndim != 2:
+        raise ValueError("data must be (n_samples, n_channels)")
+    if block_rows < 2:
+        raise ValueError("block_rows must be >= 2")
+    if y.shape[0] < 4 * block_rows + 10:
+        raise ValueError(f"{y.shape[0]} samples are too few for {block_rows} block rows")
+    if not np.all(np.isfinite(y)):
+        raise ValueError("data contain NaN or inf")
+    if max_order < 1:
+        raise ValueError("max_order must be >= 1")
+
+
+def _observability(mat: np.ndarray, max_order: int) -> tuple[np.ndarray, np.ndarray]:
+    u, s, _ = sla.svd(mat, full_matrices=False, check_finite=False, lapack_driver="gesdd")
+    n = min(max_order, s.size)
+    return u[:, :n] * np.sqrt(s[:n]), s
+
+
+def ssi_cov(y: np.ndarray, fs: float, block_rows: int, max_order: int,
+            refs: np.ndarray | None = None) -> SubspaceModel:
+    """Covariance-driven SSI with reference channels (block-Hankel of correlations, one SVD)."""
+    _check(y, block_rows, max_order)
+    refs = np.arange(y.shape[1]) if refs is None else np.asarray(refs, dtype=int)
+    i = block_rows
+    if max_order > refs.size * i:
+        raise ValueError(f"max_order {max_order} exceeds the Toeplitz rank bound "
+                         f"{refs.size * i} (references x block rows)")
+    r = correlations(y, refs, 2 * i)
+    h = block_hankel_of_correlations(r, i)
+    o, s = _observability(h, max_order)
+    return SubspaceModel(o, s, y.shape[1], fs, "ssi-cov", i)
+
+
+def block_hankel_of_correlations(r: np.ndarray, i: int) -> np.ndarray:
+    """``H(a, b) = R_{a+b+1}`` (a, b = 0..i-1): future outputs times past references."""
+    _, l, nr = r.shape
+    idx = np.arange(i)[:, None] + np.arange(i)[None, :] + 1
+    return r[idx].transpose(0, 2, 1, 3).reshape(i * l, i * nr)
+
+
+def ssi_data(y: np.ndarray, fs: float, block_rows: int, max_order: int,
+             refs: np.ndarray | None = None, lq: str = "auto") -> SubspaceModel:
+    """Data-driven SSI (reference-based past): SVD of the ``L21`` block of the LQ factorisation.
+
+    ``[Y_p(refs); Y_f] / sqrt(j) = L Q^T``; the projection of the future onto the past is
+    ``L21 Q1^T`` and, ``Q1`` being orthonormal, its column space is that of ``L21``.
+    """
+    _check(y, block_rows, max_order)
+    n, l = y.shape
+    refs = np.arange(l) if refs is None else np.asarray(refs, dtype=int)
+    i = block_rows
+    if max_order > refs.size * i:
+        raise ValueError(f"max_order {max_order} exceeds references x block rows = {refs.size * i}")
+    j = n - 2 * i + 1
+    past = (np.arange(i)[:, None] * l + refs[None, :]).ravel()
+    future = ((i + np.arange(i))[:, None] * l + np.arange(l)[None, :]).ravel()
+    lower = _lq_lower(y, np.concatenate([past, future]), 2 * i, j, lq)
+    rp = past.size
+    o, s = _observability(lower[rp:, :rp], max_order)
+    return SubspaceModel(o, s, l, fs, "ssi-data", i)
+
+
+def ssi_io(y: np.ndarray, u: np.ndarray, fs: float, block_rows: int, max_order: int,
+           lq: str = "qr") -> SubspaceModel:
+    """Combined deterministic-stochastic input-output SSI (past-output MOESP).
+
+    LQ factorisation of ``[U_f; U_p; Y_p; Y_f]``; the part of the future outputs that is orthogonal
+    to the future inputs and explained by the joint past ``W_p = [U_p; Y_p]`` is ``L32`` (rows Y_f,
+    columns W_p), whose column space is that of the extended observability matrix.
+    """
+    _check(y, block_rows, max_order)
+    if u.ndim == 1:
+        u = u[:, None]
+    if u.shape[0] != y.shape[0]:
+        raise ValueError("input and outputs differ in length")
+    n, l = y.shape
+    m = u.shape[1]
+    i = block_rows
+    if max_order > (m + l) * i:
+        raise ValueError(f"max_order {max_order} exceeds (inputs + outputs) x block rows")
+    z = np.hstack([u, y])
+    c = m + l
+    j = n - 2 * i + 1
+    blocks_p = np.arange(i)
+    blocks_f = i + np.arange(i)
+    uf = (blocks_f[:, None] * c + np.arange(m)[None, :]).ravel()
+    up = (blocks_p[:, None] * c + np.arange(m)[None, :]).ravel()
+    yp = (blocks_p[:, None] * c + m + np.arange(l)[None, :]).ravel()
+    yf = (blocks_f[:, None] * c + m + np.arange(l)[None, :]).ravel()
+    lower = _lq_lower(z, np.concatenate([uf, up, yp, yf]), 2 * i, j, lq)
+    a, b = uf.size, uf.size + up.size + yp.size
+    o, s = _observability(lower[b:, a:b], max_order)
+    return SubspaceModel(o, s, l, fs, "ssi-io", i)
+
+
+# ----------------------------------------------------------------------------- poles
+
+
+def forward_backward_A(o: np.ndarray, l: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The two estimates of ``A`` for one order ``n`` (reference implementation, plain lstsq)."""
+    up, dn = o[:-l, :n], o[l:, :n]
+    a_f = sla.lstsq(up, dn)[0]
+    a_b = sla.solve(dn.T @ up, dn.T @ dn)
+    return a_f, a_b
+
+
+def printed_eq13_estimate(o: np.ndarray, l: int, n: int) -> np.ndarray:
+    """Eq. 13 of the building paper exactly as printed: ``(O_up^T O_dn)^-1 (O_up^T O_up)``.
+
+    This is the inverse of the forward least-squares ``A``; kept only to demonstrate that.
+    """
+    up, dn = o[:-l, :n], o[l:, :n]
+    return sla.solve(up.T @ dn, up.T @ up)
+
+
+def _modal(a: np.ndarray, c: np.ndarray, fs: float):
+    mu, psi = sla.eig(a, check_finite=False, overwrite_a=True)
+    keep = mu.imag > 1e-12
+    mu, psi = mu[keep], psi[:, keep]
+    lam = np.log(mu) * fs
+    w = np.abs(lam)
+    freq = w / (2 * np.pi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zeta = -lam.real / w
+    phi = c @ psi
+    nrm = np.linalg.norm(phi, axis=0)
+    nrm[nrm == 0] = 1.0
+    return freq, zeta, (phi / nrm).T
+
+
+def mac_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """MAC between rows of ``a`` (p, l) and rows of ``b`` (q, l), both complex unit-norm rows."""
+    num = np.abs(a.conj() @ b.T) ** 2
+    den = np.outer(np.sum(np.abs(a) ** 2, 1), np.sum(np.abs(b) ** 2, 1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, num / den, 0.0)
+
+
+def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None = None,
+                     two_a: bool = True) -> PoleSet:
+    """Poles of every model order from the one observability matrix.
+
+    ``O_up = Q1 R1`` and ``O_dn = Q2 R2`` are factorised once at the largest order; for the first
+    ``n`` columns ``A_f = R1[:n,:n]^-1 (Q1^T O_dn)[:n,:n]`` and
+    ``A_b = (Q2^T O_up)[:n,:n]^-1 R2[:n,:n]`` (see module docstring).
+    """
+    o = model.observability
+    l = model.n_outputs
+    fs = model.sample_rate_hz
+    nmax = o.shape[1]
+    orders = np.arange(1, nmax + 1) if orders is None else np.asarray(orders, dtype=int)
+    orders = orders[(orders >= 1) & (orders <= nmax)]
+    up, dn = o[:-l], o[l:]
+    q1, r1 = sla.qr(up, mode="economic", check_finite=False)
+    m1 = q1.T @ dn
+    if two_a:
+        q2, r2 = sla.qr(dn, mode="economic", check_finite=False)
+        n2 = q2.T @ up
+    cols: dict[str, list] = {k: [] for k in ("order", "f", "z", "phi", "fb", "zb", "macb")}
+    for n in orders:
+        c = o[:l, :n]
+        try:
+            a_f = sla.solve_triangular(r1[:n, :n], m1[:n, :n], check_finite=False)
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        f, z, phi = _modal(a_f, c, fs)
+        if f.size == 0:
+            continue
+        fb = np.full(f.size, np.nan)
+        zb = np.full(f.size, np.nan)
+        macb = np.zeros(f.size)
+        if two_a:
+            try:
+                a_b = sla.solve(n2[:n, :n], r2[:n, :n], check_finite=False)
+                f2, z2, phi2 = _modal(a_b, c, fs)
+            except (np.linalg.LinAlgError, ValueError):
+                f2 = np.zeros(0)
+            if f2.size:
+                k = np.argmin(np.abs(f[:, None] - f2[None, :]), axis=1)
+                fb, zb = f2[k], z2[k]
+                macb = np.abs(np.sum(phi.conj() * phi2[k], axis=1)) ** 2
+        cols["order"].append(np.full(f.size, n))
+        cols["f"].append(f)
+        cols["z"].append(z)
+        cols["phi"].append(phi)
+        cols["fb"].append(fb)
+        cols["zb"].append(zb)
+        cols["macb"].append(macb)
+    if not cols["order"]:
+        e = np.zeros(0)
+        return PoleSet(e.astype(int), e, e, np.zeros((0, l), complex), e, e, e, orders)
+    cat = {k: np.concatenate(v) for k, v in cols.items()}
+    return PoleSet(cat["order"], cat["f"], cat["z"], cat["phi"], cat["fb"], cat["zb"],
+                   cat["macb"], orders)
