@@ -387,7 +387,7 @@ def resolve_path(
         nxt: list[tuple[Location, Any]] = []
         for loc, node in current:
             if not isinstance(node, Mapping) or name not in node:
-                where = ".".join(str(p) for p in loc) or "<top>"
+                where = location_str(loc) or "the top level"
                 have = sorted(node.keys()) if isinstance(node, Mapping) else type(node).__name__
                 raise StructureError(f"{path!r}: no field {name!r} under {where} (has {have})", source, field_path)
             child = node[name]
@@ -400,7 +400,7 @@ def resolve_path(
                     for p in idx:
                         if not 0 <= p < n:
                             raise StructureError(
-                                f"{path!r}: index {p} out of range, {'.'.join(map(str, cloc))} has {n} entries",
+                                f"{path!r}: index {p} out of range, {location_str(cloc)} has {n} entries",
                                 source,
                                 field_path,
                             )
@@ -409,14 +409,14 @@ def resolve_path(
             else:
                 if idx is not None:
                     raise StructureError(
-                        f"{path!r}: {'.'.join(map(str, cloc))} is not a list and cannot be indexed", source, field_path
+                        f"{path!r}: {location_str(cloc)} is not a list and cannot be indexed", source, field_path
                     )
                 nxt.append((cloc, child))
         current = nxt
     out: list[Location] = []
     for loc, node in current:
         if isinstance(node, bool) or not isinstance(node, (int, float)):
-            raise StructureError(f"{path!r} leads to a non-numeric value at {'.'.join(map(str, loc))}", source, field_path)
+            raise StructureError(f"{path!r} leads to a non-numeric value at {location_str(loc)}", source, field_path)
         out.append(loc)
     if not out:
         raise StructureError(f"{path!r} selects nothing", source, field_path)
