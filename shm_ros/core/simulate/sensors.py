@@ -1,0 +1,192 @@
+"""What a real accelerometer adds to the structure's motion, and what goes wrong with recordings.
+
+:class:`SensorModel` - per-sensor gain error, static offset, gravity on the vertical axis (REP-145),
+white noise, 24-bit-like quantisation and the range limit (clipping at +-2 g by default).
+
+:class:`FaultSpec` / :func:`apply_faults` - dropouts, spikes, NaN stretches, a dead or clipped channel,
+clock jumps and duplicated stamps, applied to a :class:`Recording` and listed for ``truth.json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+GRAVITY = 9.80665
+FAULT_KINDS = ("dropout", "spike", "nan", "dead", "clipped", "clock_jump", "duplicate")
+AXES = ("x", "y", "z")
+
+
+@dataclass
+class SensorModel:
+    """Measurement chain of one accelerometer; ``axis`` is the IMU axis that carries the signal."""
+
+    sensor_id: str
+    axis: str  # "x" | "y" | "z"
+    gain: float = 1.0
+    offsets: tuple[float, float, float] = (0.0, 0.0, 0.0)  # static offsets of x, y, z (gravity excluded)
+    gravity_axis: str = "z"
+    noise_rms: float = 1e-4  # m/s^2 per sample
+    lsb: float = 2.0 ** -19  # quantisation step, m/s^2 (about 24 bits over +-2 g)
+    full_scale: float = 2.0 * GRAVITY
+
+    @staticmethod
+    def draw(rng: np.random.Generator, sensor_id: str, axis: str, noise_rms: float = 1e-4,
+             gain_std: float = 0.01, offset_std: float = 0.02) -> SensorModel:
+        return SensorModel(sensor_id=sensor_id, axis=axis, gain=float(1.0 + gain_std * rng.standard_normal()),
+                           offsets=tuple(float(v) for v in offset_std * rng.standard_normal(3)),
+                           noise_rms=noise_rms)
+
+    def static(self, axis: str) -> float:
+        """Static reading of ``axis``: its offset plus gravity on the vertical axis."""
+        i = AXES.index(axis)
+        return self.offsets[i] + (GRAVITY if axis == self.gravity_axis else 0.0)
+
+    def measure(self, rng: np.random.Generator, accel: np.ndarray) -> np.ndarray:
+        """Reading of the signal axis for true acceleration ``accel`` (n,) in m/s^2."""
+        y = self.gain * accel + self.static(self.axis) + self.noise_rms * rng.standard_normal(accel.shape)
+        return self.quantise(y)
+
+    def idle_axes(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """(n, 3) readings of all axes with no motion (the signal axis is overwritten by the caller)."""
+        out = np.empty((n, 3))
+        for i, ax in enumerate(AXES):
+            out[:, i] = self.static(ax) + self.noise_rms * rng.standard_normal(n)
+        return self.quantise(out)
+
+    def quantise(self, y: np.ndarray) -> np.ndarray:
+        return np.clip(np.round(y / self.lsb) * self.lsb, -self.full_scale, self.full_scale)
+
+
+@dataclass
+class Recording:
+    """Samples of one window as they reach the bag, before faults mangle stamps and values.
+
+    ``values`` (n, n_ch): the signal axis of each sensor; ``idle`` (n, n_ch, 3) or None: all three
+    IMU axes (per-sample ``Imu`` output only). Faults edit ``values``/``idle`` and fill ``keep``
+    (sample written?), ``shift_ns`` (added to the stamp) and ``repeat`` (extra copies written).
+    """
+
+    sensor_ids: list[str]
+    axes: list[str]
+    stamps_ns: np.ndarray  # (n,) int64 sample grid
+    values: np.ndarray
+    idle: np.ndarray | None = None
+    keep: np.ndarray | None = None
+    shift_ns: np.ndarray | None = None
+    repeat: np.ndarray | None = None
+
+    @property
+    def n(self) -> int:
+        return int(self.stamps_ns.size)
+
+    def _masks(self) -> None:
+        shape = self.values.shape
+        if self.keep is None:
+            self.keep = np.ones(shape, bool)
+            self.shift_ns = np.zeros(shape, np.int64)
+            self.repeat = np.zeros(shape, np.uint8)
+
+    def imu_xyz(self, c: int) -> np.ndarray:
+        """(n, 3) IMU readings of channel ``c`` (signal axis from ``values``)."""
+        xyz = self.idle[:, c, :].copy() if self.idle is not None else np.zeros((self.n, 3))
+        xyz[:, AXES.index(self.axes[c])] = self.values[:, c]
+        return xyz
+
+
+@dataclass
+class FaultSpec:
+    """One fault: ``kind`` in FAULT_KINDS, in window ``window`` (index), on ``sensor`` (None: the
+    scenario picks one), starting ``at_s`` into the window, lasting ``duration_s``; ``value`` is the
+    spike height (m/s^2), the clock jump (s, may be negative) or the clip level (fraction of the
+    channel's peak dynamic amplitude), and ``count`` the number of spikes or duplicated stamps."""
+
+    kind: str
+    window: int = 0
+    sensor: str | None = None
+    at_s: float = 30.0
+    duration_s: float = 5.0
+    value: float | None = None
+    count: int = 5
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULT_KINDS:
+            raise ValueError(f"unknown fault {self.kind!r} (known: {', '.join(FAULT_KINDS)})")
+
+
+def parse_faults(text: str, default_sensor: str | None = None) -> list[FaultSpec]:
+    """``"spike@2:s3,dead,clock_jump@0"`` -> faults; ``kind[@window][:sensor]`` separated by commas."""
+    out = []
+    for item in [t.strip() for t in text.split(",") if t.strip()]:
+        sensor = default_sensor
+        if ":" in item:
+            item, sensor = item.split(":", 1)
+        window = 0
+        if "@" in item:
+            item, w = item.split("@", 1)
+            try:
+                window = int(w)
+            except ValueError:
+                raise ValueError(f"--faults: bad window index {w!r} in {item}@{w} (an integer)") from None
+        out.append(FaultSpec(kind=item.strip(), window=window, sensor=sensor))
+    return out
+
+
+def apply_faults(rec: Recording, faults: list[FaultSpec], fs: float, rng: np.random.Generator,
+                 block_level: bool) -> list[dict]:
+    """Apply ``faults`` (already filtered to this window) to ``rec``; return what was done.
+
+    With ``block_level`` (``AccelBlock`` output) dropouts, clock jumps and duplicates hit every channel
+    of the acquisition unit at once; value faults (spike, nan, dead, clipped) stay on their channel.
+    """
+    done = []
+    n = rec.n
+    for f in faults:
+        c = rec.sensor_ids.index(f.sensor) if f.sensor in rec.sensor_ids else len(rec.sensor_ids) // 2
+        sid = rec.sensor_ids[c]
+        k0 = int(np.clip(round(f.at_s * fs), 0, n - 1))
+        k1 = int(np.clip(k0 + max(1, round(f.duration_s * fs)), k0 + 1, n))
+        cols = slice(None) if block_level else slice(c, c + 1)
+        rec._masks()
+        entry: dict = {"kind": f.kind, "window": f.window, "sensor": sid if not (
+            block_level and f.kind in ("dropout", "clock_jump", "duplicate")) else "*",
+            "start_ns": int(rec.stamps_ns[k0])}
+        if f.kind == "dropout":
+            rec.keep[k0:k1, cols] = False
+            entry["end_ns"] = int(rec.stamps_ns[k1 - 1]) + int(round(1e9 / fs))
+            entry["n_samples"] = k1 - k0
+        elif f.kind == "spike":
+            height = f.value if f.value is not None else 5.0
+            ks = np.sort(rng.choice(np.arange(k0, n), size=min(f.count, n - k0), replace=False))
+            signs = np.where(rng.random(ks.size) < 0.5, -1.0, 1.0)
+            rec.values[ks, c] += signs * height
+            entry["stamps_ns"] = [int(rec.stamps_ns[k]) for k in ks]
+            entry["height"] = height
+        elif f.kind == "nan":
+            rec.values[k0:k1, c] = np.nan
+            entry["end_ns"] = int(rec.stamps_ns[k1 - 1]) + int(round(1e9 / fs))
+        elif f.kind == "dead":
+            rec.values[:, c] = rec.values[0, c] if f.value is None else f.value
+            if rec.idle is not None:
+                rec.idle[:, c, :] = rec.idle[0, c, :]
+            entry["start_ns"] = int(rec.stamps_ns[0])
+            entry["value"] = float(rec.values[0, c])
+        elif f.kind == "clipped":
+            x = rec.values[:, c]
+            centre = float(np.median(x))
+            level = (f.value if f.value is not None else 0.3) * float(np.max(np.abs(x - centre)))
+            rec.values[:, c] = np.clip(x, centre - level, centre + level)
+            entry["start_ns"] = int(rec.stamps_ns[0])
+            entry["clip_level_m_s2"] = level
+            entry["fraction_clipped"] = float(np.mean(np.abs(x - centre) > level))
+        elif f.kind == "clock_jump":
+            jump = f.value if f.value is not None else 0.25
+            rec.shift_ns[k0:, cols] += int(round(jump * 1e9))
+            entry["jump_s"] = jump
+        elif f.kind == "duplicate":
+            ks = np.sort(rng.choice(np.arange(k0, n), size=min(f.count, n - k0), replace=False))
+            rec.repeat[ks, cols] += 1
+            entry["stamps_ns"] = [int(rec.stamps_ns[k]) for k in ks]
+        done.append(entry)
+    return done
