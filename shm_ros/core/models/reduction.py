@@ -43,6 +43,7 @@ class Reduction:
     iterations: int
     converged: bool
     change: float = 0.0  # final max relative change of the reduced-eigenvalue invariants
+    not_converged: np.ndarray | None = None  # batch positions that hit max_iter (None: all converged)
 
     @property
     def t(self) -> np.ndarray:
@@ -97,7 +98,7 @@ def iirs(
     K: np.ndarray,
     M: np.ndarray,
     masters: Sequence[int],
-    max_iter: int = 100,
+    max_iter: int = 500,
     tol: float = 1e-9,
     improved: bool = True,
     t0: np.ndarray | None = None,
@@ -135,10 +136,12 @@ def iirs(
     change = 0.0
     converged = not improved
     if improved:
-        t, it, change, converged = _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, m.size, max_iter, tol)
+        t, it, change, converged, stragglers = _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, m.size, max_iter, tol)
     KR = _reduced(Kmm, Kms, Kss, t)
     MR = _reduced(Mmm, Mms, Mss, t)
     R = Reduction(_assemble_T(t, m, s, n), KR, MR, list(m), it, converged, change)
+    if improved and not converged:
+        R.not_converged = stragglers
     return _unbatch(R) if single else R
 
 
@@ -179,7 +182,7 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
             done = rel < tol_trace
             if done.all():
                 t[active] = tw
-                return t, it, float(rel.max()), True
+                return t, it, float(rel.max()), True, None
             change_max = float(rel.max())
             if done.any():
                 t[active[done]] = tw[done]
@@ -194,7 +197,7 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
         KR = kg + np.swapaxes(d, -1, -2) @ Y
         tw = tg + d
     t[active] = tw
-    return t, it, change_max, False
+    return t, it, change_max, False, active
 
 
 def guyan(K: np.ndarray, M: np.ndarray, masters: Sequence[int]) -> Reduction:
@@ -203,7 +206,7 @@ def guyan(K: np.ndarray, M: np.ndarray, masters: Sequence[int]) -> Reduction:
 
 
 def _unbatch(R: Reduction) -> Reduction:
-    return Reduction(R.T[0], R.K[0], R.M[0], R.masters, R.iterations, R.converged, R.change)
+    return Reduction(R.T[0], R.K[0], R.M[0], R.masters, R.iterations, R.converged, R.change, R.not_converged)
 
 
 def expand_mode_shapes(T: np.ndarray, shapes_m: np.ndarray) -> np.ndarray:
@@ -216,7 +219,7 @@ def reduce_model(
     thetas: np.ndarray | None = None,
     sensor_ids: Sequence[str] | None = None,
     masters: Sequence[int] | None = None,
-    max_iter: int = 100,
+    max_iter: int = 500,
     tol: float = 1e-9,
 ) -> Reduction:
     """IIRS reduction of ``model`` at ``thetas`` ((p,) -> single, (B, p) -> batch) to the DOFs of
@@ -234,7 +237,7 @@ def reduced_modes_batch(
     thetas: np.ndarray,
     sensor_ids: Sequence[str] | None = None,
     n_modes: int | None = None,
-    max_iter: int = 100,
+    max_iter: int = 500,
     tol: float = 1e-9,
     expand: bool = False,
 ) -> BatchModalSolution:
