@@ -1,0 +1,55 @@
+"""How well a model at one theta reproduces tracked modal data (frequency RMSE, MAC).
+
+Definitions (also in docs/updating.md):
+
+* per-mode frequency RMSE = root mean square over the windows of the relative error
+  ``(f_obs - f_model) / f_obs`` (reported in percent in ``frequency_rmse_pct``, as a fraction in the
+  study table);
+* per-mode MAC = mean over the windows of MAC(observed shape, model shape at the sensors);
+* overall: RMS over every (window, mode) value, and the mean of the per-mode MACs.
+
+Model modes are paired with the data's modes by MAC (see :mod:`.pairing`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .forward import ModalPredictor
+from .observations import ModalObservations
+from .pairing import mac, pair_modes
+
+
+def modal_fit(predictor: ModalPredictor, obs: ModalObservations, theta: np.ndarray) -> dict:
+    f_model, phi_model = predictor(np.atleast_2d(theta))
+    f_ref = obs.mean_frequencies()
+    phi_ref = obs.reference_shapes() if obs.has_shapes else None
+    idx = pair_modes(f_ref, phi_ref, f_model, phi_model if phi_ref is not None else None)[0]
+    fp = f_model[0, idx]
+    rel = (obs.frequencies_hz - fp[None]) / obs.frequencies_hz
+    per_mode_rmse = np.sqrt(np.nanmean(rel**2, axis=0))
+    out = {
+        "frequency_rmse_pct": float(100 * np.sqrt(np.nanmean(rel**2))),
+        "modes": [],
+    }
+    macs = np.full(obs.n_modes, np.nan)
+    if obs.has_shapes:
+        assert obs.shapes is not None
+        for k in range(obs.n_modes):
+            rows = obs.shapes[:, k, :]
+            ok = np.all(np.isfinite(rows), axis=1)
+            if ok.any():
+                macs[k] = float(np.mean(mac(rows[ok], phi_model[0, :, idx[k]][None])))
+        out["mac_mean"] = float(np.nanmean(macs)) if np.any(np.isfinite(macs)) else None
+    else:
+        out["mac_mean"] = None
+    for k, mnum in enumerate(obs.mode_numbers):
+        out["modes"].append({
+            "mode": int(mnum),
+            "frequency_obs_hz": float(f_ref[k]),
+            "frequency_model_hz": float(fp[k]),
+            "model_mode_index": int(idx[k]) + 1,
+            "frequency_rmse": float(per_mode_rmse[k]),
+            "mac": None if not np.isfinite(macs[k]) else float(macs[k]),
+        })
+    return out

@@ -1,0 +1,187 @@
+"""Batched modal predictions of an affine model at the measured DOFs.
+
+A predictor maps a batch of parameter vectors ``theta`` (B, d) to model frequencies (B, m) and
+model shapes read at the sensors (B, s, m). Two kinds:
+
+* :class:`FullModalPredictor` - the full model's generalised eigenproblem, read at the sensor DOFs.
+  When the mass does not depend on theta, ``L^-1 K(theta) L^-T`` is itself affine in theta (L the
+  Cholesky factor of M), so a batch costs one stacked ``numpy.linalg.eigh``.
+* :class:`ReducedModalPredictor` - IIRS reduction to the measured DOFs first
+  (``shm_ros.core.models.reduction``), then the small reduced eigenproblem; the shapes come out at
+  the sensors directly and the same transformation expands them to every DOF.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from shm_ros.core.models.base import AffineModel
+
+
+class ModalPredictor(Protocol):
+    sensor_ids: list[str]
+    n_modes: int
+
+    def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(B, d) -> frequencies (B, m) in Hz, shapes at sensors (B, s, m)."""
+        ...
+
+
+def observation_rows(model: AffineModel, sensor_ids: list[str]) -> np.ndarray:
+    """Rows (s, n_dof) reading the data's sensors from the model; clear error for unknown ids."""
+    known = set(model.sensor_rows) | set(model.sensor_dofs)
+    missing = [s for s in sensor_ids if s not in known]
+    if missing:
+        raise ValueError(f"sensor id(s) {missing} of the modal data are not sensors of model "
+                         f"'{model.name}' (known: {sorted(known)})")
+    return model.sensor_matrix(list(sensor_ids)) if sensor_ids else np.zeros((0, model.n_dof))
+
+
+def _stack_terms(terms: list[np.ndarray | None], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Affine terms as one array (d, n, n) plus a mask of the parameters that act."""
+    acts = np.array([t is not None and np.any(t) for t in terms], dtype=bool)
+    arr = np.zeros((len(terms), n, n))
+    for i, t in enumerate(terms):
+        if acts[i]:
+            arr[i] = np.asarray(t, dtype=float)
+    return arr, acts
+
+
+def batch_matrices(model: AffineModel, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """K(theta) and M(theta) for a batch (B, d) -> (B, n, n) each."""
+    theta = np.atleast_2d(theta)
+    Kt, _ = _stack_terms(model.K_terms, model.n_dof)
+    Mt, _ = _stack_terms(model.M_terms, model.n_dof)
+    K = model.K0[None] + np.tensordot(theta, Kt, axes=(1, 0))
+    M = model.M0[None] + np.tensordot(theta, Mt, axes=(1, 0))
+    return K, M
+
+
+def _frequencies(w2: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.clip(w2, 0.0, None)) / (2.0 * np.pi)
+
+
+class FullModalPredictor:
+    """Lowest ``n_modes`` of the full model for a batch of theta, shapes read at ``sensor_ids``."""
+
+    def __init__(self, model: AffineModel, sensor_ids: list[str], n_modes: int):
+        self.model = model
+        self.sensor_ids = list(sensor_ids)
+        self.n_modes = int(min(n_modes, model.n_dof))
+        self.S = observation_rows(model, self.sensor_ids)
+        n = model.n_dof
+        self._Kt, _ = _stack_terms(model.K_terms, n)
+        self._Mt, m_acts = _stack_terms(model.M_terms, n)
+        self.mass_varies = bool(m_acts.any())
+        if not self.mass_varies:
+            L = np.linalg.cholesky(model.M0)
+            Linv = np.linalg.inv(L)
+            self._Linv_T = Linv.T
+            self._A0 = Linv @ model.K0 @ Linv.T
+            self._At = np.einsum("ij,djk,lk->dil", Linv, self._Kt, Linv)
+
+    def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        m = self.n_modes
+        if not self.mass_varies:
+            A = self._A0[None] + np.tensordot(theta, self._At, axes=(1, 0))
+            w2, v = np.linalg.eigh(A)
+            phi = self._Linv_T[None] @ v[:, :, :m]
+        else:
+            K = self.model.K0[None] + np.tensordot(theta, self._Kt, axes=(1, 0))
+            M = self.model.M0[None] + np.tensordot(theta, self._Mt, axes=(1, 0))
+            L = np.linalg.cholesky(M)
+            Linv = np.linalg.inv(L)
+            A = Linv @ K @ np.swapaxes(Linv, 1, 2)
+            w2, v = np.linalg.eigh(A)
+            phi = np.swapaxes(Linv, 1, 2) @ v[:, :, :m]
+        return _frequencies(w2[:, :m]), self.S[None] @ phi
+
+    def full_shapes(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Frequencies (m,) and mass-normalised shapes at every DOF (n, m) for one theta."""
+        sol = self.model.modes(np.asarray(theta, dtype=float), n_modes=self.n_modes)
+        return sol.frequencies_hz, sol.shapes
+
+
+class ReducedModalPredictor:
+    """IIRS reduction to the sensors' DOFs inside the likelihood, batched over theta.
+
+    The reduced model has one DOF per distinct sensor DOF, hence at most that many modes. The IIRS
+    iteration is warm-started from the transformation of the previous batch (theta moves little
+    between sampler steps), which saves most iterations; convergence does not depend on the start.
+    """
+
+    def __init__(self, model: AffineModel, sensor_ids: list[str], n_modes: int,
+                 max_iter: int = 200, tol: float = 1e-8):
+        from shm_ros.core.models.reduction import iirs  # noqa: F401 - fail early if missing
+
+        observation_rows(model, sensor_ids)  # clear error for unknown sensors
+        self.model = model
+        self.sensor_ids = list(sensor_ids)
+        dofs = model.master_dofs(self.sensor_ids)
+        self.masters = sorted(set(dofs))
+        self.sensor_pos = np.array([self.masters.index(dof) for dof in dofs], dtype=int)
+        self.n_modes = int(min(n_modes, len(self.masters)))
+        self.max_iter, self.tol = max_iter, tol
+        self._t0: np.ndarray | None = None
+        self.last_converged = True
+
+    def reduce(self, theta: np.ndarray):
+        from shm_ros.core.models.reduction import iirs
+
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        K = self.model.stiffness_batch(theta)
+        M = self.model.mass_batch(theta)
+        R = iirs(K, M, self.masters, max_iter=self.max_iter, tol=self.tol, t0=self._t0)
+        if not R.converged:  # a poor warm start: redo from the static (Guyan) start
+            R = iirs(K, M, self.masters, max_iter=self.max_iter, tol=self.tol)
+        self.last_converged = bool(R.converged)
+        if R.converged:
+            self._t0 = R.t[0].copy()
+        return R
+
+    def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        from shm_ros.core.models.base import generalized_modes_batch
+
+        R = self.reduce(theta)
+        sol = generalized_modes_batch(R.K, R.M, self.n_modes)
+        return sol.frequencies_hz, sol.shapes[:, self.sensor_pos, :]
+
+    def full_shapes(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Frequencies (m,) and reduced shapes expanded to every DOF with the same T (n, m)."""
+        from shm_ros.core.models.base import generalized_modes_batch
+
+        R = self.reduce(np.atleast_2d(theta))
+        sol = generalized_modes_batch(R.K, R.M, self.n_modes)
+        return sol.frequencies_hz[0], (R.T @ sol.shapes)[0]
+
+
+def can_reduce(model: AffineModel, sensor_ids: list[str], n_required: int) -> bool:
+    try:
+        dofs = set(model.master_dofs(list(sensor_ids)))
+    except KeyError:
+        return False
+    return n_required <= len(dofs) < model.n_dof
+
+
+def build_predictor(model: AffineModel, sensor_ids: list[str], n_modes: int,
+                    reduction: str = "auto", n_required: int | None = None) -> ModalPredictor:
+    """Full or IIRS-reduced predictor.
+
+    ``auto`` reduces when every sensor sits on a DOF, the sensors cover fewer DOFs than the model
+    has, and at least ``n_required`` (the data's modes) reduced modes exist; ``iirs`` insists
+    (error otherwise); ``none`` uses the full model.
+    """
+    n_required = n_modes if n_required is None else n_required
+    if reduction == "none" or not sensor_ids:
+        return FullModalPredictor(model, sensor_ids, n_modes)
+    ok = can_reduce(model, sensor_ids, n_required)
+    if reduction == "iirs" and not ok:
+        raise ValueError(f"IIRS reduction to sensors {sensor_ids} is not possible for model "
+                         f"'{model.name}': every sensor must sit on a DOF and the sensors must cover "
+                         f"at least {n_required} and fewer than {model.n_dof} DOFs")
+    if ok:
+        return ReducedModalPredictor(model, sensor_ids, n_modes)
+    return FullModalPredictor(model, sensor_ids, n_modes)

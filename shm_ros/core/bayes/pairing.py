@@ -1,0 +1,77 @@
+"""Pairing measured modes with model modes by MAC (not by order), and the MAC itself."""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Weight of the log-frequency distance next to MAC in the pairing score: shapes decide, frequency
+# only separates shapes that look alike at few sensors.
+FREQUENCY_WEIGHT = 0.5
+
+
+def mac(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Modal assurance criterion of real vectors along the last axis (broadcasting)."""
+    num = np.sum(a * b, axis=-1) ** 2
+    den = np.sum(a * a, axis=-1) * np.sum(b * b, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / den, 0.0)
+
+
+def mac_matrix(phi_obs: np.ndarray, phi_model: np.ndarray) -> np.ndarray:
+    """MAC of observed shapes (m_o, s) against model shapes (B, s, m_m) -> (B, m_o, m_m)."""
+    num = np.einsum("os,bsm->bom", phi_obs, phi_model) ** 2
+    den = np.sum(phi_obs**2, axis=1)[None, :, None] * np.sum(phi_model**2, axis=1)[:, None, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / den, 0.0)
+
+
+def pairing_scores(f_obs: np.ndarray, phi_obs: np.ndarray | None,
+                   f_model: np.ndarray, phi_model: np.ndarray | None) -> np.ndarray:
+    """Score (B, m_o, m_m) of pairing each observed mode with each model mode; higher is better."""
+    f_model = np.atleast_2d(f_model)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dist = np.abs(np.log(np.clip(f_model[:, None, :], 1e-12, None) / f_obs[None, :, None]))
+    score = -FREQUENCY_WEIGHT * dist
+    if phi_obs is not None and phi_model is not None:
+        usable = ~np.any(np.isnan(phi_obs), axis=1)
+        if usable.any():
+            m = mac_matrix(np.nan_to_num(phi_obs), phi_model)
+            score = score + np.where(usable[None, :, None], m, 0.0)
+    return np.nan_to_num(score, nan=-np.inf)
+
+
+def pair_modes(f_obs: np.ndarray, phi_obs: np.ndarray | None,
+               f_model: np.ndarray, phi_model: np.ndarray | None) -> np.ndarray:
+    """Model-mode index for every observed mode, per batch row: (B, m_o).
+
+    Greedy one-to-one assignment on the score matrix, vectorised over the batch: take the best
+    remaining (observed, model) pair, remove its row and column, repeat. For the few well separated
+    modes of model updating this equals the optimal (Hungarian) assignment and costs m_o argmax
+    passes instead of a Python loop over the batch.
+    """
+    score = pairing_scores(f_obs, phi_obs, f_model, phi_model).copy()
+    B, m_o, m_m = score.shape
+    if m_m < m_o:
+        raise ValueError(f"model offers {m_m} modes for {m_o} observed modes")
+    out = np.zeros((B, m_o), dtype=int)
+    rows = np.arange(B)
+    for _ in range(m_o):
+        flat = np.argmax(score.reshape(B, -1), axis=1)
+        i, j = np.divmod(flat, m_m)
+        out[rows, i] = j
+        score[rows, i, :] = -np.inf
+        score[rows, :, j] = -np.inf
+    return out
+
+
+def pair_modes_optimal(f_obs: np.ndarray, phi_obs: np.ndarray | None,
+                       f_model: np.ndarray, phi_model: np.ndarray | None) -> np.ndarray:
+    """Optimal assignment (scipy's linear_sum_assignment) for a single model: (m_o,)."""
+    from scipy.optimize import linear_sum_assignment
+
+    score = pairing_scores(f_obs, phi_obs, f_model[None], None if phi_model is None else phi_model[None])[0]
+    score = np.where(np.isfinite(score), score, -1e6)
+    r, c = linear_sum_assignment(-score)
+    out = np.zeros(len(f_obs), dtype=int)
+    out[r] = c
+    return out

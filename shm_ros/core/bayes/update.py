@@ -1,0 +1,305 @@
+"""One call from a model, data and settings to a posterior: ``update(model, observations, config)``.
+
+The CLI (``shm-ros update``), the ROS node and ``explain`` all call :func:`update`; it assembles a
+predictor (full or IIRS-reduced), a likelihood, the joint prior, finds the MAP, samples with MH or
+emcee until the ArviZ diagnostics are met, estimates the evidence by nested sampling and summarises.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from shm_ros.core.models.base import AffineModel
+
+from .evidence import nested_evidence
+from .fit import modal_fit
+from .forward import build_predictor
+from .likelihoods import FitnessLikelihood, GaussianModalLikelihood, InverseGamma
+from .observations import ModalObservations
+from .priors import JointPrior, Prior, PriorError, priors_from_specs
+from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance, run_sampler
+
+LIKELIHOODS = ("gaussian", "fitness", "time")
+SAMPLERS = ("emcee", "mh")
+
+
+@dataclass
+class UpdateConfig:
+    """Settings of one updating run (every field has a default; all are plain data)."""
+
+    likelihood: str = "gaussian"  # gaussian | fitness | time
+    sampler: str = "emcee"  # emcee | mh
+    # priors by parameter name: {"dist": "normal", "mean": 1.0, "std": 0.1}; None = from the model
+    # caller (``priors`` argument of :func:`update`)
+    priors: dict[str, dict[str, Any]] | None = None
+    n_modes: int | None = None  # model modes offered to pairing (default: data's modes + 2)
+    use_shapes: bool = True
+    reduction: str = "auto"  # auto | iirs | none  (auto = IIRS when sensors are fewer than DOFs)
+    # Gaussian likelihood: variances with inverse-gamma priors, marginalised or sampled
+    variance: str = "marginal"  # marginal | sampled
+    ig_shape: float = 1.0
+    frequency_error_guess: float = 0.01  # prior mode of the relative frequency error std
+    shape_error_guess: float = 0.05  # prior mode of the shape error std
+    # fitness likelihood (bridge paper)
+    alpha: float = 0.5
+    beta: float = 0.5
+    k: float = 0.05
+    # sampling
+    n_chains: int = 0
+    n_steps: int = 1500
+    max_steps: int = 20000
+    burn_in: int = 0
+    rhat_target: float = 1.01
+    ess_target: float = 1000.0
+    # evidence
+    evidence: bool = True
+    n_live: int = 300
+    seed: int = 0
+
+    def validate(self) -> None:
+        if self.likelihood not in LIKELIHOODS:
+            raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {self.likelihood!r}")
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"sampler must be one of {SAMPLERS}, got {self.sampler!r}")
+        if self.reduction not in ("auto", "iirs", "none"):
+            raise ValueError(f"reduction must be auto, iirs or none, got {self.reduction!r}")
+
+
+@dataclass
+class ParameterSummary:
+    map: float
+    mean: float
+    std: float
+    ci95: tuple[float, float]
+    median: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"map": self.map, "mean": self.mean, "std": self.std, "ci95": list(self.ci95),
+                "median": self.median}
+
+
+@dataclass
+class Posterior:
+    """Result of :func:`update`. ``samples`` are the kept draws of the structural parameters."""
+
+    parameter_names: list[str]
+    parameters: dict[str, ParameterSummary]
+    samples: np.ndarray  # (n_samples, d)
+    log_prob: np.ndarray  # (n_samples,)
+    chains: np.ndarray  # (n_chains, n_draws, d_total) incl. sampled nuisance columns
+    chain_names: list[str]
+    diagnostics: dict[str, Any]
+    fit: dict[str, Any]
+    fit_nominal: dict[str, Any]
+    log_evidence: float | None
+    log_evidence_err: float | None = None
+    noise: dict[str, Any] = field(default_factory=dict)
+    priors: dict[str, dict[str, Any]] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    timing_s: dict[str, float] = field(default_factory=dict)
+
+    def theta(self, which: str = "mean") -> np.ndarray:
+        return np.array([getattr(self.parameters[n], which) for n in self.parameter_names])
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``posterior.json`` payload of contracts section 6 (without schema/provenance)."""
+        return {
+            "parameters": {n: s.to_dict() for n, s in self.parameters.items()},
+            "diagnostics": self.diagnostics,
+            "fit": self.fit,
+            "fit_nominal": self.fit_nominal,
+            "log_evidence": self.log_evidence,
+            "log_evidence_err": self.log_evidence_err,
+            "noise": self.noise,
+            "priors": self.priors,
+            "warnings": self.warnings,
+            "timing_s": self.timing_s,
+        }
+
+
+def summarise(samples: np.ndarray, x_map: np.ndarray, names: Sequence[str]) -> dict[str, ParameterSummary]:
+    out = {}
+    for i, n in enumerate(names):
+        col = samples[:, i]
+        lo, med, hi = np.quantile(col, [0.025, 0.5, 0.975])
+        out[n] = ParameterSummary(float(x_map[i]), float(col.mean()), float(col.std(ddof=1)),
+                                  (float(lo), float(hi)), float(med))
+    return out
+
+
+def joint_prior_for(model: AffineModel, config: UpdateConfig,
+                    priors: JointPrior | Sequence[Any] | None) -> JointPrior:
+    if isinstance(priors, JointPrior):
+        jp = priors
+    elif priors is not None:
+        jp = priors_from_specs(priors)
+    elif config.priors is not None:
+        missing = [n for n in model.parameter_names if n not in config.priors]
+        if missing:
+            raise PriorError(f"no prior given for parameter(s) {missing}")
+        jp = JointPrior([Prior.make(config.priors[n].get("dist", ""),
+                                    {k: v for k, v in config.priors[n].items() if k != "dist"}, n)
+                         for n in model.parameter_names])
+    else:
+        raise PriorError("update needs priors: pass them (structure 'parameters') or set config.priors")
+    if jp.names != list(model.parameter_names):
+        raise PriorError(f"priors are for {jp.names} but the model's parameters are "
+                         f"{model.parameter_names}")
+    return jp
+
+
+def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
+    """The likelihood object the config asks for (batched call (B, d_total) -> (B,))."""
+    if config.likelihood == "time":
+        from .timedomain import AccelerationRecord, TimeDomainLikelihood
+
+        if not isinstance(data, AccelerationRecord):
+            raise TypeError("likelihood 'time' needs an AccelerationRecord (input and output "
+                            "accelerations), not modal data")
+        lik = TimeDomainLikelihood(model, data, variance=config.variance,
+                                   error_prior_shape=config.ig_shape)
+        lik.n_theta = model.n_parameters
+        return lik, None
+    if not isinstance(data, ModalObservations):
+        raise TypeError(f"likelihood {config.likelihood!r} needs ModalObservations")
+    sensors = list(data.sensor_ids) if (config.use_shapes and data.has_shapes) else []
+    n_modes = config.n_modes or data.n_modes + 2
+    predictor = build_predictor(model, sensors, n_modes, config.reduction, n_required=data.n_modes)
+    if config.likelihood == "gaussian":
+        lik = GaussianModalLikelihood(
+            predictor, data, use_shapes=bool(sensors), variance=config.variance,
+            freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
+            shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape))
+    else:
+        lik = FitnessLikelihood(predictor, data, alpha=config.alpha, beta=config.beta, k=config.k)
+    lik.n_theta = model.n_parameters
+    return lik, predictor
+
+
+def update(model: AffineModel, observations: Any, config: UpdateConfig | None = None,
+           priors: JointPrior | Sequence[Any] | None = None) -> Posterior:
+    """Calibrate the model's parameters to the data; see the module docstring."""
+    config = config or UpdateConfig()
+    config.validate()
+    timing: dict[str, float] = {}
+    t0 = time.perf_counter()
+    jp = joint_prior_for(model, config, priors)
+    lik, predictor = build_likelihood(model, observations, config)
+    d = jp.dim
+    n_extra = lik.n_extra
+    names = list(jp.names) + list(lik.extra_names)
+
+    def log_post(x: np.ndarray) -> np.ndarray:
+        x = np.atleast_2d(x)
+        lp = jp.logpdf(x[:, :d]) + lik.extra_logprior(x[:, d:])
+        ok = np.isfinite(lp)
+        out = np.full(x.shape[0], -np.inf)
+        if ok.any():
+            out[ok] = lp[ok] + lik(x[ok])
+        out[~np.isfinite(out)] = -np.inf
+        return out
+
+    rng = np.random.default_rng(config.seed)
+    prior_std = np.array([p.std if np.isfinite(p.std) else 1.0 for p in jp.priors])
+    starts_theta = np.vstack([np.atleast_2d([p.mean for p in jp.priors]), jp.sample(rng, 400)])
+    starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
+    scale = np.concatenate([prior_std, np.ones(n_extra)])
+    x_map, lp_map = find_map(log_post, starts, scale)
+    cov = laplace_covariance(log_post, x_map, scale)
+    timing["map_s"] = time.perf_counter() - t0
+
+    t1 = time.perf_counter()
+    settings = SamplerSettings(config.sampler, config.n_chains, config.n_steps, config.max_steps,
+                               config.burn_in, config.rhat_target, config.ess_target, config.seed)
+    chains: ChainResult = run_sampler(log_post, x_map, cov, settings, names)
+    timing["sampling_s"] = time.perf_counter() - t1
+    flat = chains.flat
+    flat_lp = chains.log_prob.reshape(-1)
+    best = int(np.argmax(flat_lp))
+    if flat_lp[best] > lp_map:
+        x_map, lp_map = flat[best].copy(), float(flat_lp[best])
+    summary = summarise(flat[:, :d], x_map[:d], jp.names)
+
+    warnings_ = list(chains.warnings)
+    diag = {
+        "sampler": chains.sampler,
+        "rhat_max": chains.diagnostics.rhat_max,
+        "ess_min": chains.diagnostics.ess_min,
+        "acceptance": chains.acceptance,
+        "converged": chains.converged,
+        "n_chains": int(chains.chains.shape[0]),
+        "n_draws": int(chains.chains.shape[1]),
+        "burn_in": int(chains.burn_in),
+        "n_steps": int(chains.n_steps),
+        "n_evaluations": int(chains.n_evaluations),
+        "rhat": dict(zip(names, map(float, chains.diagnostics.rhat))),
+        "ess_bulk": dict(zip(names, map(float, chains.diagnostics.ess_bulk))),
+        "likelihood": config.likelihood,
+    }
+
+    noise: dict[str, Any] = {}
+    if config.likelihood == "gaussian" or config.likelihood == "time":
+        if config.variance == "sampled":
+            for j, n in enumerate(lik.extra_names):
+                v = np.exp(flat[:, d + j])
+                noise[n.removeprefix("log_")] = {"mean": float(v.mean()), "std": float(v.std(ddof=1))}
+        else:
+            noise = {k: {"mean": v} for k, v in lik.variance_estimates(x_map[:d]).items()}
+
+    if predictor is not None:
+        fit = modal_fit(predictor, observations, x_map[:d])
+        fit_nominal = modal_fit(predictor, observations, model.nominal_theta())
+    else:
+        fit = lik.fit(x_map[:d])
+        fit_nominal = lik.fit(model.nominal_theta())
+
+    log_z = log_z_err = None
+    if config.evidence:
+        t2 = time.perf_counter()
+        marginal = lik if getattr(lik, "variance", "marginal") == "marginal" else \
+            _marginal_twin(model, observations, config)
+        ev = nested_evidence(lambda x: marginal(x), jp, n_live=config.n_live, seed=config.seed)
+        log_z, log_z_err = ev.log_evidence, ev.log_evidence_err
+        timing["evidence_s"] = time.perf_counter() - t2
+        diag["evidence_method"] = ev.method
+    timing["total_s"] = time.perf_counter() - t0
+    return Posterior(
+        parameter_names=list(jp.names), parameters=summary, samples=flat[:, :d].copy(),
+        log_prob=flat_lp, chains=chains.chains, chain_names=names, diagnostics=diag, fit=fit,
+        fit_nominal=fit_nominal, log_evidence=log_z, log_evidence_err=log_z_err, noise=noise,
+        priors={p.name: p.describe() for p in jp.priors}, warnings=warnings_, timing_s=timing)
+
+
+def _marginal_twin(model: AffineModel, data: Any, config: UpdateConfig):
+    """The same likelihood with the variances integrated out (the evidence needs only theta)."""
+    twin = UpdateConfig(**{**asdict(config), "variance": "marginal"})
+    lik, _ = build_likelihood(model, data, twin)
+    return lik
+
+
+def priors_from_structure(spec: Any) -> list[Any]:
+    """Parameter specs of a ``StructureSpec`` (its ``parameters`` list) for :func:`update`."""
+    params = getattr(spec, "parameters", None)
+    if not params:
+        raise PriorError(f"structure '{getattr(spec, 'name', '?')}' lists no 'parameters' to update")
+    return list(params)
+
+
+def config_from_mapping(values: Mapping[str, Any]) -> UpdateConfig:
+    """An UpdateConfig from a plain mapping (node parameters, YAML); unknown keys are an error."""
+    known = set(UpdateConfig.__dataclass_fields__)
+    bad = sorted(set(values) - known)
+    if bad:
+        raise ValueError(f"unknown update setting(s) {bad}; known: {sorted(known)}")
+    cfg = UpdateConfig(**dict(values))
+    cfg.validate()
+    return cfg
+
+
+__all__ = ["UpdateConfig", "Posterior", "ParameterSummary", "update", "summarise",
+           "config_from_mapping", "priors_from_structure", "math"]
