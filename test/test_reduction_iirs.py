@@ -13,7 +13,14 @@ from conftest import full_size
 from scipy.optimize import least_squares
 
 from shm_ros.core.models import build_model
-from shm_ros.core.models.reduction import expand_mode_shapes, guyan, iirs, reduce_model, reduced_modes_batch
+from shm_ros.core.models.reduction import (
+    expand_mode_shapes,
+    guyan,
+    iirs,
+    iirs_limit,
+    reduce_model,
+    reduced_modes_batch,
+)
 from shm_ros.core.structure import structure_from_dict
 from shm_ros.io.structure import load_structure
 
@@ -126,6 +133,22 @@ def test_batched_and_single_agree_and_warm_start(building):
     assert sol.shapes.shape == (20, 4, 3) and exp.shapes.shape == (20, 8, 3)
     np.testing.assert_allclose(exp.shapes[:, model.master_dofs(MEASURED)], sol.shapes, atol=1e-12)
     np.testing.assert_allclose(expand_mode_shapes(batch.T, batch.modes(3).shapes), batch.expand(batch.modes(3).shapes))
+
+
+def test_limit_equals_converged_iteration(building):
+    """``method="limit"`` (lowest eigenvectors) is the fixed point the iteration converges to."""
+    spec, model = building
+    thetas = _prior_draws(spec, 200, np.random.default_rng(11))
+    it = reduce_model(model, thetas, MEASURED, tol=1e-12)
+    lim = reduce_model(model, thetas, MEASURED, method="limit")
+    for a, b in ((it.K, lim.K), (it.M, lim.M)):
+        rel = np.linalg.norm(a - b, axis=(1, 2)) / np.linalg.norm(b, axis=(1, 2))
+        assert rel.max() < 1e-4, rel.max()
+    np.testing.assert_allclose(it.modes(4).frequencies_hz, lim.modes(4).frequencies_hz, rtol=1e-8)
+    single = iirs_limit(model.stiffness(thetas[0]), model.mass(thetas[0]), model.master_dofs(MEASURED))
+    np.testing.assert_allclose(single.T, lim.T[0], atol=1e-10)
+    with pytest.raises(ValueError, match="method"):
+        reduce_model(model, None, MEASURED, method="serep")
 
 
 def test_non_convergence_is_reported(building):

@@ -18,12 +18,36 @@ possible inside a likelihood. Written here because scipy has no IIRS; the algebr
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from shm_ros.core.models.base import AffineModel, BatchModalSolution, ModalSolution, generalized_modes_batch
+
+
+_CONTROLLER = None
+
+
+@contextlib.contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """Run the block with one BLAS thread (via threadpoolctl when installed).
+
+    Stacks of tiny matrices are slower, not faster, when OpenBLAS splits each product over threads;
+    batched reductions run inside this, and callers may parallelise over processes instead.
+    """
+    global _CONTROLLER
+    try:
+        if _CONTROLLER is None:
+            from threadpoolctl import ThreadpoolController
+
+            _CONTROLLER = ThreadpoolController()
+        ctx = _CONTROLLER.limit(limits=1, user_api="blas")
+    except ImportError:  # pragma: no cover - threadpoolctl is a runtime dependency
+        ctx = contextlib.nullcontext()
+    with ctx:
+        yield
 
 
 @dataclass
@@ -136,7 +160,10 @@ def iirs(
     change = 0.0
     converged = not improved
     if improved:
-        t, it, change, converged, stragglers = _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, m.size, max_iter, tol)
+        with single_threaded_blas():
+            t, it, change, converged, stragglers = _iterate(
+                Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, m.size, max_iter, tol
+            )
     KR = _reduced(Kmm, Kms, Kss, t)
     MR = _reduced(Mmm, Mms, Mss, t)
     R = Reduction(_assemble_T(t, m, s, n), KR, MR, list(m), it, converged, change)
@@ -214,6 +241,37 @@ def expand_mode_shapes(T: np.ndarray, shapes_m: np.ndarray) -> np.ndarray:
     return np.matmul(T, shapes_m)
 
 
+def iirs_limit(K: np.ndarray, M: np.ndarray, masters: Sequence[int]) -> Reduction:
+    """The converged IIRS reduction computed directly from the full model's lowest m eigenvectors.
+
+    The fixed point of the IIRS iteration is ``T = Phi_L Phi_mL^-1`` (``Phi_L``: the lowest m mass-
+    normalised modes, ``Phi_mL`` their master rows), i.e. the SEREP transformation; with it the
+    reduced model reproduces those modes exactly. For small models (a shear building) one batched
+    eigen-solution is several times cheaper than the iteration; for large models use :func:`iirs`.
+    Ill-conditioned when a low mode has (nearly) no motion at all masters - then the sensors cannot
+    see it either.
+    """
+    K = np.asarray(K, dtype=float)
+    M = np.asarray(M, dtype=float)
+    single = K.ndim == 2
+    if single:
+        K, M = K[None], M[None]
+    n = K.shape[-1]
+    m, _ = _split(n, masters)
+    with single_threaded_blas():
+        phi = generalized_modes_batch(K, M, m.size).shapes  # (B, n, m)
+        phi_m = phi[:, m, :]
+        # T = phi phi_m^-1, solved as phi_m^T T^T = phi^T
+        T = np.swapaxes(np.linalg.solve(np.swapaxes(phi_m, -1, -2), np.swapaxes(phi, -1, -2)), -1, -2)
+        T[:, m, :] = np.eye(m.size)
+        Tt = np.swapaxes(T, -1, -2)
+        KR, MR = Tt @ K @ T, Tt @ M @ T
+    KR = 0.5 * (KR + np.swapaxes(KR, -1, -2))
+    MR = 0.5 * (MR + np.swapaxes(MR, -1, -2))
+    R = Reduction(T, KR, MR, list(m), 0, True, 0.0)
+    return _unbatch(R) if single else R
+
+
 def reduce_model(
     model: AffineModel,
     thetas: np.ndarray | None = None,
@@ -221,15 +279,27 @@ def reduce_model(
     masters: Sequence[int] | None = None,
     max_iter: int = 500,
     tol: float = 1e-9,
+    method: str = "iterate",
+    t0: np.ndarray | None = None,
 ) -> Reduction:
     """IIRS reduction of ``model`` at ``thetas`` ((p,) -> single, (B, p) -> batch) to the DOFs of
-    ``sensor_ids`` (default: every sensor on a DOF), or to explicit ``masters`` DOF indices."""
+    ``sensor_ids`` (default: every sensor on a DOF), or to explicit ``masters`` DOF indices.
+
+    ``method``: ``"iterate"`` (the IIRS iteration, :func:`iirs`, warm-started from ``t0`` if given)
+    or ``"limit"`` (its converged result from the lowest eigenvectors, :func:`iirs_limit`).
+    """
     if masters is None:
         masters = model.master_dofs(list(sensor_ids) if sensor_ids is not None else None)
     theta = model.nominal_theta() if thetas is None else np.asarray(thetas, dtype=float)
     if theta.ndim == 1:
-        return iirs(model.stiffness(theta), model.mass(theta), masters, max_iter=max_iter, tol=tol)
-    return iirs(model.stiffness_batch(theta), model.mass_batch(theta), masters, max_iter=max_iter, tol=tol)
+        K, M = model.stiffness(theta), model.mass(theta)
+    else:
+        K, M = model.stiffness_batch(theta), model.mass_batch(theta)
+    if method == "limit":
+        return iirs_limit(K, M, masters)
+    if method != "iterate":
+        raise ValueError(f"method must be 'iterate' or 'limit', got {method!r}")
+    return iirs(K, M, masters, max_iter=max_iter, tol=tol, t0=t0)
 
 
 def reduced_modes_batch(
@@ -240,11 +310,14 @@ def reduced_modes_batch(
     max_iter: int = 500,
     tol: float = 1e-9,
     expand: bool = False,
+    method: str = "iterate",
 ) -> BatchModalSolution:
     """Reduced-model modes for every row of ``thetas`` (B, p): frequencies (B, k) and shapes at the
-    sensors (B, n_sensors, k) in ``sensor_ids`` order, or expanded to all DOFs when ``expand``."""
-    R = reduce_model(model, np.atleast_2d(thetas), sensor_ids, max_iter=max_iter, tol=tol)
-    sol = R.modes(n_modes)
+    sensors (B, n_sensors, k) in ``sensor_ids`` order, or expanded to all DOFs when ``expand``.
+    Shapes are normalised to the reduced mass matrix."""
+    R = reduce_model(model, np.atleast_2d(thetas), sensor_ids, max_iter=max_iter, tol=tol, method=method)
+    with single_threaded_blas():
+        sol = R.modes(n_modes)
     if expand:
         return BatchModalSolution(sol.frequencies_hz, R.expand(sol.shapes))
     return sol
