@@ -238,3 +238,44 @@ def test_file_level_errors(tmp_path):
     d["matrices"]["file"] = "short.npz"
     with pytest.raises(StructureError, match=r"m3.yaml.*matrices\.terms\.K_upper.*not found"):
         load_structure(_write(tmp_path, d, "m3.yaml"))
+
+
+CONTRACT_EXAMPLE = """
+name: deokpyeong-like-girder
+kind: girder            # girder | shear_building | matrices
+girder:                 # 2-D Euler-Bernoulli beam on bearings
+  spans: [14.0, 30.0, 14.0]          # m
+  elements_per_span: 10
+  section: {E: 3.4e10, I: 2.1, A: 5.2, rho: 2500}   # or a list, one per span
+  bearings:                          # one per support, x in m from the left end
+    - {x: 0.0,  k_vertical: 5.0e9, k_rotation: 0.0}
+    - {x: 14.0, k_vertical: 5.0e9, k_rotation: 0.0}
+    - {x: 44.0, k_vertical: 5.0e9, k_rotation: 0.0}
+    - {x: 58.0, k_vertical: 5.0e9, k_rotation: 0.0}
+shear_building:                      # used instead of girder when kind: shear_building
+  floors:                            # bottom up; stiffness = story below the floor
+    - {mass: 4.0e5, stiffness: 6.0e8}
+damping: {kind: rayleigh, ratios: [0.02, 0.02]}     # or {kind: modal, ratios: [...]}
+sensors:
+  - {id: s1, at: {x: 7.0}, direction: vertical}
+parameters:
+  - name: E_scale
+    applies_to: girder.section.E     # multiplicative factor on the nominal value
+    prior: {dist: normal, mean: 1.0, std: 0.1}
+"""
+
+
+def test_contract_example_loads(tmp_path):
+    """The contracts' own girder example (YAML 1.1 reads 3.4e10 as text; it is still a number), with
+    the unused shear_building section ignored."""
+    p = tmp_path / "contract.yaml"
+    p.write_text(CONTRACT_EXAMPLE)
+    spec = load_structure(p)
+    assert spec.girder.sections[0].E == 3.4e10 and spec.girder.bearings[1].k_vertical == 5.0e9
+    assert spec.shear_building is None and "shear_building" in spec.raw
+    model = build_model(spec)
+    assert model.parameter_names == ["E_scale"] and model.sensor_dofs["s1"] % 2 == 0
+    d = yaml.safe_load(CONTRACT_EXAMPLE)
+    del d["parameters"][0]["prior"]
+    with pytest.raises(StructureError, match=r"parameters\[0\]\.prior"):
+        structure_from_dict(d, "noprior.yaml")

@@ -528,9 +528,9 @@ def structure_from_dict(
         raise c.err(f"unknown kind {kind!r} (expected one of: {', '.join(KINDS)})", "kind")
     if kind not in data:
         raise c.err(f"kind is {kind!r} but the section {kind!r} is missing", kind)
-    for other in KINDS:
-        if other != kind and other in data:
-            raise c.err(f"section {other!r} does not belong to kind {kind!r}", other)
+    # Sections of the other kinds may be present (a file may carry both a girder and a building
+    # description, contracts section 2); only the one named by ``kind`` is read, the rest stays in
+    # ``raw``.
 
     girder = _girder(c, data["girder"]) if kind == "girder" else None
     building = _building(c, data["shear_building"]) if kind == "shear_building" else None
@@ -788,7 +788,7 @@ def _parameters(c: _Ctx, v: Any, spec: StructureSpec) -> list[ParameterSpec]:
     for i, p in enumerate(c.seq(v, "parameters")):
         fld = f"parameters[{i}]"
         p = c.mapping(p, fld)
-        c.keys(p, ("name", "applies_to", "prior"), ("name", "applies_to"), fld)
+        c.keys(p, ("name", "applies_to", "prior"), ("name", "applies_to", "prior"), fld)
         name = c.string(p["name"], f"{fld}.name")
         if any(q.name == name for q in out):
             raise c.err(f"duplicate parameter name {name!r}", f"{fld}.name")
@@ -806,7 +806,7 @@ def _parameters(c: _Ctx, v: Any, spec: StructureSpec) -> list[ParameterSpec]:
                     )
             for key in _product_keys(spec, loc):
                 owner[key] = name
-        prior = _prior(c, p.get("prior", {"dist": "uniform", "low": 0.0, "high": 10.0}), f"{fld}.prior")
+        prior = _prior(c, p["prior"], f"{fld}.prior")
         out.append(ParameterSpec(name=name, applies_to=path, prior=prior, targets=targets))
     return out
 
