@@ -52,7 +52,7 @@ EFFECTS: dict[str, tuple[str, dict[str, dict[str, Any]]]] = {
         "shear_building": {"fraction": 0.08, "when": "always"},
     }),
     "support_flexibility": ("support_flexibility", {
-        "girder": {"k_soil_n_m": 3.0e8},
+        "girder": {"k_soil_n_m": 2.0e9},
         "shear_building": {"k_soil_rel": 3.0, "mass_rel": 0.15, "soil_damping_ratio": 0.10},
     }),
     "amplitude_stiffness": ("amplitude_dependent_stiffness", {
@@ -62,9 +62,16 @@ EFFECTS: dict[str, tuple[str, dict[str, dict[str, Any]]]] = {
         "shear_building": {"velocity_ref_m_s": 0.02},
     }),
     "damper": ("damper_stiffness", {
-        "shear_building": {"model": "kelvin_voigt", "k_rel": 0.15, "c_rel_s": 0.05, "stories": "all",
+        "shear_building": {"model": "kelvin_voigt", "k_rel": 0.30, "c_rel_s": 0.02, "stories": "all",
                            "fail_at": None, "fail_factor": 0.0},
     }),
+}
+
+# frozen elastomeric bearings lock up: their springs (chiefly the small rotational restraint) grow
+# by orders of magnitude below the knee, which is what shifts a girder's frequencies
+BEARING_DEFAULTS: dict[str, dict[str, Any]] = {
+    "temperature_linear": {"alpha_per_c": -0.02},
+    "temperature_bilinear": {"alpha_per_c": -0.01, "below_per_c": -20.0},
 }
 
 RUSH_HOURS = ((7.0, 9.5), (17.0, 19.5))  # local time, added mass of slow or jammed traffic
@@ -193,6 +200,8 @@ def make_effect(key: str, kind: str, params: dict[str, Any] | None = None, start
         raise EffectError(f"effect {key!r} is not available for {kind} structures "
                           f"(available for: {', '.join(defaults)})")
     merged = dict(defaults[kind])
+    if (params or {}).get("where") == "bearings" and key in BEARING_DEFAULTS:
+        merged.update(BEARING_DEFAULTS[key])
     for k, v in (params or {}).items():
         if k not in merged:
             raise EffectError(f"effect {key!r}: unknown parameter {k!r} (known: {', '.join(merged)})")

@@ -2,7 +2,7 @@
 
 Named scenarios:
 
-* ``girder`` - three-span girder (14 + 30 + 14 m) on four bearings, nine vertical sensors, traffic and
+* ``girder`` - three-span girder (24 + 30 + 24 m) on four bearings, nine vertical sensors, traffic and
   wind, a daily temperature cycle around 5 degC (early March), 10-minute bursts.
 * ``building`` - eight-story shear building, ground sensor ``g0`` plus floors 1, 4, 6 and 8 (x);
   microtremor at the base (measured by ``g0``) and wind on the floors.
@@ -22,19 +22,19 @@ GIRDER_STRUCTURE: dict[str, Any] = {
     "name": "three-span-girder",
     "kind": "girder",
     "girder": {
-        "spans": [14.0, 30.0, 14.0],
+        "spans": [24.0, 30.0, 24.0],
         "elements_per_span": 10,
         "section": {"E": 3.4e10, "I": 2.1, "A": 5.2, "rho": 2500.0},
         "bearings": [
             {"x": 0.0, "k_vertical": 5.0e9, "k_rotation": 0.0},
-            {"x": 14.0, "k_vertical": 5.0e9, "k_rotation": 0.0},
-            {"x": 44.0, "k_vertical": 5.0e9, "k_rotation": 0.0},
-            {"x": 58.0, "k_vertical": 5.0e9, "k_rotation": 0.0},
+            {"x": 24.0, "k_vertical": 5.0e9, "k_rotation": 0.0},
+            {"x": 54.0, "k_vertical": 5.0e9, "k_rotation": 0.0},
+            {"x": 78.0, "k_vertical": 5.0e9, "k_rotation": 0.0},
         ],
     },
     "damping": {"kind": "rayleigh", "ratios": [0.02, 0.02]},
     "sensors": [{"id": f"s{i + 1}", "at": {"x": x}, "direction": "vertical"}
-                for i, x in enumerate([3.5, 7.0, 10.5, 21.5, 29.0, 36.5, 47.5, 51.0, 54.5])],
+                for i, x in enumerate([6.0, 12.0, 18.0, 31.5, 39.0, 46.5, 60.0, 66.0, 72.0])],
     "parameters": [
         {"name": "E_scale", "applies_to": "girder.section.E", "prior": {"dist": "normal", "mean": 1.0, "std": 0.1}},
         {"name": "bearing_scale", "applies_to": "girder.bearings[*].k_vertical",
