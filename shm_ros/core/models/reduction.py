@@ -126,6 +126,7 @@ def iirs(
     tol: float = 1e-9,
     improved: bool = True,
     t0: np.ndarray | None = None,
+    accelerate: bool = True,
 ) -> Reduction:
     """IIRS reduction of (K, M) - single (n, n) or stacked (B, n, n) - to ``masters``.
 
@@ -134,6 +135,8 @@ def iirs(
     iterations, or after ``max_iter`` iterations. The reduced eigenvalues' own error is then of the
     order of ``tol`` (frequencies half of that). ``t0`` (s, m) or (B, s, m) warm-starts the
     iteration (e.g. the slave block ``Reduction.t`` of a nearby theta) instead of Guyan.
+    ``accelerate`` extrapolates the geometric convergence every third step (same fixed point,
+    fewer iterations); ``accelerate=False`` is the plain iteration.
     """
     K = np.asarray(K, dtype=float)
     M = np.asarray(M, dtype=float)
@@ -162,7 +165,7 @@ def iirs(
     if improved:
         with single_threaded_blas():
             t, it, change, converged, stragglers = _iterate(
-                Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, m.size, max_iter, tol
+                Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, m.size, max_iter, tol, accelerate
             )
     KR = _reduced(Kmm, Kms, Kss, t)
     MR = _reduced(Mmm, Mms, Mss, t)
@@ -172,7 +175,7 @@ def iirs(
     return _unbatch(R) if single else R
 
 
-def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, tol):
+def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, tol, accelerate=True):
     """The IIRS fixed-point iteration on a batch, each member stopping when it has converged.
 
     With ``t = tG + d`` the reduced stiffness is ``K_G + d' Kss d`` (the Guyan cross terms vanish),
@@ -193,13 +196,14 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
     d = t - tG
     KR = KG + np.swapaxes(d, -1, -2) @ Kss @ d
     active = np.arange(t.shape[0])
-    work = [Mmm, Mms, Msm, Mss, tG, Kss_inv, KG]
+    work = [Mmm, Mms, Msm, Mss, tG, Kss_inv, KG, Kss]
     tw = t
     prev = None
+    step_prev = None
     change_max = 0.0
     it = 0
     for it in range(1, max_iter + 1):
-        mmm, mms, msm, mss, tg, kinv, kg = work
+        mmm, mms, msm, mss, tg, kinv, kg, kss = work
         P = msm + mss @ tw
         MR = mmm + mms @ tw + np.swapaxes(tw, -1, -2) @ P
         D = np.linalg.solve(MR, KR)  # M_R^-1 K_R
@@ -216,13 +220,32 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
                 keep = ~done
                 active = active[keep]
                 work = [w[keep] for w in work]
-                mmm, mms, msm, mss, tg, kinv, kg = work
+                mmm, mms, msm, mss, tg, kinv, kg, kss = work
                 tw, D, tr, P = tw[keep], D[keep], tr[keep], P[keep]
+                if step_prev is not None:
+                    step_prev = step_prev[keep]
         prev = tr
         Y = P @ D
         d = kinv @ Y
-        KR = kg + np.swapaxes(d, -1, -2) @ Y
-        tw = tg + d
+        t_new = tg + d
+        step = t_new - tw
+        if accelerate and step_prev is not None and it % 3 == 0:
+            # The error decays geometrically (ratio ~ lambda_m / lambda_{m+1}); every third step,
+            # estimate the ratio r from two successive steps and jump to the limit of the
+            # geometric series, t + step / (1 - r). The fixed point is unchanged; only the
+            # iterations to reach it drop (by about half to two thirds here).
+            num = np.sum(step * step, axis=(-2, -1))
+            den = np.sum(step_prev * step_prev, axis=(-2, -1))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = np.sqrt(num / den)
+            r = np.where(np.isfinite(r) & (r < 0.95), r, 0.0)
+            t_new = tw + step / (1.0 - r)[:, None, None]
+            d = t_new - tg
+            KR = kg + np.swapaxes(d, -1, -2) @ (kss @ d)
+        else:
+            KR = kg + np.swapaxes(d, -1, -2) @ Y
+        step_prev = step
+        tw = t_new
     t[active] = tw
     return t, it, change_max, False, active
 
