@@ -32,7 +32,7 @@ class IdentifyConfig:
     block_rows: int | None = None  # None: max(20, ceil(max_order / n_refs) + 2)
     max_order: int = 60
     min_order: int = 2
-    order_step: int = 2
+    order_step: int = 1
     reference_channels: list[str] | None = None  # SSI-cov / SSI-data references (None = all)
     input_channel: str | None = None  # SSI-io input (None = the window's input_channel)
     lq: str = "auto"  # SSI-data / SSI-io LQ factor: auto | gram | qr
@@ -146,7 +146,9 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
         else:
             model = ssi.ssi_data(y, fs, i, cfg.max_order, refs, lq=cfg.lq)
     orders = np.arange(max(1, cfg.min_order), model.observability.shape[1] + 1, cfg.order_step)
-    poles = ssi.poles_all_orders(model, orders, two_a=cfg.stability.two_a)
+    st = cfg.stability
+    poles = ssi.poles_all_orders(model, orders, two_a=st.two_a, match_scale=(
+        st.two_a_freq_tol, st.two_a_damping_tol, st.two_a_mac_min))
     flags = classify(poles, cfg.stability, fs)
     picked = pick_modes(poles, flags, cfg.picking, use_filters=cfg.use_filters)
     std_f = np.full(len(picked), np.nan)

@@ -330,12 +330,15 @@ def mac_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None = None,
-                     two_a: bool = True) -> PoleSet:
+                     two_a: bool = True,
+                     match_scale: tuple[float, float, float] = (0.01, 0.05, 0.9)) -> PoleSet:
     """Poles of every model order from the one observability matrix.
 
     ``O_up = Q1 R1`` and ``O_dn = Q2 R2`` are factorised once at the largest order; for the first
     ``n`` columns ``A_f = R1[:n,:n]^-1 (Q1^T O_dn)[:n,:n]`` and
-    ``A_b = (Q2^T O_up)[:n,:n]^-1 R2[:n,:n]`` (see module docstring).
+    ``A_b = (Q2^T O_up)[:n,:n]^-1 R2[:n,:n]`` (see module docstring). Each forward pole is paired
+    with the backward pole of the same order that is closest in frequency, damping and MAC, each
+    difference scaled by ``match_scale`` = (frequency tol, damping tol, MAC minimum).
     """
     o = model.observability
     l = model.n_outputs
@@ -369,9 +372,16 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
             except (np.linalg.LinAlgError, ValueError):
                 f2 = np.zeros(0)
             if f2.size:
-                k = np.argmin(np.abs(f[:, None] - f2[None, :]), axis=1)
+                # best partner: smallest sum of the differences scaled by their tolerances
+                tf, tz, tm = match_scale
+                mac = mac_matrix(phi, phi2)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    score = (np.abs(f[:, None] - f2[None, :]) / f[:, None] / tf
+                             + np.abs(z[:, None] - z2[None, :]) / np.abs(z[:, None]) / tz
+                             + (1.0 - mac) / (1.0 - tm))
+                k = np.argmin(np.nan_to_num(score, nan=np.inf), axis=1)
                 fb, zb = f2[k], z2[k]
-                macb = np.abs(np.sum(phi.conj() * phi2[k], axis=1)) ** 2
+                macb = mac[np.arange(f.size), k]
         cols["order"].append(np.full(f.size, n))
         cols["f"].append(f)
         cols["z"].append(z)
