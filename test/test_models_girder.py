@@ -184,3 +184,20 @@ def test_elements_per_span_override_and_bearing_nodes():
     assert fine.n_dof > 3 * coarse.n_dof
     fc, ff = coarse.modes(n_modes=3).frequencies_hz, fine.modes(n_modes=3).frequencies_hz
     assert np.all(np.abs(fc / ff - 1) < 0.005)
+
+
+def test_sensor_near_a_mesh_node_moves_it_instead_of_a_sliver_element():
+    spans = [14.0, 30.0, 14.0]
+    xs = [7.05, 14.02, 29.9, 30.6]  # near interior nodes, one next to a bearing
+    sensors = [{"id": f"s{i}", "at": {"x": x}, "direction": "vertical"} for i, x in enumerate(xs)]
+    spec = structure_from_dict(girder_dict(spans, sensors=sensors, eps=10), "near.yaml")
+    model = build_model(spec)
+    for i, x in enumerate(xs):
+        assert model.node_x[model.sensor_dofs[f"s{i}"] // 2] == pytest.approx(x)
+    h = np.diff(model.node_x)
+    # only the sensor 2 cm from the bearing at 14 m needs a short element; all others stay near h
+    assert np.sum(h < 0.5 * 1.4) == 1 and h.min() == pytest.approx(0.02)
+    for b in (0.0, 14.0, 44.0, 58.0):
+        assert np.any(np.isclose(model.node_x, b, atol=1e-12))
+    ref = build_model(structure_from_dict(girder_dict(spans, eps=10), "ref.yaml"))
+    np.testing.assert_allclose(model.modes(n_modes=4).frequencies_hz, ref.modes(n_modes=4).frequencies_hz, rtol=2e-4)

@@ -88,18 +88,41 @@ class GirderMesh:
 def girder_mesh(g: GirderSpec, extra_x: list[float] | None = None, elements_per_span: int | None = None) -> GirderMesh:
     """Nodes: ``elements_per_span`` equal divisions of each span, plus bearings and ``extra_x``.
 
-    Extra points closer than 1e-6 of the shortest element to an existing node merge with it.
+    Span ends and bearings are fixed nodes. An extra point (a sensor) within 1e-6 of the shortest
+    element of a node is that node; one within a quarter element of an interior mesh node moves that
+    node onto it (so no sliver elements appear); otherwise a node is inserted.
     """
     n = elements_per_span or g.elements_per_span
     ends = g.span_ends()
-    xs = [np.linspace(ends[k], ends[k + 1], n + 1) for k in range(len(g.spans))]
-    base = np.unique(np.concatenate(xs))
-    tol = 1e-6 * float(np.min(np.diff(base)))
-    pts = list(base)
-    for x in [b.x for b in g.bearings] + list(extra_x or []):
-        if np.min(np.abs(np.asarray(pts) - x)) > tol:
+    base = np.unique(np.concatenate([np.linspace(ends[k], ends[k + 1], n + 1) for k in range(len(g.spans))]))
+    h_min = float(np.min(np.diff(base)))
+    tol = 1e-6 * h_min
+    fixed = list(ends)
+    for b in g.bearings:
+        if np.min(np.abs(np.asarray(fixed) - b.x)) > tol:
+            fixed.append(float(b.x))
+    pts = sorted(set([float(x) for x in base if np.min(np.abs(np.asarray(fixed) - x)) > tol] + fixed))
+    is_fixed = {x: np.min(np.abs(np.asarray(fixed) - x)) <= tol for x in pts}
+    moved: set[float] = set()
+    for x in sorted(extra_x or []):
+        arr = np.asarray(pts)
+        i = int(np.argmin(np.abs(arr - x)))
+        dx = abs(arr[i] - x)
+        if dx <= tol:
+            continue
+        local_h = float(np.min(np.diff(arr[max(i - 1, 0) : i + 2]))) if len(arr) > 1 else h_min
+        if not is_fixed[pts[i]] and pts[i] not in moved and dx < 0.25 * local_h:
+            old = pts[i]
+            pts[i] = float(x)
+            del is_fixed[old]
+            is_fixed[pts[i]] = False
+            moved.add(pts[i])
+            pts.sort()
+        else:
             pts.append(float(x))
-    node_x = np.array(sorted(pts))
+            is_fixed[float(x)] = True  # an inserted sensor node is not moved again
+            pts.sort()
+    node_x = np.array(pts)
     mids = 0.5 * (node_x[:-1] + node_x[1:])
     span = np.clip(np.searchsorted(ends, mids, side="right") - 1, 0, len(g.spans) - 1)
     return GirderMesh(node_x=node_x, element_span=span)
