@@ -115,6 +115,8 @@ def test_damping_gives_the_stated_ratios(kind, ratios):
         np.testing.assert_allclose(f, model.modes(theta, n_modes=5).frequencies_hz, rtol=1e-3)
         predicted = model.modal_damping_ratios(theta, n_modes=5)
         np.testing.assert_allclose(zeta, predicted, rtol=2e-3)
+        batch = model.modal_damping_ratios_batch(np.stack([theta, theta]), np.stack([f, f]))
+        np.testing.assert_allclose(batch, np.stack([zeta, zeta]), rtol=2e-3)
         if kind == "rayleigh":
             np.testing.assert_allclose(zeta[:2], ratios, rtol=2e-3)
             assert zeta[4] > zeta[2] > ratios[1]  # stiffness-proportional part grows with frequency

@@ -182,6 +182,28 @@ class AffineModel:
         a0, a1 = rayleigh_coefficients(w[0], w[1], z[0], z[1])
         return (a0 / (2 * w) + a1 * w / 2)[:n]
 
+    def modal_damping_ratios_batch(self, thetas: np.ndarray, frequencies_hz: np.ndarray) -> np.ndarray:
+        """Damping ratios (B, k) of modes with ``frequencies_hz`` (B, k) - the model's lowest modes at
+        each row of ``thetas``, e.g. from ``modes_batch`` or a reduction (Rayleigh damping is fixed by
+        the first two columns)."""
+        thetas = self._thetas(thetas)
+        f = np.atleast_2d(np.asarray(frequencies_hz, dtype=float))
+        z = np.tile(np.asarray(self.damping_ratios, dtype=float), (thetas.shape[0], 1))
+        for i, idx in enumerate(self.damping_factors):
+            for j in idx:
+                z[:, j] *= thetas[:, i]
+        k = f.shape[1]
+        if self.damping_kind == "modal":
+            cols = [min(c, z.shape[1] - 1) for c in range(k)]
+            return z[:, cols]
+        w = 2 * np.pi * f
+        w1, w2 = w[:, :1], w[:, 1:2]
+        z1, z2 = z[:, :1], z[:, 1:2]
+        d = w2**2 - w1**2
+        a0 = 2 * w1 * w2 * (z1 * w2 - z2 * w1) / d
+        a1 = 2 * (z2 * w2 - z1 * w1) / d
+        return a0 / (2 * w) + a1 * w / 2
+
     def damping(self, theta: np.ndarray | None = None) -> np.ndarray:
         """Viscous damping matrix C(theta).
 

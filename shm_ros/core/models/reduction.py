@@ -304,6 +304,7 @@ def reduce_model(
     tol: float = 1e-9,
     method: str = "iterate",
     t0: np.ndarray | None = None,
+    accelerate: bool = True,
 ) -> Reduction:
     """IIRS reduction of ``model`` at ``thetas`` ((p,) -> single, (B, p) -> batch) to the DOFs of
     ``sensor_ids`` (default: every sensor on a DOF), or to explicit ``masters`` DOF indices.
@@ -322,7 +323,7 @@ def reduce_model(
         return iirs_limit(K, M, masters)
     if method != "iterate":
         raise ValueError(f"method must be 'iterate' or 'limit', got {method!r}")
-    return iirs(K, M, masters, max_iter=max_iter, tol=tol, t0=t0)
+    return iirs(K, M, masters, max_iter=max_iter, tol=tol, t0=t0, accelerate=accelerate)
 
 
 def reduced_modes_batch(
