@@ -336,9 +336,7 @@ class StructureSpec:
                 parent = _get(data, loc[:-1])
                 parent[loc[-1]] = float(parent[loc[-1]]) * float(f)
         arrays = self.matrices.arrays if self.matrices is not None else None
-        spec = structure_from_dict(data, source=self.source, matrices_arrays=arrays)
-        spec.raw = copy.deepcopy(self.raw)
-        return spec
+        return structure_from_dict(data, source=self.source, matrices_arrays=arrays)
 
 
 def _section_dict(s: SectionSpec) -> dict[str, float]:
@@ -491,7 +489,8 @@ class _Ctx:
         return v
 
     def integer(self, v: Any, fld: str, minimum: int | None = None) -> int:
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) and not (isinstance(v, float) and v.is_integer()):
+        integral = isinstance(v, (int, np.integer)) or (isinstance(v, float) and v.is_integer())
+        if isinstance(v, bool) or not integral:
             raise self.err(f"must be an integer, got {v!r}", fld)
         v = int(v)
         if minimum is not None and v < minimum:
@@ -506,13 +505,16 @@ class _Ctx:
     def keys(self, m: Mapping, allowed: tuple[str, ...], required: tuple[str, ...], fld: str) -> None:
         for k in m:
             if k not in allowed:
-                raise self.err(f"unknown field {k!r} (allowed: {', '.join(allowed)})", f"{fld}.{k}" if fld else str(k))
+                where = f"{fld}.{k}" if fld else str(k)
+                raise self.err(f"unknown field {k!r} (allowed: {', '.join(allowed)})", where)
         for k in required:
             if k not in m:
                 raise self.err("missing required field", f"{fld}.{k}" if fld else k)
 
 
-_TOP = ("name", "kind", "description", "girder", "shear_building", "matrices", "damping", "sensors", "input", "parameters")
+_TOP = (
+    "name", "kind", "description", "girder", "shear_building", "matrices", "damping", "sensors", "input", "parameters",
+)
 
 
 def structure_from_dict(
@@ -574,7 +576,9 @@ def _section(c: _Ctx, v: Any, fld: str) -> SectionSpec:
 def _girder(c: _Ctx, v: Any) -> GirderSpec:
     g = c.mapping(v, "girder")
     c.keys(g, ("spans", "elements_per_span", "section", "bearings"), ("spans", "section", "bearings"), "girder")
-    spans = [c.number(s, f"girder.spans[{i}]", positive=True) for i, s in enumerate(c.seq(g["spans"], "girder.spans"))]
+    spans = [
+        c.number(s, f"girder.spans[{i}]", positive=True) for i, s in enumerate(c.seq(g["spans"], "girder.spans"))
+    ]
     if not spans:
         raise c.err("needs at least one span", "girder.spans")
     eps = c.integer(g.get("elements_per_span", 10), "girder.elements_per_span", minimum=1)
@@ -607,8 +611,12 @@ def _girder(c: _Ctx, v: Any) -> GirderSpec:
     if sum(1 for b in bearings if b.k_vertical > 0) < 1 or (
         sum(1 for b in bearings if b.k_vertical > 0) < 2 and not any(b.k_rotation > 0 for b in bearings)
     ):
-        raise c.err("the girder needs at least two vertical bearings (or one with rotational stiffness)", "girder.bearings")
-    return GirderSpec(spans=spans, elements_per_span=eps, sections=sections, bearings=bearings, section_per_span=per_span)
+        raise c.err(
+            "the girder needs at least two vertical bearings (or one with rotational stiffness)", "girder.bearings"
+        )
+    return GirderSpec(
+        spans=spans, elements_per_span=eps, sections=sections, bearings=bearings, section_per_span=per_span
+    )
 
 
 def _building(c: _Ctx, v: Any) -> ShearBuildingSpec:
@@ -640,11 +648,14 @@ def _matrices(c: _Ctx, v: Any, arrays: Mapping[str, np.ndarray] | None) -> Matri
     )
     arrays = {k: np.asarray(a, dtype=float) for k, a in (arrays or {}).items()}
     if not arrays:
-        raise c.err(f"no matrices loaded from {spec.file!r} (load the file with shm_ros.io.structure)", "matrices.file")
+        raise c.err(
+            f"no matrices loaded from {spec.file!r} (load the file with shm_ros.io.structure)", "matrices.file"
+        )
     where = f"{spec.file}"
     for key in (spec.mass, spec.stiffness):
         if key not in arrays:
-            raise c.err(f"array {key!r} not found in {where} (has {sorted(arrays)})", "matrices.mass" if key == spec.mass else "matrices.stiffness")
+            fld = "matrices.mass" if key == spec.mass else "matrices.stiffness"
+            raise c.err(f"array {key!r} not found in {where} (has {sorted(arrays)})", fld)
     n = arrays[spec.mass].shape[0] if arrays[spec.mass].ndim == 2 else -1
     if "terms" in m:
         spec.terms = {
@@ -685,7 +696,9 @@ def _damping(c: _Ctx, v: Any) -> DampingSpec:
     kind = d.get("kind", "rayleigh")
     if kind not in ("rayleigh", "modal"):
         raise c.err(f"unknown damping kind {kind!r} (expected rayleigh or modal)", "damping.kind")
-    ratios = [c.number(r, f"damping.ratios[{i}]", nonneg=True) for i, r in enumerate(c.seq(d["ratios"], "damping.ratios"))]
+    ratios = [
+        c.number(r, f"damping.ratios[{i}]", nonneg=True) for i, r in enumerate(c.seq(d["ratios"], "damping.ratios"))
+    ]
     if kind == "rayleigh" and len(ratios) != 2:
         raise c.err(f"rayleigh damping needs exactly two ratios, got {len(ratios)}", "damping.ratios")
     if not ratios:
@@ -706,7 +719,9 @@ def _sensors(c: _Ctx, v: Any, kind: str, girder, building, matrices) -> list[Sen
         seen.add(sid)
         direction = s["direction"]
         if direction not in DIRECTIONS:
-            raise c.err(f"unknown direction {direction!r} (expected one of: {', '.join(DIRECTIONS)})", f"{fld}.direction")
+            raise c.err(
+                f"unknown direction {direction!r} (expected one of: {', '.join(DIRECTIONS)})", f"{fld}.direction"
+            )
         at = dict(c.mapping(s["at"], f"{fld}.at"))
         if kind == "girder":
             c.keys(at, ("x",), ("x",), f"{fld}.at")
@@ -720,7 +735,9 @@ def _sensors(c: _Ctx, v: Any, kind: str, girder, building, matrices) -> list[Sen
             c.keys(at, ("floor",), ("floor",), f"{fld}.at")
             fl = c.integer(at["floor"], f"{fld}.at.floor", minimum=0)
             if fl > building.n_floors:
-                raise c.err(f"floor {fl} does not exist (the building has {building.n_floors} floors)", f"{fld}.at.floor")
+                raise c.err(
+                    f"floor {fl} does not exist (the building has {building.n_floors} floors)", f"{fld}.at.floor"
+                )
             if direction == "vertical":
                 raise c.err("a shear-building sensor must be horizontal (x or y)", f"{fld}.direction")
             at = {"floor": fl}
@@ -735,7 +752,8 @@ def _sensors(c: _Ctx, v: Any, kind: str, girder, building, matrices) -> list[Sen
                 if d >= matrices.n_dof:
                     raise c.err(f"DOF {d} does not exist (the matrices have {matrices.n_dof} DOFs)", f"{fld}.at.dof")
             at = {"dof": d}
-        out.append(SensorSpec(id=sid, at=at, direction=direction, source=_source(c, s.get("source"), sid, direction, fld)))
+        source = _source(c, s.get("source"), sid, direction, fld)
+        out.append(SensorSpec(id=sid, at=at, direction=direction, source=source))
     if not out:
         raise c.err("needs at least one sensor", "sensors")
     return out
@@ -796,7 +814,10 @@ def _parameters(c: _Ctx, v: Any, spec: StructureSpec) -> list[ParameterSpec]:
         targets = resolve_path(view, path, spec.source, f"{fld}.applies_to")
         for loc in targets:
             if not updatable(spec.kind, loc):
-                raise c.err(f"{location_str(loc)} is not a quantity a parameter can scale for kind {spec.kind!r}", f"{fld}.applies_to")
+                raise c.err(
+                    f"{location_str(loc)} is not a quantity a parameter can scale for kind {spec.kind!r}",
+                    f"{fld}.applies_to",
+                )
             for key in _product_keys(spec, loc):
                 if key in owner:
                     raise c.err(

@@ -128,7 +128,9 @@ class AffineModel:
         if thetas.ndim == 1:
             thetas = thetas[None, :]
         if thetas.shape[1] != self.n_parameters:
-            raise ValueError(f"thetas must have {self.n_parameters} columns ({self.parameter_names}), got {thetas.shape}")
+            raise ValueError(
+                f"thetas must have {self.n_parameters} columns ({self.parameter_names}), got {thetas.shape}"
+            )
         return thetas
 
     def stiffness_batch(self, thetas: np.ndarray) -> np.ndarray:
