@@ -12,8 +12,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("bag", help="rosbag2 folder (MCAP or sqlite3)")
     p.add_argument("--rate", type=float, default=0.0,
                    help="1 = real time, N = N x real time, 0 = as fast as the graph keeps up (default)")
-    p.add_argument("--credit", type=int, default=2000,
-                   help="messages in flight at most when flow-controlled (default 2000)")
+    p.add_argument("--credit", type=int, default=256,
+                   help="messages in flight at most when flow-controlled (default 256; the shared-memory transport queues 512 per reader)")
+    p.add_argument("--credit-bytes", type=int, default=192 * 1024,
+                   help="bytes in flight at most when flow-controlled (default 192 KiB)")
     p.add_argument("--all-topics", action="store_true",
                    help="also replay topics that are not recording topics")
     p.add_argument("--wait", type=float, default=15.0, help="seconds to wait for the graph")
@@ -28,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
 
     rclpy.init()
     try:
-        result = replay_bag(args.bag, rate=args.rate, credit=args.credit, wait_s=args.wait,
+        result = replay_bag(args.bag, rate=args.rate, credit=args.credit, credit_bytes=args.credit_bytes, wait_s=args.wait,
                             recording_only=not args.all_topics, progress=True)
     except BagError as exc:
         print(f"shm-ros replay: {exc}", file=sys.stderr)

@@ -121,6 +121,30 @@ class BagWriter:
             )
             self._writer.write(conn, int(rt), ser(msg, IMU))
 
+    def imu_streams(self, streams: dict[str, tuple[np.ndarray, np.ndarray]]) -> None:
+        """Several Imu topics written the way a recorder receives them: interleaved in stamp order.
+
+        ``streams`` maps topic -> (stamps_ns (n,), accel_xyz (n, 3)).
+        """
+        topics_, stamps, rows = [], [], []
+        for k, (topic, (t, xyz)) in enumerate(streams.items()):
+            topics_.append(topic)
+            stamps.append(np.asarray(t, dtype=np.int64))
+            rows.append(np.full(len(t), k))
+        t_all = np.concatenate(stamps)
+        which = np.concatenate(rows)
+        pos = np.concatenate([np.arange(len(t)) for t in stamps])
+        order = np.argsort(t_all, kind="stable")
+        for k, topic in enumerate(topics_):
+            self.connection(topic, IMU)
+        # One message at a time in global stamp order (runs of one topic are written together).
+        breaks = np.flatnonzero(np.diff(which[order])) + 1
+        for run in np.split(order, breaks):
+            k = int(which[run[0]])
+            idx = pos[run]
+            t, xyz = streams[topics_[k]]
+            self.imu_series(topics_[k], np.asarray(t)[idx], np.asarray(xyz)[idx])
+
     def temperature(self, topic: str, t_ns: int, value_c: float, variance: float = 0.0) -> None:
         msg = self._types[TEMPERATURE](header=self.header(t_ns), temperature=float(value_c),
                                       variance=float(variance))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -14,25 +15,46 @@ def overrides(parameters: dict[str, Any] | None) -> list[Parameter]:
     return [Parameter(k, value=v) for k, v in (parameters or {}).items()]
 
 
+def _terminate(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
 def spin(factory: Callable[[], Any], args: list[str] | None = None) -> int:
     """Run one node until shutdown. Callbacks run in a single-threaded executor (the
     multi-threaded one is far slower for data topics)."""
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
-    rclpy.init(args=sys.argv if args is None else args)
+    # Ctrl-C arrives as KeyboardInterrupt (not as a context shutdown), so a node can still publish
+    # what it holds (e.g. ingest's last window) before the context goes away.
+    # A process started in the background by a non-interactive shell inherits SIGINT as ignored;
+    # a node must still stop on it (and on SIGTERM), so install the handlers explicitly.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _terminate)
+    rclpy.init(args=sys.argv if args is None else args,
+               signal_handler_options=SignalHandlerOptions.NO)
     node = None
+    code = 0
     try:
         node = factory()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
+        # Wake up regularly: a signal is only handled once control is back in Python.
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except SystemExit as exc:  # configuration errors: message already says what is wrong
+        print(exc, file=sys.stderr)
+        code = 2
     finally:
         if node is not None:
             close = getattr(node, "close", None)
-            if close is not None:
-                close()
+            try:
+                if close is not None and rclpy.ok():
+                    close()
+            except KeyboardInterrupt:
+                pass
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return code

@@ -2,14 +2,16 @@
 
 Messages are published as the CDR bytes stored in the bag (no decode/re-encode). Flow control: the
 ingest node publishes how many recording messages it has taken (``/shm/ingest/received``); with
-``rate=0`` the replayer keeps at most ``credit`` messages in flight, so nothing overflows a queue and
-nothing is dropped even on best-effort subscriptions. Publishing flat out with KEEP_LAST would drop
+``rate=0`` the replayer keeps at most ``credit`` messages and ``credit_bytes`` bytes in flight, so
+neither the subscriber's history nor the transport's buffers overflow, and nothing is dropped even
+on best-effort (sensor-data) subscriptions. Publishing flat out with KEEP_LAST would drop
 silently once the subscriber lags.
 """
 
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -62,7 +64,8 @@ class Replayer(Node):
         return pub
 
 
-def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 2000, wait_s: float = 10.0,
+def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
+               credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
                drain_timeout_s: float = 60.0, recording_only: bool = True,
                progress: bool = False) -> ReplayResult:
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
@@ -96,6 +99,9 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 2000, wait_
         t0_bag = last_bag = None
         start_ack = node.acknowledged
         last_report = t0_wall
+        sizes: deque[int] = deque()  # bytes of the messages not yet acknowledged
+        in_flight_bytes = 0
+        acked_upto = 0
         for k, m in enumerate(read_messages(path, topics=list(node.pubs))):
             t0_bag = m.receive_ns if t0_bag is None else t0_bag
             last_bag = m.receive_ns
@@ -104,8 +110,17 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 2000, wait_
                 while (delay := due - time.monotonic()) > 0:
                     rclpy.spin_once(node, timeout_sec=min(delay, 0.05))
             elif flow:
-                while result.published - (node.acknowledged - start_ack) >= credit:
-                    rclpy.spin_once(node, timeout_sec=0.01)
+                while True:
+                    acked = node.acknowledged - start_ack
+                    while acked_upto < acked and sizes:
+                        in_flight_bytes -= sizes.popleft()
+                        acked_upto += 1
+                    if result.published - acked < credit and (
+                            in_flight_bytes + len(m.data) <= credit_bytes or not sizes):
+                        break
+                    rclpy.spin_once(node, timeout_sec=0.005)
+                sizes.append(len(m.data))
+                in_flight_bytes += len(m.data)
             node.pubs[m.topic].publish(m.data)
             result.published += 1
             if k % 200 == 0:

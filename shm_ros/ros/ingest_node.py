@@ -1,0 +1,172 @@
+"""ingest: recording topics in, validated and aligned ``Window`` messages out.
+
+Subscribes (sensor-data QoS, deep history) to ``<prefix>/accel/<id>`` (sensor_msgs/Imu),
+``<prefix>/accel_block`` (shm_interfaces/AccelBlock) and ``<prefix>/temperature/<id>``
+(sensor_msgs/Temperature) as they appear in the graph (ROS has no wildcard subscriptions, so the
+graph is polled); all science is in :class:`shm_ros.core.windows.IngestCore`.
+Publishes ``/shm/windows``, ``/diagnostics`` and ``/shm/ingest/received`` (flow control for replay).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from std_msgs.msg import String, UInt64
+
+from shm_ros.core.windows import ChannelMap, IngestConfig, IngestCore
+from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
+from shm_ros.ros import topics
+from shm_ros.ros.convert import time_to_ns, window_to_msg
+from shm_ros.ros.diagnostics import Diagnostics
+from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.qos import latched_qos, pipeline_qos, recording_qos
+
+LEVEL = {0: "ok", 1: "warn", 2: "error"}
+
+
+class IngestNode(Node):
+    def __init__(self, name: str = "ingest", parameters: dict[str, Any] | None = None) -> None:
+        super().__init__(name, parameter_overrides=overrides(parameters))
+        p = self.declare_parameter
+        p("structure", "")
+        p("window_s", 600.0)
+        p("sample_rate_hz", 0.0)  # 0 = from the data
+        p("burst_pause_s", 1.0)
+        # Stamp time a window waits for lagging channels before it is cut. DDS does not order
+        # messages across topics, and a fast replay delivers seconds of stamp time per wall tick.
+        p("max_latency_s", 120.0)
+        p("event_detector", "sta_lta")
+        p("pga_threshold_m_s2", 0.5)
+        p("reliable_input", False)
+        p("idle_flush_s", 5.0)
+        p("discovery_period_s", 0.5)
+        p("frame_id", "")
+        value = lambda n: self.get_parameter(n).value  # noqa: E731
+        self.core = IngestCore(self._channel_map(value("structure")), IngestConfig(
+            window_s=float(value("window_s")),
+            sample_rate_hz=float(value("sample_rate_hz")) or None,
+            burst_pause_s=float(value("burst_pause_s")),
+            max_latency_s=float(value("max_latency_s")),
+            event_detector=str(value("event_detector")),
+            pga_threshold_m_s2=float(value("pga_threshold_m_s2")),
+        ))
+        self.frame_id = str(value("frame_id"))
+        self.idle_flush_s = float(value("idle_flush_s"))
+        self.reliable = bool(value("reliable_input"))
+        self.diag = Diagnostics(self, "ingest")
+        self.window_pub = self.create_publisher(
+            topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, pipeline_qos())
+        self.ack_pub = self.create_publisher(UInt64, topics.INGEST_RECEIVED, pipeline_qos())
+        self.create_subscription(String, topics.REPLAY_DONE, self._on_replay_done, latched_qos())
+        self.subscribed: set[str] = set()
+        self.received = 0
+        self.acked = -1
+        self.windows_out = 0
+        self.last_stamp_ns: int | None = None
+        self.last_msg_wall = time.monotonic()
+        self.create_timer(float(value("discovery_period_s")), self._discover)
+        self.create_timer(0.05, self._ack)
+        self.create_timer(1.0, self._idle)
+        self._discover()
+        self.get_logger().info(f"ingest for sensors {self.core.channels}")
+
+    def _channel_map(self, structure: str) -> ChannelMap:
+        if not structure:
+            raise SystemExit("ingest: parameter 'structure' (path of the structure YAML) is required")
+        from shm_ros.io.structure import load_structure
+
+        return ChannelMap.from_structure(load_structure(structure))
+
+    # -- topics appear while the graph runs: subscribe to the contract ones ----------------------
+    def _discover(self) -> None:
+        qos = recording_qos(reliable=self.reliable)
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self.subscribed:
+                continue
+            for msgtype in types:
+                kind = topic_kind(topic, msgtype)
+                if kind is None:
+                    continue
+                callback = {"imu": self._on_imu, "block": self._on_block,
+                            "temperature": self._on_temperature}[kind[0]]
+                cls = topics.message_class({"imu": IMU, "block": ACCEL_BLOCK,
+                                            "temperature": TEMPERATURE}[kind[0]])
+                self.create_subscription(cls, topic, self._guard(topic, callback, kind[1]), qos)
+                self.subscribed.add(topic)
+                self.get_logger().info(f"subscribed to {topic} ({msgtype})")
+
+    def _guard(self, topic: str, callback, sensor_id: str):
+        def handle(msg) -> None:
+            self.received += 1
+            self.last_msg_wall = time.monotonic()
+            try:
+                callback(msg, sensor_id, topic)
+            except Exception as exc:  # one bad message must never take the node down
+                self.core.report_error(topic, f"message not processed: {exc!r}")
+            self._emit()
+            if self.received - self.acked >= 50:
+                self._ack()
+        return handle
+
+    def _on_imu(self, msg, sensor_id: str, topic: str) -> None:
+        t = time_to_ns(msg.header.stamp)
+        a = msg.linear_acceleration
+        self.core.add_imu(sensor_id, t, a.x, a.y, a.z)
+        self.last_stamp_ns = max(self.last_stamp_ns or t, t)
+
+    def _on_block(self, msg, _sensor_id: str, topic: str) -> None:
+        t = time_to_ns(msg.header.stamp)
+        samples = np.frombuffer(msg.samples, dtype=np.float64) if len(msg.samples) else np.zeros(0)
+        self.core.add_block(t, msg.sample_rate_hz, list(msg.channel_names), samples, msg.units, topic)
+        if msg.sample_rate_hz > 0 and len(msg.channel_names):
+            end = t + int(samples.size / len(msg.channel_names) * 1e9 / msg.sample_rate_hz)
+            self.last_stamp_ns = max(self.last_stamp_ns or end, end)
+
+    def _on_temperature(self, msg, sensor_id: str, topic: str) -> None:
+        self.core.add_temperature(sensor_id, time_to_ns(msg.header.stamp), msg.temperature)
+
+    # -- outputs -------------------------------------------------------------------------------
+    def _emit(self, windows: list | None = None) -> None:
+        for window in self.core.pop_windows() if windows is None else windows:
+            self.window_pub.publish(window_to_msg(window, self.frame_id))
+            self.windows_out += 1
+            self.get_logger().info(f"window {window.window_id}: {window.n_samples} samples x "
+                                   f"{len(window.channel_names)} channels")
+        for d in self.core.pop_diagnostics():
+            self.diag.report(LEVEL.get(d.level, "error"), d.message, d.source, code=d.code, count=d.count)
+        self.diag.publish()
+
+    def _ack(self) -> None:
+        if self.received != self.acked:
+            self.ack_pub.publish(UInt64(data=self.received))
+            self.acked = self.received
+
+    def _idle(self) -> None:
+        """No data for a while: let time advance on the stamp clock so finished bursts go out."""
+        idle = time.monotonic() - self.last_msg_wall
+        if self.last_stamp_ns is not None and idle >= self.idle_flush_s:
+            self.core.tick(self.last_stamp_ns + int(idle * 1e9))
+            self._emit()
+
+    def _on_replay_done(self, msg: String) -> None:
+        self._ack()
+        self._emit(self.core.flush())
+        self.get_logger().info(f"end of replay of {msg.data}: flushed")
+
+    def close(self) -> None:
+        self._emit(self.core.flush())
+
+
+def make_node(name: str, parameters: dict[str, Any]) -> IngestNode:
+    return IngestNode(name, parameters)
+
+
+def main(args: list[str] | None = None) -> int:
+    return spin(lambda: IngestNode(), args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
