@@ -15,6 +15,7 @@ from scipy.optimize import least_squares
 from shm_ros.core.models import build_model
 from shm_ros.core.models.reduction import (
     expand_mode_shapes,
+    expand_sensor_shapes,
     guyan,
     iirs,
     iirs_limit,
@@ -176,3 +177,21 @@ def test_girder_reduction_to_deck_sensors():
     np.testing.assert_allclose(red.modes().frequencies_hz, full.frequencies_hz, rtol=1e-6)
     expanded = red.expand(red.modes().shapes)
     assert _mac(expanded, full.shapes).min() > 0.9999
+
+
+def test_expand_sensor_shapes_from_sensor_order(building):
+    """Measured shapes given in any sensor order (max |.| = 1 as identification writes them), with
+    a duplicated sensor, expand to every floor."""
+    spec, model = building
+    theta = np.array([0.9, 1.1, 1.05])
+    full = model.modes(theta, n_modes=3).shapes
+    ids = ["f8", "f3", "f1", "f6", "f6"]
+    measured = model.sensor_matrix(ids) @ full
+    measured = measured / np.abs(measured).max(axis=0)
+    expanded = expand_sensor_shapes(model, ids, measured, theta)
+    assert expanded.shape == (8, 3)
+    assert _mac(expanded, full).min() > 0.99999
+    one = expand_sensor_shapes(model, ids, measured[:, 0], theta)
+    np.testing.assert_allclose(one, expanded[:, 0])
+    with pytest.raises(KeyError):
+        expand_sensor_shapes(model, ["g0", "f1", "f3", "f6"], measured[:4], theta)

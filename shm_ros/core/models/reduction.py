@@ -345,3 +345,36 @@ def reduced_modes_batch(
     if expand:
         return BatchModalSolution(sol.frequencies_hz, R.expand(sol.shapes))
     return sol
+
+
+def expand_sensor_shapes(
+    model: AffineModel,
+    sensor_ids: Sequence[str],
+    shapes: np.ndarray,
+    theta: np.ndarray | None = None,
+    method: str = "iterate",
+) -> np.ndarray:
+    """Expand mode shapes measured at ``sensor_ids`` ((n_sensors,) or (n_sensors, k)) to every DOF
+    of ``model`` at ``theta``, with the IIRS transformation to those sensors' DOFs.
+
+    Sensors that share a DOF are averaged; sensors not on a DOF (girder sensors read by shape
+    functions, a building's ground sensor) raise KeyError - place girder sensors on nodes
+    (``build_model(spec, sensor_nodes=True)``, the default) to expand girder shapes.
+    """
+    shapes = np.asarray(shapes, dtype=float)
+    vector = shapes.ndim == 1
+    if vector:
+        shapes = shapes[:, None]
+    if shapes.shape[0] != len(sensor_ids):
+        raise ValueError(f"shapes have {shapes.shape[0]} rows but {len(sensor_ids)} sensors were given")
+    dofs = model.master_dofs(list(sensor_ids))
+    masters = sorted(set(dofs))
+    at_masters = np.zeros((len(masters), shapes.shape[1]))
+    counts = np.zeros(len(masters))
+    for row, dof in enumerate(dofs):
+        at_masters[masters.index(dof)] += shapes[row]
+        counts[masters.index(dof)] += 1
+    at_masters /= counts[:, None]
+    red = reduce_model(model, theta, masters=masters, method=method)
+    full = red.expand(at_masters)
+    return full[:, 0] if vector else full
