@@ -24,6 +24,7 @@ class ModalObservations:
     damping: np.ndarray | None = None  # (n_windows, n_modes)
     covariates: dict[str, np.ndarray] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    time_kind: str = "seconds"  # "seconds" | "iso" (how the table wrote its time column)
 
     def __post_init__(self) -> None:
         self.times = np.asarray(self.times, dtype=float)
@@ -62,7 +63,7 @@ class ModalObservations:
             sensor_ids=list(self.sensor_ids),
             damping=None if self.damping is None else self.damping[windows],
             covariates={k: v[windows] for k, v in self.covariates.items()},
-            notes=list(self.notes))
+            notes=list(self.notes), time_kind=self.time_kind)
 
     def mean_frequencies(self) -> np.ndarray:
         return np.nanmean(self.frequencies_hz, axis=0)

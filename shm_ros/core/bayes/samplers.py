@@ -58,31 +58,113 @@ class ChainResult:
         return self.chains.reshape(-1, self.chains.shape[-1])
 
 
-def find_map(log_prob: LogProb, starts: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, float]:
-    """Maximum of the log-posterior: best of ``starts`` (evaluated as one batch), then Nelder-Mead.
+def find_map(log_prob: LogProb, starts: np.ndarray, scale: np.ndarray, *, batch: int = 128,
+             rounds: int = 30, seed: int = 0) -> tuple[np.ndarray, float]:
+    """Maximum of the log-posterior using batched evaluations only.
 
-    The search runs in coordinates scaled by ``scale`` (e.g. prior standard deviations).
+    1. the best of ``starts`` (one batch);
+    2. a cross-entropy search: sample ``batch`` points from a Gaussian around the current elite,
+       refit it to the best tenth, shrink until the spread is tiny (one batch per round);
+    3. Newton refinement with central-difference gradient and Hessian, each iteration one batch
+       (stencil and line-search points together).
+
+    Every step is a batch because a likelihood with IIRS reduction costs almost the same for 1 or
+    256 parameter vectors; a one-point optimiser (Nelder-Mead) would be ~100 times slower here.
     """
-    from scipy.optimize import minimize
-
+    rng = np.random.default_rng(seed)
     lp = log_prob(starts)
-    best = starts[np.argmax(lp)].copy()
     if not np.isfinite(np.max(lp)):
         raise RuntimeError("the log-posterior is -inf at every starting point; check priors and data")
-
-    def f(z: np.ndarray) -> float:
-        v = float(log_prob((best + z * scale)[None])[0])
-        return -v if np.isfinite(v) else 1e300
-
-    x = np.zeros_like(best)
-    for _ in range(3):  # restarts refresh the simplex, which helps on narrow ridges
-        res = minimize(f, x, method="Nelder-Mead",
-                       options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 4000, "adaptive": True})
-        if np.allclose(res.x, x, atol=1e-8):
+    order = np.argsort(lp)[::-1]
+    n_elite = max(8, batch // 10)
+    elite = starts[order[:n_elite]]
+    best, best_lp = starts[order[0]].copy(), float(lp[order[0]])
+    mean = best.copy()
+    cov = np.cov(elite.T).reshape(best.size, best.size) + np.diag((0.05 * scale) ** 2)
+    for _ in range(rounds):
+        try:
+            L = np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            L = np.diag(np.sqrt(np.clip(np.diag(cov), 1e-300, None)))
+        pts = mean + rng.standard_normal((batch, best.size)) @ L.T
+        pts[0] = best
+        v = log_prob(pts)
+        o = np.argsort(v)[::-1][:n_elite]
+        if v[o[0]] > best_lp:
+            best, best_lp = pts[o[0]].copy(), float(v[o[0]])
+        el = pts[o][np.isfinite(v[o])]
+        if el.shape[0] < 2:
+            cov *= 0.25
+            continue
+        mean = el.mean(axis=0)
+        cov = 0.7 * np.cov(el.T).reshape(best.size, best.size) + 0.3 * cov * 0.5
+        if np.all(np.sqrt(np.diag(cov)) < 1e-4 * scale):  # Newton takes over from here
             break
-        x = res.x
-    x_map = best + x * scale
-    return x_map, float(log_prob(x_map[None])[0])
+    return newton_refine(log_prob, best, best_lp, scale)
+
+
+def _stencil(x0: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, dict]:
+    d = x0.size
+    pts, idx = [x0.copy()], {}
+    for i in range(d):
+        for j in range(i, d):
+            for si, sj in (((1, 1), (1, -1), (-1, 1), (-1, -1)) if i != j else ((1, 0), (-1, 0))):
+                p = x0.copy()
+                p[i] += si * h[i]
+                if i != j:
+                    p[j] += sj * h[j]
+                idx[(i, j, si, sj)] = len(pts)
+                pts.append(p)
+    return np.array(pts), idx
+
+
+def _grad_hess(f: np.ndarray, idx: dict, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d = h.size
+    g = np.zeros(d)
+    H = np.zeros((d, d))
+    for i in range(d):
+        fp, fm = f[idx[(i, i, 1, 0)]], f[idx[(i, i, -1, 0)]]
+        g[i] = (fp - fm) / (2 * h[i])
+        H[i, i] = (fp - 2 * f[0] + fm) / h[i] ** 2
+        for j in range(i + 1, d):
+            v = (f[idx[(i, j, 1, 1)]] - f[idx[(i, j, 1, -1)]] - f[idx[(i, j, -1, 1)]]
+                 + f[idx[(i, j, -1, -1)]]) / (4 * h[i] * h[j])
+            H[i, j] = H[j, i] = v
+    return g, H
+
+
+def newton_refine(log_prob: LogProb, x: np.ndarray, lp: float, scale: np.ndarray,
+                  iterations: int = 30) -> tuple[np.ndarray, float]:
+    """Damped Newton steps on the log-posterior, stencil and line search in one batch each step."""
+    alphas = 2.0 ** -np.arange(0, 12)
+    h = 1e-3 * scale
+    for _ in range(iterations):
+        pts, idx = _stencil(x, h)
+        f = log_prob(pts)
+        if not np.all(np.isfinite(f)):
+            h = h * 0.1
+            continue
+        g, H = _grad_hess(f, idx, h)
+        try:
+            np.linalg.cholesky(-H)
+            step = np.linalg.solve(-H, g)
+        except np.linalg.LinAlgError:
+            step = g * (scale**2) * 1e-2 / max(np.linalg.norm(g * scale), 1e-300)
+        cand = x + alphas[:, None] * step[None]
+        v = log_prob(cand)
+        k = int(np.argmax(v))
+        if not v[k] > lp + 1e-10:
+            # shrink the difference step once the Newton step is below it
+            if np.all(np.abs(step) < h):
+                break
+            h = h * 0.3
+            continue
+        gain = v[k] - lp
+        x, lp = cand[k].copy(), float(v[k])
+        h = np.clip(np.abs(step) * 0.1, 1e-7 * scale, 1e-3 * scale)
+        if gain < 1e-8:
+            break
+    return x, lp
 
 
 def laplace_covariance(log_prob: LogProb, x0: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -90,37 +172,20 @@ def laplace_covariance(log_prob: LogProb, x0: np.ndarray, scale: np.ndarray) -> 
 
     Falls back to a small diagonal when the Hessian is not negative definite.
     """
-    d = x0.size
-    fallback = np.diag((1e-3 * scale) ** 2)
-    for rel in (1e-3, 1e-2, 1e-4):
+    for rel in (1e-3, 1e-4, 1e-2, 1e-5):
         h = rel * scale
-        pts, idx = [x0], {}
-        for i in range(d):
-            for j in range(i, d):
-                for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)) if i != j else ((1, 0), (-1, 0)):
-                    p = x0.copy()
-                    p[i] += si * h[i]
-                    if i != j:
-                        p[j] += sj * h[j]
-                    idx[(i, j, si, sj)] = len(pts)
-                    pts.append(p)
-        f = log_prob(np.array(pts))
+        pts, idx = _stencil(x0, h)
+        f = log_prob(pts)
         if not np.all(np.isfinite(f)):
             continue
-        H = np.zeros((d, d))
-        for i in range(d):
-            H[i, i] = (f[idx[(i, i, 1, 0)]] - 2 * f[0] + f[idx[(i, i, -1, 0)]]) / h[i] ** 2
-            for j in range(i + 1, d):
-                v = (f[idx[(i, j, 1, 1)]] - f[idx[(i, j, 1, -1)]] - f[idx[(i, j, -1, 1)]]
-                     + f[idx[(i, j, -1, -1)]]) / (4 * h[i] * h[j])
-                H[i, j] = H[j, i] = v
+        _, H = _grad_hess(f, idx, h)
         try:
             cov = np.linalg.inv(-H)
             np.linalg.cholesky(cov)
             return 0.5 * (cov + cov.T)
         except np.linalg.LinAlgError:
             continue
-    return fallback
+    return np.diag((1e-3 * scale) ** 2)
 
 
 def _counted(log_prob: LogProb) -> tuple[LogProb, list[int]]:

@@ -7,7 +7,6 @@ emcee until the ArviZ diagnostics are met, estimates the evidence by nested samp
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping, Sequence
@@ -60,6 +59,9 @@ class UpdateConfig:
     evidence: bool = True
     n_live: int = 300
     seed: int = 0
+    # BLAS threads during the run: the batched small-matrix algebra is fastest single-threaded
+    # (several threads per tiny eigenproblem only contend); 0 = leave the library default
+    blas_threads: int = 1
 
     def validate(self) -> None:
         if self.likelihood not in LIKELIHOODS:
@@ -183,9 +185,24 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
 
 def update(model: AffineModel, observations: Any, config: UpdateConfig | None = None,
            priors: JointPrior | Sequence[Any] | None = None) -> Posterior:
-    """Calibrate the model's parameters to the data; see the module docstring."""
+    """Calibrate the model's parameters to the data; see the module docstring.
+
+    ``observations`` is :class:`ModalObservations` (likelihood ``gaussian`` or ``fitness``) or an
+    :class:`~shm_ros.core.bayes.timedomain.AccelerationRecord` (likelihood ``time``). ``priors``:
+    the structure's parameter specs, a :class:`JointPrior`, or None to use ``config.priors``.
+    """
     config = config or UpdateConfig()
     config.validate()
+    if config.blas_threads > 0:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=config.blas_threads, user_api="blas"):
+            return _update(model, observations, config, priors)
+    return _update(model, observations, config, priors)
+
+
+def _update(model: AffineModel, observations: Any, config: UpdateConfig,
+            priors: JointPrior | Sequence[Any] | None) -> Posterior:
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     jp = joint_prior_for(model, config, priors)
@@ -209,7 +226,7 @@ def update(model: AffineModel, observations: Any, config: UpdateConfig | None = 
     starts_theta = np.vstack([np.atleast_2d([p.mean for p in jp.priors]), jp.sample(rng, 400)])
     starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
     scale = np.concatenate([prior_std, np.ones(n_extra)])
-    x_map, lp_map = find_map(log_post, starts, scale)
+    x_map, lp_map = find_map(log_post, starts, scale, seed=config.seed)
     cov = laplace_covariance(log_post, x_map, scale)
     timing["map_s"] = time.perf_counter() - t0
 
@@ -302,4 +319,4 @@ def config_from_mapping(values: Mapping[str, Any]) -> UpdateConfig:
 
 
 __all__ = ["UpdateConfig", "Posterior", "ParameterSummary", "update", "summarise",
-           "config_from_mapping", "priors_from_structure", "math"]
+           "config_from_mapping", "priors_from_structure"]
