@@ -233,6 +233,11 @@ def test_file_level_errors(tmp_path):
     d["matrices"]["file"] = "asym.npz"
     with pytest.raises(StructureError, match=r"m2.yaml.*matrices\.terms\.K_upper.*not symmetric"):
         load_structure(_write(tmp_path, d, "m2.yaml"))
+    singular = dict(arrays, K_upper=arrays["K_upper"] - np.triu(np.ones((6, 6)), 1), M=np.diag([1.0, 1, 1, 1, 1, 0]))
+    np.savez(tmp_path / "massless.npz", **singular)
+    d["matrices"]["file"] = "massless.npz"
+    with pytest.raises(StructureError, match=r"m4.yaml.*matrices\.mass.*positive definite"):
+        load_structure(_write(tmp_path, d, "m4.yaml"))
     del arrays["K_upper"]
     np.savez(tmp_path / "short.npz", **arrays)
     d["matrices"]["file"] = "short.npz"

@@ -681,6 +681,14 @@ def _matrices(c: _Ctx, v: Any, arrays: Mapping[str, np.ndarray] | None) -> Matri
             raise c.err(f"array {key!r} in {where} has non-finite entries", fld)
         if not np.allclose(a, a.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(a).max()))):
             raise c.err(f"array {key!r} in {where} is not symmetric", fld)
+    try:
+        np.linalg.cholesky(arrays[spec.mass])
+    except np.linalg.LinAlgError:
+        raise c.err(
+            f"mass matrix {spec.mass!r} in {where} is not positive definite (massless DOFs must be condensed "
+            "out before export)",
+            "matrices.mass",
+        ) from None
     if "dofs" in m:
         dofs = [str(d) for d in c.seq(m["dofs"], "matrices.dofs")]
         if len(dofs) != n:
