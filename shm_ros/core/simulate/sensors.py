@@ -145,7 +145,9 @@ def apply_faults(rec: Recording, faults: list[FaultSpec], fs: float, rng: np.ran
     for f in faults:
         c = rec.sensor_ids.index(f.sensor) if f.sensor in rec.sensor_ids else len(rec.sensor_ids) // 2
         sid = rec.sensor_ids[c]
-        k0 = int(np.clip(round(f.at_s * fs), 0, n - 1))
+        k0 = int(round(f.at_s * fs))
+        if not 0 <= k0 < n:  # a start beyond a short window: a third of the way in
+            k0 = n // 3
         k1 = int(np.clip(k0 + max(1, round(f.duration_s * fs)), k0 + 1, n))
         cols = slice(None) if block_level else slice(c, c + 1)
         rec._masks()
