@@ -475,8 +475,21 @@ class IngestCore:
 
     def tick(self, now_ns: int) -> None:
         """Time has reached ``now_ns`` (stamp clock): close what cannot change any more."""
-        self._drain_imu()
-        self._process(int(now_ns) - self._latency_ns)
+        if math.isfinite(self.config.max_latency_s):
+            self.advance(int(now_ns) - self._latency_ns)
+
+    def advance(self, final_ns: int) -> None:
+        """Every sample stamped before ``final_ns`` has been fed: cut what that completes.
+
+        Readers that know their order (a bag read in time order) call this with
+        ``max_latency_s=inf``; a live stream relies on ``max_latency_s`` instead.
+        """
+        if self._rate is None:
+            self._drain_imu()
+            if self._rate is None:
+                return
+        if self._due_ns is None or int(final_ns) >= self._due_ns:
+            self._process(int(final_ns))
 
     def flush(self) -> list[Window]:
         """End of stream: cut everything still buffered; returns (and pops) all finished windows."""
@@ -1070,13 +1083,13 @@ def _clipped(x: np.ndarray, lo: float, hi: float, med: float, min_run: int) -> n
 
 def _spikes(x: np.ndarray, finite: np.ndarray, k: float) -> np.ndarray:
     """Isolated samples far (``k`` robust sigmas) from the median of their 5 neighbours."""
-    from scipy.ndimage import median_filter
-
     n = x.size
     if n < 7:
         return np.zeros(n, bool)
     y = np.where(finite, x, np.median(x[finite]) if finite.any() else 0.0)
-    r = y - median_filter(y, size=5, mode="nearest")
+    padded = np.concatenate((y[:1], y[:1], y, y[-1:], y[-1:]))
+    med5 = np.partition(np.lib.stride_tricks.sliding_window_view(padded, 5), 2, axis=1)[:, 2]
+    r = y - med5
     a = np.abs(r)
     sigma = 1.4826 * float(np.median(a))
     if sigma <= 0:
