@@ -28,6 +28,7 @@ from shm_ros.core.models.base import AffineModel, BatchModalSolution, ModalSolut
 
 
 _CONTROLLER = None
+R_MAX = 0.9  # largest convergence ratio the extrapolation trusts (jump factor <= 10)
 
 
 @contextlib.contextmanager
@@ -200,6 +201,8 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
     tw = t
     prev = None
     step_prev = None
+    r_prev = None
+    jumped_mask = None
     change_max = 0.0
     it = 0
     for it in range(1, max_iter + 1):
@@ -211,6 +214,8 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
         if prev is not None:
             rel = np.abs(tr - prev) / np.abs(tr)
             done = rel < tol_trace
+            if jumped_mask is not None:  # a change measured across a jump does not count
+                done &= ~jumped_mask
             if done.all():
                 t[active] = tw
                 return t, it, float(rel.max()), True, None
@@ -224,26 +229,34 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
                 tw, D, tr, P = tw[keep], D[keep], tr[keep], P[keep]
                 if step_prev is not None:
                     step_prev = step_prev[keep]
+                if r_prev is not None:
+                    r_prev = r_prev[keep]
+                if jumped_mask is not None:
+                    jumped_mask = jumped_mask[keep]
         prev = tr
         Y = P @ D
         d = kinv @ Y
         t_new = tg + d
         step = t_new - tw
-        if accelerate and step_prev is not None and it % 3 == 0:
-            # The error decays geometrically (ratio ~ lambda_m / lambda_{m+1}); every third step,
-            # estimate the ratio r from two successive steps and jump to the limit of the
-            # geometric series, t + step / (1 - r). The fixed point is unchanged; only the
-            # iterations to reach it drop (by about half to two thirds here).
+        jumped = False
+        jumped_mask = None
+        if accelerate and step_prev is not None:
+            # The error decays geometrically (ratio r ~ lambda_m / lambda_{m+1}). The ratio of
+            # successive step sizes estimates r; every third step, where two successive estimates
+            # agree (a clean geometric regime), jump to the limit of the series, t + step / (1 - r).
+            # The fixed point is unchanged; only the iterations to reach it drop.
             num = np.sum(step * step, axis=(-2, -1))
             den = np.sum(step_prev * step_prev, axis=(-2, -1))
             with np.errstate(divide="ignore", invalid="ignore"):
                 r = np.sqrt(num / den)
-            r = np.where(np.isfinite(r) & (r < 0.95), r, 0.0)
-            t_new = tw + step / (1.0 - r)[:, None, None]
-            d = t_new - tg
-            KR = kg + np.swapaxes(d, -1, -2) @ (kss @ d)
-        else:
-            KR = kg + np.swapaxes(d, -1, -2) @ Y
+            if it % 3 == 0 and r_prev is not None:
+                ok = np.isfinite(r) & (r < R_MAX) & (np.abs(r - r_prev) < 0.02 * r + 1e-3)
+                if ok.any():
+                    t_new = tw + step / (1.0 - np.where(ok, r, 0.0))[:, None, None]
+                    d = t_new - tg
+                    jumped, jumped_mask = True, ok
+            r_prev = r
+        KR = kg + np.swapaxes(d, -1, -2) @ ((kss @ d) if jumped else Y)
         step_prev = step
         tw = t_new
     t[active] = tw
