@@ -214,3 +214,14 @@ def test_unknown_or_misplaced_effects_fail_clearly():
         _campaign("girder", [("damper", {})])
     with pytest.raises(EffectError, match="unknown parameter"):
         _campaign("building", [("added_mass", {"fractoin": 0.1})])
+
+
+def test_story_damage_on_a_building_with_foundation_sway_hits_the_named_story():
+    soil = _campaign("building", [("support_flexibility", {})])
+    both = _campaign("building", [("support_flexibility", {}), ("damage", {"at": 0, "where": "story1"})])
+    tm = both.truth_model
+    theta = tm.theta(both.factors(0))
+    k = tm.building_matrices(theta, both.factors(0))["k_story"]
+    k0 = soil.truth_model.building_matrices(soil.truth_model.theta({}), {})["k_story"]
+    assert np.allclose(k / k0, [1.0, 0.85] + [1.0] * (k.size - 2))  # foundation spring untouched
+    assert np.all(_ratios(_truth(both), _truth(soil)) < 1.0)

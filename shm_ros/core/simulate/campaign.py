@@ -20,9 +20,8 @@ import numpy as np
 
 from shm_ros.core.simulate import excitation as ex
 from shm_ros.core.simulate.effects import Conditions, Effect, EffectError, make_effect
-from shm_ros.core.simulate.linear import real_shape
 from shm_ros.core.simulate.scenario import Scenario, named_scenario
-from shm_ros.core.simulate.sensors import FaultSpec, Recording, SensorModel, apply_faults
+from shm_ros.core.simulate.sensors import Recording, SensorModel, apply_faults
 from shm_ros.core.simulate.truth import ModalTruth, TruthModel, build_truth
 from shm_ros.core.types import Window
 

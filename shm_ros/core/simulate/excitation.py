@@ -71,7 +71,6 @@ def traffic_loads(rng: np.random.Generator, n: int, fs: float, point_x: np.ndarr
     grid = np.concatenate([np.asarray(point_x, dtype=float), sup])
     order = np.argsort(grid, kind="stable")
     point_x = grid[order]
-    is_load = order < len(grid) - sup.size
     F = np.zeros((n, point_x.size))
     duration = n / fs
     n_veh = int(rng.poisson(vehicles_per_hour * (duration + 10.0) / 3600.0))

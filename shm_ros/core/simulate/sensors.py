@@ -9,7 +9,7 @@ clock jumps and duplicated stamps, applied to a :class:`Recording` and listed fo
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

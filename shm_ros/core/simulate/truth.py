@@ -101,7 +101,7 @@ class TruthModel:
         equivalent-linear factors of amplitude-dependent springs/dashpots."""
         m = self.model
         E = self.story_vectors()
-        k_story = self.info["k_story"] * np.array([theta[self.groups[f"EI:{i + 1}"][0]] for i in range(m.n_dof)])
+        k_story = self.info["k_story"] * theta[self.info["story_params"]]
         if k_scale is not None:
             k_story = k_story * k_scale
         K = E.T @ (k_story[:, None] * E)
@@ -296,12 +296,10 @@ def _building_truth(nominal, structure, effects, rng, scatter, damping_range, n_
     names = model.parameter_names
     groups: dict[str, list[int]] = {"EI": [names.index(f"story{i + 1 + shift}") for i in range(n - shift)],
                                     "mass": [names.index(f"floor{i + 1 + shift}_mass") for i in range(n - shift)]}
-    for i in range(n):
-        groups[f"EI:{i + 1}"] = [names.index(f"story{i + 1}")]  # internal: truth story index
-    # user-facing story k = nominal story k = truth story k + shift
+    # story k of effects = story k of the nominal file = truth story k + shift (a foundation, if any,
+    # is truth story 1 and never scaled by an effect)
     for i in range(n - shift):
         groups[f"EI:{i + 1}"] = [names.index(f"story{i + 1 + shift}")]
-    groups_internal = {f"EI:{i + 1}": [names.index(f"story{i + 1}")] for i in range(n)}
     k_story = np.array([f["stiffness"] for f in floors])
     # truth damping: C = a0 M + a1 K_story, ratios damping_range at modes 1 and 3
     w = 2 * np.pi * model.modes(n_modes=3).frequencies_hz
@@ -328,7 +326,7 @@ def _building_truth(nominal, structure, effects, rng, scatter, damping_range, n_
         c_s = 2 * soil.params["soil_damping_ratio"] * np.sqrt(soil_info["stiffness"] * soil_info["mass"])
         soil_info["dashpot"] = float(c_s)
     info = {"n_truth_modes": n_truth, "k_story": k_story, "sensor_dof": sensor_dof, "shift": shift,
-            "groups_internal": groups_internal}
+            "story_params": np.array([names.index(f"story{i + 1}") for i in range(n)])}
     tm = TruthModel(kind="shear_building", nominal=nominal, spec=spec, model=model, groups=groups,
                     sensor_ids=sensor_ids, input_names=["ground"] + [f"wind@floor{i + 1}" for i in range(n)],
                     rayleigh=(float(a0), float(a1)), dampers=dampers, soil=soil_info, info=info)
