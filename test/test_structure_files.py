@@ -284,3 +284,15 @@ def test_contract_example_loads(tmp_path):
     del d["parameters"][0]["prior"]
     with pytest.raises(StructureError, match=r"parameters\[0\]\.prior"):
         structure_from_dict(d, "noprior.yaml")
+
+
+def test_typed_edits_survive_to_dict():
+    """Editing the typed spec (as a truth-model builder does) is kept by to_dict / scaled."""
+    spec = load_structure(EXAMPLES / "girder.yaml")
+    spec.girder.sections[1].E *= 0.5
+    d = spec.to_dict()
+    assert isinstance(d["girder"]["section"], list) and d["girder"]["section"][1]["E"] == 1.7e10
+    again = structure_from_dict(d, "edited.yaml")
+    assert again.girder.sections[1].E == 1.7e10 and again.girder.sections[0].E == 3.4e10
+    s2 = spec.scaled({"bearing_kv_scale": 0.5})
+    assert s2.girder.sections[1].E == 1.7e10 and s2.girder.bearings[2].k_vertical == 2.5e9

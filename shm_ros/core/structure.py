@@ -279,7 +279,8 @@ class StructureSpec:
             out["girder"] = {
                 "spans": [float(v) for v in g.spans],
                 "elements_per_span": int(g.elements_per_span),
-                "section": secs if g.section_per_span else secs[0],
+                # one mapping for all spans unless the file had a list or the spans now differ
+                "section": secs if g.section_per_span or any(x != secs[0] for x in secs) else secs[0],
                 "bearings": [
                     {"x": float(b.x), "k_vertical": float(b.k_vertical), "k_rotation": float(b.k_rotation)}
                     for b in g.bearings
