@@ -201,3 +201,15 @@ def test_sensor_near_a_mesh_node_moves_it_instead_of_a_sliver_element():
         assert np.any(np.isclose(model.node_x, b, atol=1e-12))
     ref = build_model(structure_from_dict(girder_dict(spans, eps=10), "ref.yaml"))
     np.testing.assert_allclose(model.modes(n_modes=4).frequencies_hz, ref.modes(n_modes=4).frequencies_hz, rtol=2e-4)
+
+
+def test_rotational_springs_clamp_the_ends():
+    """Very stiff vertical and rotational bearings at both ends: a clamped-clamped beam,
+    (beta L) = 4.7300, 7.8532, 10.9956."""
+    L = 30.0
+    k_rot = 1.0e6 * E * I / L
+    bearings = [{"x": x, "k_vertical": STIFF, "k_rotation": k_rot} for x in (0.0, L)]
+    m = build_model(structure_from_dict(girder_dict([L], bearings=bearings, eps=16), "cc.yaml"))
+    bl = np.array([4.730040745, 7.853204624, 10.99560784])
+    exact = (bl / L) ** 2 * np.sqrt(E * I / (RHO * A)) / (2 * np.pi)
+    np.testing.assert_allclose(m.modes(n_modes=3).frequencies_hz, exact, rtol=5e-4)
