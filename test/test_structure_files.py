@@ -296,3 +296,10 @@ def test_typed_edits_survive_to_dict():
     assert again.girder.sections[1].E == 1.7e10 and again.girder.sections[0].E == 3.4e10
     s2 = spec.scaled({"bearing_kv_scale": 0.5})
     assert s2.girder.sections[1].E == 1.7e10 and s2.girder.bearings[2].k_vertical == 2.5e9
+
+
+def test_duplicate_yaml_key_is_an_error(tmp_path):
+    p = tmp_path / "dup.yaml"
+    p.write_text((EXAMPLES / "building.yaml").read_text().replace("damping: {", "damping: {kind: modal, ", 1))
+    with pytest.raises(StructureError, match=r"(?s)dup.yaml.*'kind' appears twice.*line 16"):
+        load_structure(p)

@@ -18,6 +18,25 @@ from shm_ros.core.structure import StructureError, StructureSpec, structure_from
 __all__ = ["StructureError", "load_structure", "dump_structure", "load_matrices"]
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that refuses a key given twice in one mapping (PyYAML keeps the last silently)."""
+
+
+def _construct_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
+    seen: set = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"key {key!r} appears twice in one mapping", key_node.start_mark
+            )
+        seen.add(key)
+    return loader.construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
 def load_matrices(npz_path: str | Path, source: str, field_path: str = "matrices.file") -> dict[str, np.ndarray]:
     """All arrays of an ``.npz`` file as float arrays."""
     p = Path(npz_path)
@@ -41,7 +60,7 @@ def load_structure(path: str | Path) -> StructureSpec:
     except (OSError, UnicodeDecodeError) as exc:
         raise StructureError(f"cannot read file: {exc}", source) from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
         raise StructureError(f"not valid YAML: {exc}", source) from None
     if not isinstance(data, dict):
