@@ -58,7 +58,8 @@ late sample            stamp before the last emitted window    rejected, reporte
 
 Events: a window is an event (``is_event``) when the classic STA/LTA ratio of any usable channel
 (after subtracting its median, in a copy) reaches ``sta_lta_on`` and/or its PGA reaches
-``pga_threshold_m_s2``, depending on ``event_detector``; ``pga_m_s2`` is the largest
+``pga_threshold_m_s2``, depending on ``event_detector`` (``sta_lta`` by default; ``pga``, ``either``,
+``both`` or ``none``); ``pga_m_s2`` is the largest
 ``|x - median|`` over usable channels.
 
 Memory and speed: samples are buffered per channel in numpy chunks (no per-sample objects beyond
@@ -183,10 +184,11 @@ class IngestConfig:
     dead_ptp_m_s2: float = 0.0
     spike_k: float = 12.0
     noisy_fraction: float = 0.01
-    event_detector: str = "sta_lta"  # sta_lta | pga | either | none
+    event_detector: str = "sta_lta"  # sta_lta | pga | either | both | none
     sta_s: float = 1.0
     lta_s: float = 30.0
-    sta_lta_on: float = 5.0
+    sta_lta_on: float = 10.0  # narrow-band ambient response of a lightly damped structure
+    #                           reaches 5-9 within 10 min (Rayleigh envelope); quakes go far above
     pga_threshold_m_s2: float = 0.5
     check_interval_s: float = 5.0  # streaming: how often (stream time) a pause is looked for
     rate_tolerance: float = 0.01  # relative mismatch of a channel's rate before it is reported
@@ -197,8 +199,9 @@ class IngestConfig:
             raise ValueError(f"window_s must be > 0, got {self.window_s}")
         if not 0 < self.snap_tolerance <= 0.5:
             raise ValueError(f"snap_tolerance must be in (0, 0.5], got {self.snap_tolerance}")
-        if self.event_detector not in ("sta_lta", "pga", "either", "none"):
-            raise ValueError(f"event_detector must be sta_lta|pga|either|none, got {self.event_detector!r}")
+        if self.event_detector not in ("sta_lta", "pga", "either", "both", "none"):
+            raise ValueError("event_detector must be sta_lta|pga|either|both|none, "
+                             f"got {self.event_detector!r}")
         if self.sample_rate_hz is not None and not self.sample_rate_hz > 0:
             raise ValueError(f"sample_rate_hz must be > 0, got {self.sample_rate_hz}")
 
@@ -571,22 +574,18 @@ class IngestCore:
         if self._rate is not None:
             return
         probe = self._rate_probe.setdefault(topic_id, [])
-        probe.extend(t[:256].tolist())
-        if len(probe) >= 32:
-            d = np.diff(np.sort(np.asarray(probe, np.int64)))
-            d = d[d > 0]
-            if d.size >= 16:
-                rate = 1e9 / float(np.median(d))
-                if abs(rate - round(rate)) < 1e-3 * rate:
-                    rate = float(round(rate))
+        probe.extend(t[:1024].tolist())
+        if len(probe) >= 64:
+            rate = estimate_rate(np.asarray(probe, np.int64))
+            if rate is not None:
                 self._rate = rate
                 self._diag(OK, "sample_rate", f"accel/{topic_id}.header.stamp",
-                           f"grid rate {rate:g} Hz (median stamp interval)", int(t[0]))
+                           f"grid rate {rate:g} Hz (fitted to the stamps)", int(t[0]))
 
     def _append(self, col: int, t: np.ndarray, v: np.ndarray, seq: np.ndarray, source: str) -> None:
         buf = self._buf[col]
         if self._committed_ns is not None:
-            late = t < self._committed_ns - self._half_period_ns()
+            late = t < self._committed_ns
             if late.any():
                 n = int(late.sum())
                 self.stats.samples_not_windowed["late"] += n
@@ -663,8 +662,8 @@ class IngestCore:
                 self._open_burst(min(firsts))
             origin, k0 = self._burst_origin, self._burst_k
             assert origin is not None
-            span_start = origin + k0 * P - P / 2  # stamps in [span_start, span_end) snap into it
-            span_end = origin + (k0 + W) * P - P / 2
+            span_start = _edge(origin, k0, P)  # stamps in [span_start, span_end) snap into it
+            span_end = _edge(origin, k0 + W, P)
             lim = min(span_end, fin)
             lo = span_start if self._scan_ns is None else max(span_start, self._scan_ns)
             parts = [b.t[(b.t >= lo) & (b.t < lim)] for b in self._buf]
@@ -680,7 +679,7 @@ class IngestCore:
                     self._close_burst()
                     continue
                 self._scan_last = int(u[-1])
-            self._scan_ns = int(math.ceil(lim))
+            self._scan_ns = int(lim)
             last = self._scan_last  # newest stamp of the burst so far
             if fin >= span_end:  # everything that snaps into this window is final
                 later = [b.t[(b.t >= span_end) & (b.t < fin)] for b in self._buf]
@@ -710,14 +709,14 @@ class IngestCore:
         # when to try again: the end of the open window, or a pause after the newest sample;
         # at most every check interval of stream time, so that a long window is not rescanned often
         if self._burst_origin is not None:
-            due = int(self._burst_origin + (self._burst_k + W) * P)
+            due = _grid(self._burst_origin, self._burst_k + W, P)
             if self._scan_last is not None:
-                due = min(due, max(int(self._scan_last + pause_ns) + 1,
+                due = min(due, max(self._scan_last + int(pause_ns) + 1,
                                    fin + int(self.config.check_interval_s * 1e9)))
             self._due_ns = due
         else:
             firsts = [int(b.t.min()) for b in self._buf if b.t.size]
-            self._due_ns = None if not firsts else int(min(firsts) + W * P)
+            self._due_ns = None if not firsts else _grid(min(firsts), W, P)
         if self._temp_t.size and self._committed_ns is not None:
             keep = self._temp_t >= self._committed_ns
             self._temp_t, self._temp_v = self._temp_t[keep], self._temp_v[keep]
@@ -751,8 +750,8 @@ class IngestCore:
         vals = np.full((n, C), np.nan)
         flags = np.zeros((n, C), np.uint8)
         filled = np.zeros((n, C), bool)
-        span_start = origin + k0 * P - P / 2
-        span_end = origin + k1 * P - P / 2
+        span_start = _edge(origin, k0, P)
+        span_end = _edge(origin, k1, P)
         notes: list[str] = []
         for c, b in enumerate(self._buf):
             sel = (b.t < span_end)
@@ -817,24 +816,22 @@ class IngestCore:
                            "from the grid: not placed (gap)", int(t[~snappable][0]), n_bad)
                 self.stats.samples_not_windowed["unsnappable"] += n_bad
             # the rate of this channel, for a clear message when it differs from the grid
-            if t.size > 16:
-                d = np.diff(np.sort(t))
-                d = d[d > 0]
-                if d.size > 8:
-                    r = 1e9 / float(np.median(d))
+            if t.size > 64:
+                r = estimate_rate(t, nominal=False)
+                if r is not None:
                     if abs(r - self._rate) > self.config.rate_tolerance * self._rate:
                         self._diag(ERROR, "rate_mismatch", self._src(c),
                                    f"samples at {r:.4g} Hz, grid at {self._rate:g} Hz: not resampled "
                                    "(collisions/gaps follow)", int(t[0]))
-        self._committed_ns = int(round(origin + k1 * P - P / 2))
+        self._committed_ns = span_end
         # channels mostly absent are dropped for this span instead of splitting it everywhere
         cover = filled.mean(axis=0)
         dropped = cover < self.config.min_coverage
         for c in np.flatnonzero(dropped):
             self._diag(WARN, "channel_dropped", self._src(c),
                        f"only {cover[c]:.0%} of the samples present: channel dropped for "
-                       f"[{iso_utc(int(origin + k0 * P))}, {iso_utc(int(origin + k1 * P))})",
-                       int(origin + k0 * P))
+                       f"[{iso_utc(_grid(origin, k0, P))}, {iso_utc(_grid(origin, k1, P))})",
+                       _grid(origin, k0, P))
             flags[~filled[:, c], c] |= np.uint8(SampleFlag.MISSING)
         active = ~dropped
         if active.any():
@@ -855,13 +852,13 @@ class IngestCore:
                     first_miss = int(np.flatnonzero(miss)[0])
                     self._diag(WARN, "gap", self._src(c),
                                f"{int(miss.sum())} grid point(s) without a sample: window split there",
-                               int(origin + (k0 + first_miss) * P), int(miss.sum()))
+                               _grid(origin, k0 + first_miss, P), int(miss.sum()))
             if lost:
                 self.stats.samples_not_windowed["gap_rows"] += lost
         for s, e in zip(starts.tolist(), ends.tolist()):
             m = e - s
-            t_s = int(round(origin + (k0 + s) * P))
-            t_e = int(round(origin + (k0 + e) * P))
+            t_s = _grid(origin, k0 + s, P)
+            t_e = _grid(origin, k0 + e, P)
             if m < min_len:
                 reason = "remainder of burst" if (e == n and why is not None) else "piece between gaps"
                 self.dropped.append(DroppedSpan(t_s, t_e, m, f"{reason} shorter than half a window"))
@@ -1011,7 +1008,7 @@ class IngestCore:
         pga = float(np.abs(x).max()) if x.size else 0.0
         trig_pga = pga >= cfg.pga_threshold_m_s2
         trig_sl = False
-        if cfg.event_detector in ("sta_lta", "either"):
+        if cfg.event_detector in ("sta_lta", "either", "both"):
             trig_sl = float(sta_lta(x, rate, cfg.sta_s, cfg.lta_s).max(initial=0.0)) >= cfg.sta_lta_on
         if cfg.event_detector == "sta_lta":
             return trig_sl, pga
@@ -1019,11 +1016,46 @@ class IngestCore:
             return trig_pga, pga
         if cfg.event_detector == "either":
             return trig_sl or trig_pga, pga
+        if cfg.event_detector == "both":
+            return trig_sl and trig_pga, pga
         return False, pga
 
 
 # ----------------------------------------------------------------------------------------------
 # detectors (plain numpy)
+
+
+def estimate_rate(stamps: np.ndarray, nominal: bool = True) -> float | None:
+    """Sample rate (Hz) of jittered stamps: the median interval over 16 samples, refined by
+    least-squares fits over growing spans; within 0.5 % of a whole number of Hz it is rounded
+    (``nominal``). None when fewer than 17 distinct stamps."""
+    ts = np.unique(np.asarray(stamps, np.int64))
+    if ts.size < 17:
+        return None
+    lag = 16
+    slope = float(np.median((ts[lag:] - ts[:-lag]) / lag))
+    if not slope > 0:
+        return None
+    rel = (ts - ts[0]).astype(np.float64)
+    for m in (64, 256, ts.size):
+        m = min(m, ts.size)
+        k = np.rint(rel[:m] / slope)
+        if k[-1] > 0:
+            slope = float(np.polyfit(k, rel[:m], 1)[0])
+    rate = 1e9 / slope
+    if nominal and abs(rate - round(rate)) < 5e-3 * rate:
+        rate = float(round(rate))
+    return rate
+
+
+def _grid(origin: int, k: int, period_ns: float) -> int:
+    """Time of grid point ``k`` (integer nanoseconds; float64 alone cannot hold epoch ns)."""
+    return origin + int(round(k * period_ns))
+
+
+def _edge(origin: int, k: int, period_ns: float) -> int:
+    """First integer stamp that snaps to grid point ``k`` or later (half a period before it)."""
+    return origin + int(math.ceil(k * period_ns - period_ns / 2))
 
 
 def sta_lta(x: np.ndarray, rate: float, sta_s: float, lta_s: float) -> np.ndarray:
