@@ -9,9 +9,32 @@ from __future__ import annotations
 from typing import Any
 
 from shm_ros.core.models.base import AffineModel, BatchModalSolution, ModalSolution
+from shm_ros.core.models.reduction import (
+    Reduction,
+    expand_mode_shapes,
+    expand_sensor_shapes,
+    guyan,
+    iirs,
+    iirs_limit,
+    reduce_model,
+    reduced_modes_batch,
+)
 from shm_ros.core.structure import StructureSpec
 
-__all__ = ["AffineModel", "ModalSolution", "BatchModalSolution", "build_model"]
+__all__ = [
+    "AffineModel",
+    "ModalSolution",
+    "BatchModalSolution",
+    "build_model",
+    "Reduction",
+    "iirs",
+    "iirs_limit",
+    "guyan",
+    "reduce_model",
+    "reduced_modes_batch",
+    "expand_mode_shapes",
+    "expand_sensor_shapes",
+]
 
 
 def build_model(spec: StructureSpec, **overrides: Any) -> AffineModel:
