@@ -361,7 +361,7 @@ class IngestCore:
         if pend is None:
             if topic_id not in self._imu_routes:
                 self._diag(WARN, "unknown_topic", f"accel/{topic_id}",
-                           "Imu topic not in the structure's sensors: ignored", stamp_ns)
+                           "Imu topic not in the structure's sensors: ignored", stamp_ns, once=True)
                 return
             pend = self._imu_pending[topic_id] = ([], [], [], [])
         pend[0].append(stamp_ns)
@@ -379,7 +379,8 @@ class IngestCore:
         source = f"accel/{topic_id}"
         routes = self._imu_routes.get(topic_id)
         if routes is None:
-            self._diag(WARN, "unknown_topic", source, "Imu topic not in the structure's sensors: ignored")
+            self._diag(WARN, "unknown_topic", source, "Imu topic not in the structure's sensors: ignored",
+                       once=True)
             return
         try:
             t = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
@@ -439,7 +440,7 @@ class IngestCore:
             routes = self._block_routes.get(name)
             if routes is None:
                 self._diag(WARN, "unknown_channel", f"{topic}.channel_names[{name}]",
-                           "channel not in the structure's sensors: ignored", t0)
+                           "channel not in the structure's sensors: ignored", t0, once=True)
                 continue
             for col, sign in routes:
                 v = x[:, j] * factor if factor != 1.0 else x[:, j].copy()
@@ -525,10 +526,10 @@ class IngestCore:
         return 2**62 if not math.isfinite(lat) else int(lat * 1e9)
 
     def _diag(self, level: int, code: str, source: str, message: str, stamp_ns: int | None = None,
-              count: int = 1) -> None:
+              count: int = 1, once: bool = False) -> None:
         key = (code, source)
         self.diagnostic_counts[key] += count
-        if self.diagnostic_counts[key] - count < self.config.max_repeats:
+        if self.diagnostic_counts[key] - count < (1 if once else self.config.max_repeats):
             self._diags.append(Diagnostic(level, code, source, message, stamp_ns, count))
             self._diag_new += 1
 
