@@ -47,6 +47,13 @@ def test_same_seed_gives_identical_bags_and_other_seeds_other_noise(tmp_path):
     assert max(abs(v) for v in corr) < 0.2  # independent noise and loads, not a shifted copy
 
 
+def test_worker_processes_write_the_same_bytes(tmp_path):
+    sc = named_scenario("girder", n_windows=4, window_s=5.0, seed=8)
+    one = write_campaign(simulate_campaign(sc), tmp_path / "one", workers=1)
+    two = write_campaign(simulate_campaign(sc), tmp_path / "two", workers=2)
+    assert _digest(one.bag) == _digest(two.bag)
+
+
 def test_accel_block_bag_follows_the_contract(tmp_path):
     sc = named_scenario("girder", n_windows=3, window_s=30.0, seed=2)
     c = simulate_campaign(sc)

@@ -107,3 +107,20 @@ def test_equivalent_factors_match_monte_carlo():
     assert abs(equivalent_stiffness_factor(np.array([0.004]), 0.01)[0] - mc) < 2e-3
     mc_c = np.mean(1.0 + 2.0 * np.abs(d) / 0.02)
     assert abs(equivalent_damping_factor(np.array([0.004]), 0.02) - mc_c) < 2e-3
+
+
+def test_projected_loads_equal_the_dense_load_history_projected():
+    from shm_ros.core.simulate import excitation as ex
+
+    x = np.linspace(1.0, 29.0, 25)
+    proj = np.random.default_rng(0).standard_normal((25, 4))
+    for fn, kw in ((ex.traffic_loads, dict(point_x=x, length=30.0, vehicles_per_hour=3000.0,
+                                           support_x=np.array([0.0, 15.0, 30.0]))),
+                   (ex.wind_loads, dict(n_points=25, rms_n=100.0))):
+        dense = fn(np.random.default_rng(4), 3000, 100.0, **kw)
+        proj_out = fn(np.random.default_rng(4), 3000, 100.0, projection=proj, **kw)
+        if isinstance(dense, tuple):
+            assert dense[1] == proj_out[1] and dense[1] > 10
+            dense, proj_out = dense[0], proj_out[0]
+        assert np.abs(dense).max() > 0
+        assert np.allclose(dense @ proj, proj_out, rtol=1e-10, atol=1e-9 * np.abs(proj_out).max())

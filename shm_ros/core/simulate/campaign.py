@@ -122,9 +122,11 @@ class Campaign:
         sys, modal = self.truth_model.system(factors)
         slow = float(np.min(-sys.poles.real[sys.conjugate])) if np.any(sys.conjugate) else 1.0
         n_warm = int(round(min(120.0, max(10.0, 5.0 / slow)) * sc.fs))
-        u, event = self._inputs(rng, n_warm + n, cond, i)
+        u, event = self._inputs(rng, n_warm + n, cond, i, sys)
         extra: dict[str, Any] = {}
-        if amp:
+        if self.truth_model.kind == "girder":
+            y = sys.simulate_modal(u, dt)  # u holds modal forces
+        elif amp:
             from shm_ros.core.simulate.newmark import simulate_building_nonlinear
 
             y, eq = simulate_building_nonlinear(self.truth_model, factors, self.effects, u, dt, n_warm)
@@ -155,16 +157,20 @@ class Campaign:
         for i in indices if indices is not None else range(self.n_windows):
             yield self.window(i)
 
-    def _inputs(self, rng: np.random.Generator, n: int, cond: Conditions, i: int) -> tuple[np.ndarray, dict | None]:
+    def _inputs(self, rng: np.random.Generator, n: int, cond: Conditions, i: int,
+                sys=None) -> tuple[np.ndarray, dict | None]:
+        """Inputs of a window: building - (n, 1 + n_dof) ground acceleration and floor forces;
+        girder - the modal forces (n, m) of ``sys`` (loads at the load points, projected)."""
         sc, tm = self.scenario, self.truth_model
         fs = sc.fs
         if tm.kind == "girder":
+            proj = None if sys is None else sys.participation.T
             length = float(sum(tm.nominal.girder.spans))
             rate = sc.vehicles_per_hour * traffic_profile(cond.local_hour)
             F, _ = ex.traffic_loads(rng, n, fs, tm.load_x, length, rate,
-                                    support_x=np.array([b.x for b in tm.nominal.girder.bearings]))
+                                    support_x=np.array([b.x for b in tm.nominal.girder.bearings]), projection=proj)
             wind = sc.wind_rms_n * float(rng.lognormal(0.0, 0.4))
-            F += ex.wind_loads(rng, n, fs, tm.load_x.size, wind)
+            F += ex.wind_loads(rng, n, fs, tm.load_x.size, wind, projection=proj)
             return F, None
         n_dof = tm.model.n_dof
         shift = tm.info["shift"]

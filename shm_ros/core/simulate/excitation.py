@@ -27,12 +27,15 @@ def _bandpass(x: np.ndarray, lo: float, hi: float, fs: float, order: int = 2) ->
 
 
 def wind_loads(rng: np.random.Generator, n: int, fs: float, n_points: int, rms_n: float,
-               corner_hz: float = 1.5, correlation: float = 0.6, n_basis: int = 8) -> np.ndarray:
+               corner_hz: float = 1.5, correlation: float = 0.6, n_basis: int = 8,
+               projection: np.ndarray | None = None) -> np.ndarray:
     """(n, n_points) gust forces in N; RMS about ``rms_n`` with a slowly wandering intensity.
 
     The spectrum is flat below ``corner_hz`` and falls as f^-2 above, plus a -20 dB white floor so
     that every mode of interest is still excited. The local part is a smooth random field: ``n_basis``
     independent gust processes along the structure, linearly interpolated to the load points.
+    With ``projection`` (n_points, m) the result is ``F @ projection`` (n, m), computed without the
+    dense (n, n_points) load history.
     """
     nb = max(2, min(n_basis, n_points))
     common = rng.standard_normal((n, 1))
@@ -52,26 +55,33 @@ def wind_loads(rng: np.random.Generator, n: int, fs: float, n_points: int, rms_n
     # intensity: slow random modulation (gustiness over minutes)
     mod = _lowpass(rng.standard_normal(n), 1.0 / 120.0, fs, order=1) * np.sqrt(fs * 120.0 / np.pi)
     envelope = np.clip(1.0 + 0.35 * mod, 0.2, None)[:, None]
-    return (rms_n / np.sqrt(1.01)) * envelope * (coloured @ W)
+    Wp = W if projection is None else W @ projection
+    return (rms_n / np.sqrt(1.01)) * envelope * (coloured @ Wp)
 
 
 def traffic_loads(rng: np.random.Generator, n: int, fs: float, point_x: np.ndarray, length: float,
                   vehicles_per_hour: float, mean_weight_n: float = 1.5e5,
                   speed_m_s: tuple[float, float] = (12.0, 25.0),
-                  support_x: np.ndarray | None = None) -> tuple[np.ndarray, int]:
+                  support_x: np.ndarray | None = None,
+                  projection: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """(n, n_points) dynamic forces of vehicles crossing the deck, and the number of vehicles.
 
     Each vehicle is a point load W (1 + 0.1 b(t)) moving at constant speed, where b is unit band noise
     in 1.5-4 Hz (axle hop and body bounce); only the dynamic part and the moving static weight's
     change enter (the static weight itself sets the vehicle's share of load points). A vehicle can
     enter before the window starts, so a window never begins on an empty deck by construction.
+    With ``projection`` (n_points, m) the result is ``F @ projection`` (n, m).
     """
     # load points plus the supports (a load over a support goes straight into it)
     sup = np.asarray(support_x if support_x is not None else [0.0, length], dtype=float)
     grid = np.concatenate([np.asarray(point_x, dtype=float), sup])
     order = np.argsort(grid, kind="stable")
     point_x = grid[order]
-    F = np.zeros((n, point_x.size))
+    n_load = len(grid) - sup.size
+    proj = np.eye(n_load) if projection is None else np.asarray(projection, dtype=float)
+    G = np.zeros((point_x.size, proj.shape[1]))  # projection on the sorted grid; supports carry 0
+    G[np.argsort(order)[:n_load]] = proj
+    F = np.zeros((n, proj.shape[1]))
     duration = n / fs
     n_veh = int(rng.poisson(vehicles_per_hour * (duration + 10.0) / 3600.0))
     t = np.arange(n) / fs
@@ -96,12 +106,8 @@ def traffic_loads(rng: np.random.Generator, n: int, fs: float, point_x: np.ndarr
         j = np.clip(np.searchsorted(point_x, x) - 1, 0, point_x.size - 2)
         xa, xb = point_x[j], point_x[j + 1]
         a = np.clip((x - xa) / np.maximum(xb - xa, 1e-9), 0.0, 1.0)
-        rows = np.arange(k0, k1)
-        np.add.at(F, (rows, j), p * (1 - a))
-        np.add.at(F, (rows, j + 1), p * a)
-    back = np.empty(order.size, int)
-    back[order] = np.arange(order.size)
-    return F[:, back[: len(grid) - sup.size]], n_veh
+        F[k0:k1] += (p * (1 - a))[:, None] * G[j] + (p * a)[:, None] * G[j + 1]
+    return F, n_veh
 
 
 def microtremor(rng: np.random.Generator, n: int, fs: float, rms_m_s2: float) -> np.ndarray:

@@ -79,9 +79,18 @@ class ModalSystem:
         return y
 
 
+    def simulate_modal(self, Pm: np.ndarray, dt: float) -> np.ndarray:
+        """Outputs for classical modes driven by modal forces ``Pm`` (n, m) = u @ participation.T
+        (lets a caller form modal forces without the full load history)."""
+        if self.participation is None:
+            raise ValueError("simulate_modal needs a model from from_real_modes")
+        return Pm @ self.C.real.T + self._filter_real(Pm, dt)
+
     def _simulate_real(self, u: np.ndarray, dt: float) -> np.ndarray:
+        return self._filter_real(u @ self.participation.T, dt)
+
+    def _filter_real(self, Pm: np.ndarray, dt: float) -> np.ndarray:
         # the conjugate pair 2 Re(R (c1 + c0 q^-1) / (1 - phi q^-1)) as one real biquad
-        Pm = u @ self.participation.T  # (n, m) real modal forces
         Q = np.empty_like(Pm)
         for j, lam in enumerate(self.poles):
             c1, c0, phi = _foh_coefficients(complex(lam), dt)
