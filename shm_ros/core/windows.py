@@ -32,8 +32,9 @@ NaN / Inf sample       ``~isfinite``                           kept as is (Inf -
 clipped samples        runs >= ``clip_run`` at the channel's   flag ``CLIPPED``; status ``clipped``
                        extreme (flat top) or ``|x| >=
                        saturation_m_s2``
-spike                  isolated sample far (``spike_k`` robust flag ``SPIKE``; status ``noisy`` when
-                       sigmas) from its 5-point median         flagged (NaN+spike) > ``noisy_fraction``
+spike                  isolated sample > ``spike_k`` robust    flag ``SPIKE``; status ``noisy`` when
+                       sigmas of the first differences from    flagged (NaN+spike) > ``noisy_fraction``
+                       its 5-point median
 duplicated stamp       two samples snap to one grid point      first kept, flag ``DUPLICATE_STAMP``,
                        with equal stamps                       copies counted and reported
 out-of-order stamp     stamp < latest stamp of the channel     placed by its stamp, flag ``OUT_OF_ORDER``
@@ -171,28 +172,30 @@ class ChannelMap:
 
 @dataclass
 class IngestConfig:
-    """Settings of :class:`IngestCore` (node parameters and CLI flags come from these names)."""
+    """Settings of :class:`IngestCore`. Node parameters and CLI flags are generated from these
+    fields (:data:`PARAMETER_HELP` holds the one-line help of each)."""
 
     window_s: float = 600.0
-    sample_rate_hz: float | None = None  # None: from the first AccelBlock or the Imu stamps
+    sample_rate_hz: float | None = None
     burst_pause_s: float = 1.0
-    snap_tolerance: float = 0.5  # fraction of a period; a stamp must be strictly closer
-    max_latency_s: float = 2.0  # how long to wait for late channels; inf: cut only at flush()
-    min_coverage: float = 0.5  # below this a channel is dropped for the window instead of splitting
+    snap_tolerance: float = 0.5
+    max_latency_s: float = 2.0
+    min_coverage: float = 0.5
     clip_run: int = 3
     saturation_m_s2: float | None = None
     dead_ptp_m_s2: float = 0.0
     spike_k: float = 12.0
     noisy_fraction: float = 0.01
-    event_detector: str = "sta_lta"  # sta_lta | pga | either | both | none
+    event_detector: str = "sta_lta"
     sta_s: float = 1.0
     lta_s: float = 30.0
-    sta_lta_on: float = 10.0  # narrow-band ambient response of a lightly damped structure
-    #                           reaches 5-9 within 10 min (Rayleigh envelope); quakes go far above
+    # narrow-band ambient response of a lightly damped structure reaches STA/LTA 5-9 within 10 min
+    # (Rayleigh envelope); earthquakes go far above 10
+    sta_lta_on: float = 10.0
     pga_threshold_m_s2: float = 0.5
-    check_interval_s: float = 5.0  # streaming: how often (stream time) a pause is looked for
-    rate_tolerance: float = 0.01  # relative mismatch of a channel's rate before it is reported
-    max_repeats: int = 5  # identical diagnostics (code, source) kept individually; then only counted
+    check_interval_s: float = 5.0
+    rate_tolerance: float = 0.01
+    max_repeats: int = 5
 
     def __post_init__(self) -> None:
         if not self.window_s > 0:
@@ -204,6 +207,29 @@ class IngestConfig:
                              f"got {self.event_detector!r}")
         if self.sample_rate_hz is not None and not self.sample_rate_hz > 0:
             raise ValueError(f"sample_rate_hz must be > 0, got {self.sample_rate_hz}")
+
+
+PARAMETER_HELP: dict[str, str] = {
+    "window_s": "window length, s; long bursts are split into windows of this length",
+    "sample_rate_hz": "grid sample rate, Hz (default: the first AccelBlock's, or fitted to Imu stamps)",
+    "burst_pause_s": "a pause longer than this (no channel has data) ends a burst, s",
+    "snap_tolerance": "a stamp snaps to a grid point strictly closer than this fraction of a period",
+    "max_latency_s": "how long (stamp time) to wait for late channels before cutting; inf = at the end",
+    "min_coverage": "a channel with less than this fraction of a window's samples is dropped for it",
+    "clip_run": "this many equal samples at a channel's extreme count as clipping",
+    "saturation_m_s2": "|a| at or above this is flagged CLIPPED (default: only flat tops)",
+    "dead_ptp_m_s2": "a channel whose peak-to-peak in a window is at most this is dead",
+    "spike_k": "an isolated sample this many robust sigmas from its 5-point median is a spike",
+    "noisy_fraction": "a channel with more NaN/spike samples than this fraction is 'noisy'",
+    "event_detector": "earthquake/event trigger: sta_lta | pga | either | both | none",
+    "sta_s": "STA window, s",
+    "lta_s": "LTA window, s",
+    "sta_lta_on": "STA/LTA ratio that triggers an event",
+    "pga_threshold_m_s2": "peak |a - median| that triggers an event (pga, either, both)",
+    "check_interval_s": "streaming: at most this often (stamp time) a burst end is looked for, s",
+    "rate_tolerance": "relative difference of a channel's rate from the grid's that is reported",
+    "max_repeats": "identical diagnostics kept one by one before they are only counted",
+}
 
 
 @dataclass
@@ -1115,18 +1141,21 @@ def _clipped(x: np.ndarray, lo: float, hi: float, med: float, min_run: int) -> n
 
 
 def _spikes(x: np.ndarray, finite: np.ndarray, k: float) -> np.ndarray:
-    """Isolated samples far (``k`` robust sigmas) from the median of their 5 neighbours."""
+    """Isolated samples farther than ``k`` robust sigmas (of the first differences) from the median
+    of the 5 samples around them."""
     n = x.size
     if n < 7:
         return np.zeros(n, bool)
     y = np.where(finite, x, np.median(x[finite]) if finite.any() else 0.0)
     padded = np.concatenate((y[:1], y[:1], y, y[-1:], y[-1:]))
     med5 = np.partition(np.lib.stride_tricks.sliding_window_view(padded, 5), 2, axis=1)[:, 2]
-    r = y - med5
-    a = np.abs(r)
-    sigma = 1.4826 * float(np.median(a))
+    a = np.abs(y - med5)
+    # scale: robust spread of the first differences, so that the smooth peaks of a band-limited
+    # signal (tiny residual from the median, but also tiny differences) are never spikes
+    d = np.diff(y)
+    sigma = 1.4826 * float(np.median(np.abs(d - np.median(d))))
     if sigma <= 0:
-        sigma = float(np.std(r))
+        sigma = float(np.std(d))
         if sigma <= 0:
             return np.zeros(n, bool)
     big = a > k * sigma
