@@ -339,7 +339,32 @@ def test_sta_lta_ratio_is_one_on_stationary_noise():
     x = np.random.default_rng(5).standard_normal(200 * 200)
     r = sta_lta(x, 200.0, 1.0, 30.0)
     assert 0.5 < np.median(r[6000:]) < 1.5
-    assert r[:5999].max() == 0.0
+    assert r[:399].max() == 0.0 and r[399:].min() > 0.0  # expanding LTA from 2 STA lengths on
+
+
+def test_no_spikes_flagged_on_band_limited_or_strong_shaking():
+    from scipy.signal import butter, sosfilt
+
+    flagged = 0
+    for seed in range(10):
+        rng = np.random.default_rng(300 + seed)
+        n = int(60 * FS)
+        sos = butter(4, [0.5, 15.0], btype="band", fs=FS, output="sos")
+        x = sosfilt(sos, rng.standard_normal(n)) * 0.01
+        t = np.arange(n) / FS
+        env = np.where(t > 20, (t - 20) * np.exp(-(t - 20) / 2.0), 0.0)  # a burst of shaking
+        x = x + env * sosfilt(sos, rng.standard_normal(n))
+        core = offline(["a"], window_s=60.0)
+        core.add_block(T0, FS, ["a"], x[:, None])
+        (w,) = core.flush()
+        flagged += 0 if w.flags is None else int(((w.flags & SampleFlag.SPIKE) != 0).sum())
+        x2 = x.copy()
+        x2[int(5 * FS)] += 0.5  # a real spike in the quiet part is still found
+        core = offline(["a"], window_s=60.0)
+        core.add_block(T0, FS, ["a"], x2[:, None])
+        (w2,) = core.flush()
+        assert w2.flags is not None and w2.flags[int(5 * FS), 0] & SampleFlag.SPIKE
+    assert flagged == 0
 
 
 def test_streaming_per_sample_equals_offline_arrays():

@@ -959,7 +959,7 @@ class IngestCore:
                 self._diag(WARN, "clipped", self._src(c), f"{n_clip} sample(s) flat-topped at "
                            f"{lo:.4g}/{hi:.4g} m/s^2 in {where}: flagged CLIPPED", start_ns, n_clip)
                 notes.append(f"{self.channels[c]}: {n_clip} clipped samples")
-            spikes = _spikes(x, finite, cfg.spike_k) & ~clip
+            spikes = _spikes(x, finite, cfg.spike_k, rate) & ~clip
             n_sp = int(spikes.sum())
             if n_sp:
                 flags[spikes, c] |= np.uint8(SampleFlag.SPIKE)
@@ -1086,9 +1086,11 @@ def _edge(origin: int, k: int, period_ns: float) -> int:
 
 
 def sta_lta(x: np.ndarray, rate: float, sta_s: float, lta_s: float) -> np.ndarray:
-    """Classic STA/LTA of ``x`` (n,) or (n, c): trailing means of x^2; zeros before the LTA fills.
+    """Classic STA/LTA of ``x`` (n,) or (n, c): trailing means of x^2 over ``sta_s`` and ``lta_s``.
 
-    Written out because it is a few lines of cumulative sums (ObsPy's version needs ObsPy).
+    While fewer than ``lta_s`` seconds precede a sample the LTA is the mean over all of them (at
+    least ``2 * sta_s``; zeros before), so that a record that starts shortly before an earthquake
+    still triggers. Written out because it is a few lines of cumulative sums.
     """
     x = np.asarray(x, dtype=np.float64)
     if x.ndim == 1:
@@ -1096,15 +1098,17 @@ def sta_lta(x: np.ndarray, rate: float, sta_s: float, lta_s: float) -> np.ndarra
     ns, nl = max(1, int(round(sta_s * rate))), max(1, int(round(lta_s * rate)))
     n = x.shape[0]
     out = np.zeros_like(x)
-    if n <= nl:
+    first = min(nl, 2 * ns)
+    if n < first:
         return out
     cs = np.vstack((np.zeros((1, x.shape[1])), np.cumsum(x * x, axis=0)))
-    idx = np.arange(nl, n + 1)
+    idx = np.arange(first, n + 1)
+    lo = np.maximum(idx - nl, 0)
     sta = (cs[idx] - cs[idx - ns]) / ns
-    lta = (cs[idx] - cs[idx - nl]) / nl
+    lta = (cs[idx] - cs[lo]) / (idx - lo)[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(lta > 0, sta / lta, 0.0)
-    out[nl - 1:] = r
+    out[first - 1:] = r
     return out
 
 
@@ -1140,9 +1144,13 @@ def _clipped(x: np.ndarray, lo: float, hi: float, med: float, min_run: int) -> n
     return out
 
 
-def _spikes(x: np.ndarray, finite: np.ndarray, k: float) -> np.ndarray:
-    """Isolated samples farther than ``k`` robust sigmas (of the first differences) from the median
-    of the 5 samples around them."""
+def _spikes(x: np.ndarray, finite: np.ndarray, k: float, rate: float) -> np.ndarray:
+    """Isolated samples farther than ``k`` sigmas from the median of the 5 samples around them.
+
+    Sigma is the larger of the robust spread of the first differences over the window and their
+    RMS over the surrounding second (without the 5 samples themselves): band-limited peaks and
+    strong shaking are not spikes, a lone outlier in a quiet stretch is.
+    """
     n = x.size
     if n < 7:
         return np.zeros(n, bool)
@@ -1150,15 +1158,20 @@ def _spikes(x: np.ndarray, finite: np.ndarray, k: float) -> np.ndarray:
     padded = np.concatenate((y[:1], y[:1], y, y[-1:], y[-1:]))
     med5 = np.partition(np.lib.stride_tricks.sliding_window_view(padded, 5), 2, axis=1)[:, 2]
     a = np.abs(y - med5)
-    # scale: robust spread of the first differences, so that the smooth peaks of a band-limited
-    # signal (tiny residual from the median, but also tiny differences) are never spikes
     d = np.diff(y)
     sigma = 1.4826 * float(np.median(np.abs(d - np.median(d))))
-    if sigma <= 0:
-        sigma = float(np.std(d))
-        if sigma <= 0:
-            return np.zeros(n, bool)
-    big = a > k * sigma
+    d2 = np.concatenate(([0.0], d * d))  # d2[i] = (y[i] - y[i-1])^2
+    cs = np.concatenate(([0.0], np.cumsum(d2)))
+    half = max(3, int(rate / 2))
+    i = np.arange(n)
+    lo, hi = np.clip(i - half, 0, n), np.clip(i + half + 1, 0, n)
+    ilo, ihi = np.clip(i - 2, 0, n), np.clip(i + 3, 0, n)
+    m = (hi - lo) - (ihi - ilo)
+    local = np.sqrt(np.maximum(cs[hi] - cs[lo] - (cs[ihi] - cs[ilo]), 0.0) / np.maximum(m, 1))
+    scale = np.maximum(sigma, local)
+    if not np.any(scale > 0):
+        return np.zeros(n, bool)
+    big = a > k * scale
     if not big.any():
         return big
     # isolated: neither neighbour is big as well (oscillations are not spikes)
