@@ -72,7 +72,10 @@ def synth_modal(truth_model, theta: np.ndarray, sensor_ids: list[str], n_windows
                 rng: np.random.Generator, n_modes: int = 4, freq_noise=FREQ_NOISE,
                 shape_noise: float = SHAPE_NOISE) -> ModalObservations:
     """Tracked modal data of ``n_windows`` windows from ``truth_model`` at ``theta``."""
-    sol = truth_model.modes(np.asarray(theta, dtype=float), n_modes)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1, "blas"):
+        sol = truth_model.modes(np.asarray(theta, dtype=float), n_modes)
     S = truth_model.sensor_matrix(sensor_ids)
     phi = (S @ sol.shapes).T  # (modes, sensors)
     k = np.argmax(np.abs(phi), axis=1)

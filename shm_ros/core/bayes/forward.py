@@ -200,9 +200,87 @@ def build_predictor(model: AffineModel, sensor_ids: list[str], n_modes: int,
     out = {}
     for name, p in (("full", full), ("iirs", reduced)):
         p(trial[:2])
-        t0 = time.perf_counter()
-        out[name] = p(trial)
-        cost[name] = time.perf_counter() - t0
+        runs = []
+        for _ in range(3):  # best of three: the machine may be busy
+            t0 = time.perf_counter()
+            out[name] = p(trial)
+            runs.append(time.perf_counter() - t0)
+        cost[name] = min(runs)
     f_full, f_red = out["full"][0][:, :n_required], out["iirs"][0][:, :n_required]
     agree = bool(np.all(np.abs(f_red / f_full - 1.0) < 1e-6)) and reduced.last_converged
     return reduced if agree and cost["iirs"] < cost["full"] else full
+
+
+class RitzModalPredictor:
+    """Rayleigh-Ritz projection of the full model onto modes sampled around a reference theta.
+
+    The basis holds the lowest modes of the full model at ``theta_ref`` and at ``theta_ref +- step_i``
+    along every parameter (so it contains the modes and, to first order, their parameter
+    derivatives), made mass-orthonormal. The projected matrices stay affine in theta, so a batch
+    costs one stacked eigen-solution of a basis-sized matrix instead of a model-sized one. It is an
+    approximation valid near ``theta_ref``: :meth:`max_error` measures it against the full model,
+    and :func:`shm_ros.core.bayes.update.update` uses it for sampling only when that error is far
+    below the data's resolution (the evidence, which explores the whole prior, never uses it).
+    """
+
+    def __init__(self, model: AffineModel, sensor_ids: list[str], n_modes: int,
+                 theta_ref: np.ndarray, step: np.ndarray, extra_modes: int = 4):
+        self.model = model
+        self.sensor_ids = list(sensor_ids)
+        self.n_modes = int(min(n_modes, model.n_dof))
+        theta_ref = np.asarray(theta_ref, dtype=float)
+        pts = [theta_ref]
+        for i in range(theta_ref.size):
+            for sgn in (1.0, -1.0):
+                p = theta_ref.copy()
+                p[i] += sgn * step[i]
+                pts.append(p)
+        k = min(self.n_modes + extra_modes, model.n_dof)
+        V = np.hstack([model.modes(p, k).shapes for p in pts])
+        M_ref = model.mass(theta_ref)
+        G = V.T @ M_ref @ V
+        w, U = np.linalg.eigh(0.5 * (G + G.T))
+        keep = w > 1e-12 * w.max()
+        self.V = V @ (U[:, keep] / np.sqrt(w[keep]))
+        Kt, _ = _stack_terms(model.K_terms, model.n_dof)
+        Mt, m_acts = _stack_terms(model.M_terms, model.n_dof)
+        P = self.V
+        self._K0 = P.T @ model.K0 @ P
+        self._Kt = np.einsum("ni,dnm,mj->dij", P, Kt, P)
+        self._M0 = P.T @ model.M0 @ P
+        self._Mt = np.einsum("ni,dnm,mj->dij", P, Mt, P)
+        self.mass_varies = bool(m_acts.any())
+        self.S = observation_rows(model, self.sensor_ids) @ P
+        self.basis_size = int(P.shape[1])
+        if not self.mass_varies:
+            L = np.linalg.cholesky(0.5 * (self._M0 + self._M0.T))
+            Li = np.linalg.inv(L)
+            self._Li_T = Li.T
+            self._A0 = Li @ self._K0 @ Li.T
+            self._At = np.einsum("ij,djk,lk->dil", Li, self._Kt, Li)
+
+    def __call__(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        from shm_ros.core.models.base import generalized_modes_batch
+
+        theta = np.atleast_2d(np.asarray(theta, dtype=float))
+        m = self.n_modes
+        if not self.mass_varies:
+            A = self._A0[None] + np.tensordot(theta, self._At, axes=(1, 0))
+            w2, y = np.linalg.eigh(A)
+            return _frequencies(w2[:, :m]), self.S[None] @ (self._Li_T[None] @ y[:, :, :m])
+        K = self._K0[None] + np.tensordot(theta, self._Kt, axes=(1, 0))
+        M = self._M0[None] + np.tensordot(theta, self._Mt, axes=(1, 0))
+        sol = generalized_modes_batch(K, M, m)
+        return sol.frequencies_hz, self.S[None] @ sol.shapes
+
+    def max_error(self, reference: ModalPredictor, theta: np.ndarray, n_check: int) -> tuple[float, float]:
+        """Largest relative frequency error and MAC deficit of the first ``n_check`` modes."""
+        from .pairing import mac
+
+        f_r, p_r = self(theta)
+        f_f, p_f = reference(theta)
+        ferr = float(np.max(np.abs(f_r[:, :n_check] / f_f[:, :n_check] - 1.0)))
+        if p_r.shape[1] == 0:
+            return ferr, 0.0
+        macs = mac(np.swapaxes(p_r[:, :, :n_check], 1, 2), np.swapaxes(p_f[:, :, :n_check], 1, 2))
+        return ferr, float(np.max(1.0 - macs))

@@ -58,7 +58,7 @@ class ChainResult:
         return self.chains.reshape(-1, self.chains.shape[-1])
 
 
-def find_map(log_prob: LogProb, starts: np.ndarray, scale: np.ndarray, *, batch: int = 128,
+def find_map(log_prob: LogProb, starts: np.ndarray, scale: np.ndarray, *, batch: int = 96,
              rounds: int = 30, seed: int = 0) -> tuple[np.ndarray, float]:
     """Maximum of the log-posterior using batched evaluations only.
 
@@ -98,7 +98,7 @@ def find_map(log_prob: LogProb, starts: np.ndarray, scale: np.ndarray, *, batch:
             continue
         mean = el.mean(axis=0)
         cov = 0.7 * np.cov(el.T).reshape(best.size, best.size) + 0.3 * cov * 0.5
-        if np.all(np.sqrt(np.diag(cov)) < 1e-4 * scale):  # Newton takes over from here
+        if np.all(np.sqrt(np.diag(cov)) < 3e-3 * scale):  # near the mode: Newton takes over
             break
     return newton_refine(log_prob, best, best_lp, scale)
 
