@@ -99,8 +99,14 @@ class _BagFeeder:
 
     def run(self) -> None:
         try:
-            done = self._run_mcap_chunks()
-        except Exception:  # the fast path is an optimisation only: fall back to rosbags
+            done = self._run_mcap_chunks() or self._run_sqlite()
+        except _Damaged as exc:
+            self.flush_imu()
+            self.core.report_error(str(self.path), f"{self.path}: cannot read bag: {exc.__cause__} "
+                                   f"({self.n_messages} messages read before the damage were ingested)",
+                                   code="bag_damaged")
+            done = True
+        except Exception:  # the fast paths are an optimisation only: fall back to rosbags
             done = False
         if not done:
             self._run_rosbags()
@@ -165,7 +171,12 @@ class _BagFeeder:
                 f = Path(fname)
                 fh = handles[f]
                 fh.seek(ci.chunk_start_offset)
-                self._read_chunk(_chunk_records(fh.read(ci.chunk_length)), meta[f])
+                try:
+                    self._read_chunk(_chunk_records(fh.read(ci.chunk_length)), meta[f])
+                except Exception as exc:
+                    if self.n_messages:
+                        raise _Damaged() from exc
+                    raise
                 # chunks may overlap in time: release (in receive order) only what no later chunk
                 # can precede
                 nxt = plan[i + 1][0] if i + 1 < len(plan) else None
@@ -176,6 +187,65 @@ class _BagFeeder:
             for fh in handles.values():
                 fh.close()
         return True
+
+    def _run_sqlite(self) -> bool:
+        """sqlite3 bags read with the standard library in batches (fast path; rows in time order)."""
+        files = _bag_files(self.path, "sqlite3")
+        if not files:
+            return False
+        import sqlite3
+
+        conns = []
+        try:
+            for f in files:
+                con = sqlite3.connect(f"file:{f}?mode=ro", uri=True)
+                topics = {int(i): (str(n), str(t)) for i, n, t in con.execute("SELECT id, name, type FROM topics")}
+                conns.append((con, topics))
+        except sqlite3.Error:
+            for con, _ in conns:
+                con.close()
+            return False  # let rosbags open it and report
+        try:
+            for con, topics in conns:
+                try:
+                    cur = con.execute("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id")
+                    while True:
+                        rows = cur.fetchmany(8192)
+                        if not rows:
+                            break
+                        self._feed_rows(rows, topics)
+                except sqlite3.Error as exc:
+                    raise _Damaged() from exc
+        finally:
+            for con, _ in conns:
+                con.close()
+        return True
+
+    def _feed_rows(self, rows: list[tuple[int, int, bytes]], topics: dict[int, tuple[str, str]]) -> None:
+        imu: dict[str, list[bytes]] = {}
+        for tid, t_ns, data in rows:
+            self.n_messages += 1
+            topic, msgtype = topics.get(tid, ("", ""))
+            kind = self._kind(topic, msgtype)
+            if kind is None:
+                continue
+            if kind[0] == "imu":
+                lst = imu.get(kind[1])
+                if lst is None:
+                    lst = imu[kind[1]] = []
+                lst.append(data)
+            else:
+                for sid, datas in imu.items():
+                    self.imu_raw.setdefault(sid, []).extend(datas)
+                    self.n_imu += len(datas)
+                imu = {}
+                self.flush_imu()
+                self._feed_decoded(topic, msgtype, kind[0], kind[1], bytes(data))
+        for sid, datas in imu.items():
+            self.imu_raw.setdefault(sid, []).extend(datas)
+            self.n_imu += len(datas)
+        self.flush_imu()
+        self.core.advance(int(rows[-1][1]) - self.margin_ns)
 
     def _read_chunk(self, buf: bytes, chans: dict[int, tuple[str, str]]) -> None:
         mv = np.frombuffer(buf, dtype=np.uint8)
@@ -342,23 +412,32 @@ def _walk_records(buf: bytes, mv: np.ndarray) -> Iterator[tuple[int, np.ndarray,
             pos += size
 
 
-def _mcap_files(path: Path) -> list[Path]:
-    """The MCAP files of a bag directory whose messages are not compressed one by one."""
+class _Damaged(Exception):
+    """A fast-path reader met a damaged file after it had fed messages (``__cause__`` says why)."""
+
+
+def _bag_files(path: Path, storage: str) -> list[Path]:
+    """The files of a bag directory of ``storage`` whose messages are not compressed one by one
+    (those go through rosbags); [] when that is not what ``path`` is."""
     if not path.is_dir():
-        return [path] if path.suffix == ".mcap" else []
+        return [path] if storage == "mcap" and path.suffix == ".mcap" else []
     meta = path / "metadata.yaml"
     if not meta.exists():
         return []
     import yaml
 
     info = (yaml.safe_load(meta.read_text()) or {}).get("rosbag2_bagfile_information", {})
-    if info.get("storage_identifier") != "mcap" or info.get("compression_mode", "") not in ("", "none", None):
-        if info.get("compression_mode", "").lower() == "message":
-            return []
-    if info.get("storage_identifier") != "mcap":
+    if info.get("storage_identifier") != storage:
         return []
+    if str(info.get("compression_mode") or "").lower() not in ("", "none"):
+        if storage == "sqlite3" or str(info.get("compression_mode")).lower() == "message":
+            return []
     files = [path / p for p in info.get("relative_file_paths", [])]
     return files if files and all(f.exists() for f in files) else []
+
+
+def _mcap_files(path: Path) -> list[Path]:
+    return _bag_files(path, "mcap")
 
 
 def _chunk_records(record: bytes) -> bytes:
