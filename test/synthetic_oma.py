@@ -212,13 +212,16 @@ def earthquake_record(seed: int, duration: float = 40.0, fs: float = 100.0, nois
     ug = kanai_tajimi(rng, duration + 2.0, fs_fine, pga=rng.uniform(0.3, 2.0))
     n = ch.M.shape[0]
     force = -ug[:, None] * np.diag(ch.M)[None, :]
-    acc = _modal_response(ch, force, 1.0 / fs_fine, ch.floor_dofs, base_accel=ug)
+    # unmeasured ambient forcing (wind, occupants) on top of the measured base motion
+    amb = coloured_force(rng, ug.size, fs_fine, n, duration)
+    amb *= 0.1 * np.abs(force).std() / amb.std()
+    acc = _modal_response(ch, force + amb, 1.0 / fs_fine, ch.floor_dofs, base_accel=ug)
     n_out = int(round(duration * fs))
     acc = sig.resample_poly(acc, 1, oversample, axis=0)[:n_out]
     u = sig.resample_poly(ug, 1, oversample)[:n_out]
     acc = acc + rng.standard_normal(acc.shape) * noise * acc.std(axis=0)
     u = u + rng.standard_normal(u.shape) * noise * u.std()
-    del n
+    acc = acc + rng.normal(0, 0.02, 8)[None, :]  # sensor offsets
     return acc, u, fs, truth_modes(ch, np.arange(8), 3)
 
 
