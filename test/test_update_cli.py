@@ -1,0 +1,107 @@
+"""`shm-ros update` end to end (contracts section 6) and the bridge paper's study as a command."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from bayes_synth import building_dict, girder_dict, spec_and_model, synth_modal
+from shm_ros.cli import main
+from shm_ros.io.tables import write_tracked_modes
+
+FAST = ["--steps", "300", "--rhat", "1.05", "--ess", "300", "--n-live", "100"]
+
+
+@pytest.fixture(scope="module")
+def building_files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("b8")
+    spec_dict = building_dict()
+    (d / "structure.yaml").write_text(yaml.safe_dump(spec_dict))
+    spec, model = spec_and_model(spec_dict)
+    obs = synth_modal(model, np.array([0.93, 1.06, 0.97]), ["f2", "f4", "f6", "f8"], 50,
+                      np.random.default_rng(11))
+    write_tracked_modes(d / "modes.csv", obs)
+    return d
+
+
+def test_update_writes_contract_outputs(building_files, capsys):
+    out = building_files / "out"
+    code = main(["update", "--structure", str(building_files / "structure.yaml"), "--modes",
+                 str(building_files / "modes.csv"), "--out", str(out), "--seed", "3", *FAST])
+    assert code == 0
+    post = json.loads((out / "posterior.json").read_text())
+    assert post["schema_version"] and post["provenance"]["random_seed"] == 3
+    assert set(post["parameters"]) == {"k_low", "k_mid", "k_top"}
+    for name, truth in zip(("k_low", "k_mid", "k_top"), (0.93, 1.06, 0.97)):
+        p = post["parameters"][name]
+        assert {"map", "mean", "std", "ci95"} <= set(p)
+        assert p["ci95"][0] < p["mean"] < p["ci95"][1] and p["std"] > 0
+        assert abs(p["mean"] - truth) < 0.03
+    d = post["diagnostics"]
+    assert d["sampler"] == "emcee" and d["rhat_max"] < 1.05 and d["ess_min"] >= 300
+    assert 0 < d["acceptance"] < 1
+    assert post["fit"]["frequency_rmse_pct"] < 1.5 and post["fit"]["mac_mean"] > 0.99
+    assert post["fit_nominal"]["frequency_rmse_pct"] > post["fit"]["frequency_rmse_pct"]
+    assert np.isfinite(post["log_evidence"])
+    with np.load(out / "samples.npz") as z:
+        assert z["samples"].shape[1] == 3 and z["samples"].shape[0] == z["log_prob"].shape[0]
+    assert (out / "corner.png").stat().st_size > 1000 and (out / "trace.png").stat().st_size > 1000
+    assert "k_low" in capsys.readouterr().out
+
+
+def test_mh_and_fitness_options(building_files):
+    out = building_files / "out_mh"
+    code = main(["update", "--structure", str(building_files / "structure.yaml"), "--modes",
+                 str(building_files / "modes.csv"), "--out", str(out), "--sampler", "mh",
+                 "--likelihood", "fitness", "--no-evidence", "--no-plots", *FAST])
+    assert code == 0
+    post = json.loads((out / "posterior.json").read_text())
+    assert post["diagnostics"]["sampler"] == "mh" and post["log_evidence"] is None
+    assert 0.15 <= post["diagnostics"]["acceptance"] <= 0.4
+    assert post["diagnostics"]["likelihood"] == "fitness"
+
+
+def test_bad_inputs_give_clear_errors(building_files, tmp_path, capsys):
+    code = main(["update", "--structure", str(building_files / "structure.yaml"), "--modes",
+                 str(tmp_path / "missing.csv"), "--out", str(tmp_path / "o")])
+    assert code == 2 and "missing.csv" in capsys.readouterr().err
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,mode1_hz,mode1_shape_f3\n0,1.0,1.0\n")
+    code = main(["update", "--structure", str(building_files / "structure.yaml"), "--modes",
+                 str(bad), "--out", str(tmp_path / "o2")])
+    assert code == 2 and "'f3'" in capsys.readouterr().err
+    no_params = dict(building_dict(), parameters=[])
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(no_params))
+    code = main(["update", "--structure", str(tmp_path / "s.yaml"), "--modes",
+                 str(building_files / "modes.csv"), "--out", str(tmp_path / "o3")])
+    assert code == 2 and "parameters" in capsys.readouterr().err
+
+
+def test_bridge_study_table(tmp_path, capsys):
+    """Priors (normal/Weibull/lognormal) x fitness weights on a simulated girder."""
+    spec_dict = girder_dict(5)
+    (tmp_path / "girder.yaml").write_text(yaml.safe_dump(spec_dict))
+    spec, _ = spec_and_model(spec_dict)
+    _, truth_model = spec_and_model(girder_dict(20))
+    obs = synth_modal(truth_model, np.array([1.06, 0.88]), [s.id for s in spec.sensors], 50,
+                      np.random.default_rng(4))
+    write_tracked_modes(tmp_path / "modes.csv", obs)
+    code = main(["update", "--structure", str(tmp_path / "girder.yaml"), "--modes",
+                 str(tmp_path / "modes.csv"), "--out", str(tmp_path / "study"), "--study",
+                 "--sampler", "mh", "--steps", "400", "--rhat", "1.1", "--ess", "200"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "RMSE" in printed and "MAC" in printed and "weibull" in printed
+    study = json.loads((tmp_path / "study" / "study.json").read_text())
+    rows = {r["configuration"]: r for r in study["rows"]}
+    assert len(study["rows"]) == 7 and study["definitions"]["rmse"]
+    for label in ("normal", "weibull", "lognormal", "alpha=1, beta=0", "alpha=0.8, beta=0.2"):
+        assert max(rows[label]["rmse"]) < 0.02, (label, rows[label]["rmse"])
+    for r in study["rows"]:
+        if r["beta"] > 0:
+            assert min(r["mac"]) > 0.99
+    # shapes alone say little about the overall stiffness level: frequencies fit worse
+    assert np.mean(rows["alpha=0, beta=1"]["rmse"]) > np.mean(rows["alpha=1, beta=0"]["rmse"])
