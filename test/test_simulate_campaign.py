@@ -168,3 +168,23 @@ def test_earthquake_windows_carry_a_measured_base_input(tmp_path):
     assert np.max(np.abs(w.accel[:, g])) == pytest.approx(pga, rel=0.05)
     f8 = w.sensor_ids.index("f8")
     assert np.max(np.abs(w.accel[:, f8])) > pga  # the building amplifies the ground motion
+
+
+@pytest.mark.parametrize("fmt", ["block", "imu"])
+def test_ingest_cuts_exactly_one_window_per_burst(tmp_path, fmt):
+    """The project's own ingest reads the simulated bag: one window per burst, samples as recorded,
+    temperature = mean of the temperature samples inside the window (contracts section 1)."""
+    from shm_ros.io.recording import ingest_bag
+
+    sc = named_scenario("girder", n_windows=3, window_s=150.0, seed=4, output=fmt)
+    c = simulate_campaign(sc)
+    files = write_campaign(c, tmp_path)
+    res = ingest_bag(files.bag, files.structure, window_s=150.0)
+    truth = json.loads(files.truth.read_text())
+    assert len(res.windows) == 3
+    for win, t in zip(res.windows, truth["windows"]):
+        assert win.start_ns == t["start_ns"] and win.end_ns == t["end_ns"]
+        assert win.samples.shape == (15000, 9)
+        assert win.temperature_c == pytest.approx(t["temperature_measured_c"], abs=1e-3)
+    rec = c.window(1).recording
+    assert np.array_equal(res.windows[1].samples, rec.values[:, [rec.sensor_ids.index(s) for s in res.windows[1].channel_names]])

@@ -12,6 +12,7 @@ Random streams: ``SeedSequence(seed, spawn_key=(stream, window))`` with streams 
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -110,6 +111,12 @@ class Campaign:
 
     # -- one window ---------------------------------------------------------------------------
     def window(self, i: int, with_idle_axes: bool | None = None) -> SimulatedWindow:
+        """Window ``i``: the same numbers whoever calls it (BLAS runs on one thread here, since
+        a threaded BLAS may round matrix products differently)."""
+        with single_blas_thread():
+            return self._window(i, with_idle_axes)
+
+    def _window(self, i: int, with_idle_axes: bool | None) -> SimulatedWindow:
         sc = self.scenario
         if not 0 <= i < self.n_windows:
             raise IndexError(f"window {i} out of range (campaign has {self.n_windows})")
@@ -245,6 +252,15 @@ class Campaign:
             if tm.soil:
                 out["foundation"] = tm.soil
         return out
+
+
+def single_blas_thread() -> contextlib.AbstractContextManager:
+    """One BLAS thread (``threadpoolctl``) for reproducible products and fast small eigenproblems."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - pinned in requirements/base.txt
+        return contextlib.nullcontext()
+    return threadpool_limits(1)
 
 
 def traffic_profile(local_hour: float) -> float:
