@@ -60,16 +60,17 @@ def wind_loads(rng: np.random.Generator, n: int, fs: float, n_points: int, rms_n
 
 
 def traffic_loads(rng: np.random.Generator, n: int, fs: float, point_x: np.ndarray, length: float,
-                  vehicles_per_hour: float, mean_weight_n: float = 1.5e5,
+                  vehicles_per_hour: float, car_weight_n: float = 1.5e4, truck_weight_n: float = 2.5e5,
+                  truck_share: float = 0.15, axle_spacing_m: float = 4.5,
                   speed_m_s: tuple[float, float] = (12.0, 25.0),
                   support_x: np.ndarray | None = None,
                   projection: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """(n, n_points) dynamic forces of vehicles crossing the deck, and the number of vehicles.
 
-    Each vehicle is a point load W (1 + 0.1 b(t)) moving at constant speed, where b is unit band noise
-    in 1.5-4 Hz (axle hop and body bounce); only the dynamic part and the moving static weight's
-    change enter (the static weight itself sets the vehicle's share of load points). A vehicle can
-    enter before the window starts, so a window never begins on an empty deck by construction.
+    Each vehicle (a car, or with probability ``truck_share`` a truck; lognormal weights about the
+    given ones) is two axles ``axle_spacing_m`` apart, each carrying W/2 (1 + 0.1 b(t)) at constant
+    speed, where b is unit band noise in 1.5-4 Hz (axle hop and body bounce). A vehicle can enter
+    before the window starts, so a window never begins on an empty deck by construction.
     With ``projection`` (n_points, m) the result is ``F @ projection`` (n, m).
     """
     # load points plus the supports (a load over a support goes straight into it)
@@ -88,25 +89,28 @@ def traffic_loads(rng: np.random.Generator, n: int, fs: float, point_x: np.ndarr
     bounce_sos = butter(2, [1.5 / (fs / 2), min(4.0 / (fs / 2), 0.99)], btype="band", output="sos")
     for _ in range(n_veh):
         v = rng.uniform(*speed_m_s)
-        t0 = rng.uniform(-length / v, duration)
-        w = mean_weight_n * rng.lognormal(0.0, 0.5)
+        truck = rng.random() < truck_share
+        w = (truck_weight_n if truck else car_weight_n) * rng.lognormal(0.0, 0.3)
+        t0 = rng.uniform(-(length + axle_spacing_m) / v, duration)
         leftward = rng.random() < 0.5
-        k0, k1 = max(0, int(np.floor(t0 * fs))), min(n, int(np.ceil((t0 + length / v) * fs)) + 1)
+        k0 = max(0, int(np.floor(t0 * fs)))
+        k1 = min(n, int(np.ceil((t0 + (length + axle_spacing_m) / v) * fs)) + 1)
         if k1 <= k0:
             continue
         tt = t[k0:k1]
-        x = (tt - t0) * v
-        if leftward:
-            x = length - x
-        inside = (x >= 0) & (x <= length)
         bounce = sosfilt(bounce_sos, rng.standard_normal(tt.size + 64))[64:]
         bounce /= max(np.std(bounce), 1e-12)
-        p = w * (1.0 + 0.1 * bounce) * inside
-        # share between the two load points around x (linear interpolation weights)
-        j = np.clip(np.searchsorted(point_x, x) - 1, 0, point_x.size - 2)
-        xa, xb = point_x[j], point_x[j + 1]
-        a = np.clip((x - xa) / np.maximum(xb - xa, 1e-9), 0.0, 1.0)
-        F[k0:k1] += (p * (1 - a))[:, None] * G[j] + (p * a)[:, None] * G[j + 1]
+        for lag in (0.0, axle_spacing_m):
+            x = (tt - t0) * v - lag
+            if leftward:
+                x = length - x
+            inside = (x >= 0) & (x <= length)
+            p = 0.5 * w * (1.0 + 0.1 * bounce) * inside
+            # share between the two load points around x (linear interpolation weights)
+            j = np.clip(np.searchsorted(point_x, x) - 1, 0, point_x.size - 2)
+            xa, xb = point_x[j], point_x[j + 1]
+            a = np.clip((x - xa) / np.maximum(xb - xa, 1e-9), 0.0, 1.0)
+            F[k0:k1] += (p * (1 - a))[:, None] * G[j] + (p * a)[:, None] * G[j + 1]
     return F, n_veh
 
 
