@@ -103,14 +103,13 @@ def format_table(rows: list[StudyRow], mode_numbers: Sequence[int]) -> str:
         return f"{k}{'th' if 10 <= k % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(k % 10, 'th')}"
 
     heads = [ordinal(k) for k in mode_numbers]
-    w_set, w_cfg = 34, 22
+    w_set, w_cfg = 28, 22
     line1 = f"{'Hyperparameter set':<{w_set}}{'Configuration':<{w_cfg}}" + \
         f"{'RMSE':<{8 * len(heads)}}" + "MAC"
     line2 = " " * (w_set + w_cfg) + "".join(f"{h:>8}" for h in heads) * 2
     out = [line1, line2, "-" * len(line2)]
     for r in rows:
-        group = ("Distribution function (alpha=0.5, beta=0.5)" if r.group == "prior"
-                 else "Fitness weights (normal prior)")
+        group = "Prior (alpha=beta=0.5)" if r.group == "prior" else "Weights (normal prior)"
         cells = "".join(f"{v:8.3f}" for v in r.rmse) + "".join(
             f"{v:8.3f}" if v is not None else f"{'-':>8}" for v in r.mac)
         out.append(f"{group[:w_set - 1]:<{w_set}}{r.configuration[:w_cfg - 1]:<{w_cfg}}{cells}")
