@@ -151,7 +151,8 @@ def ambient_record(seed: int, duration: float = 600.0, fs: float = 40.0, noise: 
     rng = np.random.default_rng(seed)
     ch = tall_building(rng)
     n_floors = ch.floor_dofs.size
-    sensors = np.unique(np.round(np.linspace(2, n_floors - 1, n_sensors)).astype(int))
+    first = 2 if n_sensors <= n_floors - 2 else 0
+    sensors = np.unique(np.round(np.linspace(first, n_floors - 1, n_sensors)).astype(int))
     fs_fine = fs * oversample
     n_out = int(round(duration * fs))
     n_t = n_out * oversample + 400

@@ -307,9 +307,14 @@ def printed_eq13_estimate(o: np.ndarray, l: int, n: int) -> np.ndarray:
 
 
 def _modal(a: np.ndarray, c: np.ndarray, fs: float):
-    mu, psi = sla.eig(a, check_finite=False, overwrite_a=True)
-    keep = mu.imag > 1e-12
-    mu, psi = mu[keep], psi[:, keep]
+    # LAPACK dgeev directly: only the eigenvectors of the poles with positive imaginary part are
+    # assembled (first column of each conjugate pair = real part, second = imaginary part)
+    wr, wi, _, vr, info = sla.lapack.dgeev(a, compute_vl=0, compute_vr=1, overwrite_a=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgeev failed ({info})")
+    keep = np.flatnonzero(wi > 1e-12)
+    mu = wr[keep] + 1j * wi[keep]
+    psi = vr[:, keep] + 1j * vr[:, keep + 1]
     lam = np.log(mu) * fs
     w = np.abs(lam)
     freq = w / (2 * np.pi)

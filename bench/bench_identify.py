@@ -1,0 +1,223 @@
+"""Benchmark of ``identify``: SSI-cov and SSI-data against pyOMA2 (same run, same window).
+
+One 12-channel x 60,000-sample window (10 min at 100 Hz) of the test-side simulator
+(``test/synthetic_oma.py``: 36-DOF building, non-proportional damping, coloured non-stationary
+forcing, 2 % sensor noise, gravity offsets, drift), 40 block rows, model orders 1..100 step 1,
+uncertainty off. Timed: the whole call from raw window to modal estimate (ours: pre-processing,
+subspace step, poles of all orders with both estimates of A, stability, automatic picking;
+pyOMA2: ``SingleSetup.run_by_name`` = Hankel matrix, SVD, poles of all orders, stability labels,
+plus ``mpe`` with the TRUE frequencies given as the selection). Peak memory: tracemalloc peak of
+a separate, untimed run. Accuracy of modes 1-4 against the simulator's eigenvalues.
+
+Then the campaign: 1,152 such windows (8 distinct simulated windows, cycled) identified by two
+worker processes (BLAS on one thread each), SSI-cov and SSI-data.
+
+    python -m bench.bench_identify            # full run (several minutes)
+    python -m bench.bench_identify --quick    # smoke run: 2 min window, 24-window campaign
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+import time
+import tracemalloc
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "test"))
+
+import synthetic_oma as so  # noqa: E402
+
+from shm_ros.core.identify import IdentifyConfig, identify_window  # noqa: E402
+from shm_ros.core.types import Window  # noqa: E402
+
+RESULTS = ROOT / "bench" / "results"
+BLOCK_ROWS = 40
+MAX_ORDER = 100
+FS = 100.0
+N_CH = 12
+
+
+def _config(method: str) -> IdentifyConfig:
+    return IdentifyConfig(method=method, block_rows=BLOCK_ROWS, max_order=MAX_ORDER, min_order=1,
+                          order_step=1, uncertainty=False)
+
+
+def _window(seed: int, duration: float) -> tuple[Window, so.Truth]:
+    y, fs, truth, names = so.ambient_record(seed, duration=duration, fs=FS, noise=0.02,
+                                            n_sensors=N_CH)
+    return Window(f"bench{seed}", 0, fs, names, np.array(y)), truth
+
+
+def _ours(window: Window, method: str):
+    est = identify_window(window, _config(method))
+    f = np.array([m.frequency_hz for m in est.modes])
+    z = np.array([m.damping_ratio for m in est.modes])
+    phi = [m.mode_shape for m in est.modes]
+    return f, z, phi
+
+
+def _pyoma(window: Window, method: str, sel_freq: list[float]):
+    from pyoma2.algorithms import SSI
+    from pyoma2.setup import SingleSetup
+
+    data = window.samples - window.samples.mean(axis=0)  # pyOMA2 does not remove offsets
+    setup = SingleSetup(data, window.sample_rate_hz)
+    alg = SSI(name="alg", method="cov" if method == "ssi-cov" else "dat", br=BLOCK_ROWS,
+              ordmax=MAX_ORDER, step=1, calc_unc=False)
+    setup.add_algorithms(alg)
+    setup.run_by_name("alg")
+    setup.mpe("alg", sel_freq=sel_freq, order_in="find_min")
+    r = alg.result
+    phi = np.asarray(r.Phi)
+    return (np.asarray(r.Fn, float), np.asarray(r.Xi, float),
+            [real for real in (np.real(phi[:, k] * np.exp(-0.5j * np.angle(np.sum(phi[:, k] ** 2))))
+                               for k in range(phi.shape[1]))])
+
+
+def _accuracy(truth: so.Truth, f, z, phi) -> list[dict]:
+    rows = []
+    for k in range(4):
+        if f.size == 0:
+            rows.append({"found": False})
+            continue
+        j = int(np.argmin(np.abs(f - truth.frequency_hz[k])))
+        rel = abs(f[j] / truth.frequency_hz[k] - 1)
+        if rel > 0.05:
+            rows.append({"found": False})
+            continue
+        rows.append({"found": True, "f_err_pct": 100 * rel,
+                     "z_err_pct": 100 * abs(z[j] / truth.damping_ratio[k] - 1),
+                     "mac": so.mac_real(truth.shapes[k], np.asarray(phi[j], float))})
+    return rows
+
+
+def _timed(fn, *args, repeat: int = 1):
+    best = np.inf
+    out = None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn(*args)
+        best = min(best, time.perf_counter() - t0)
+    tracemalloc.start()
+    fn(*args)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return out, best, peak / 2 ** 20
+
+
+# ---------------------------------------------------------------------------- campaign workers
+_WINDOWS: list[Window] = []
+
+
+def _init(windows: list[Window]) -> None:
+    global _WINDOWS
+    _WINDOWS = windows
+
+
+def _work(args: tuple[int, str]) -> tuple[int, float]:
+    k, method = args
+    t0 = time.process_time()
+    est = identify_window(_WINDOWS[k % len(_WINDOWS)], _config(method))
+    return len(est.modes), time.process_time() - t0
+
+
+def campaign(windows: list[Window], n: int, method: str, workers: int = 2) -> dict:
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(workers, initializer=_init, initargs=(windows,)) as pool:
+        out = list(pool.map(_work, [(k, method) for k in range(n)], chunksize=8))
+    wall = time.perf_counter() - t0
+    cpu = float(sum(c for _, c in out))
+    return {"method": method, "windows": n, "workers": workers, "wall_s": wall,
+            "per_window_s": wall / n, "mean_modes": float(np.mean([m for m, _ in out])),
+            "cpu_s": cpu, "extrapolated_1152_s": wall / n * 1152,
+            "dedicated_2core_1152_s": cpu / n * 1152 / workers}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="short window and small campaign")
+    ap.add_argument("--campaign", type=int, default=None, help="campaign size (default 1152)")
+    ap.add_argument("--seed", type=int, default=2024)
+    args = ap.parse_args(argv)
+    logging.disable(logging.WARNING)  # pyOMA2 logs every step at INFO
+    duration = 120.0 if args.quick else 600.0
+    n_campaign = args.campaign or (24 if args.quick else 1152)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+
+    window, truth = _window(args.seed, duration)
+    sel = list(truth.frequency_hz[:4])
+    rows = []
+    for method in ("ssi-cov", "ssi-data"):
+        (f, z, phi), t, mem = _timed(_ours, window, method, repeat=3)
+        rows.append({"tool": "shm_ros", "method": method, "time_s": t, "peak_mib": mem,
+                     "modes_reported": int(f.size), "accuracy": _accuracy(truth, f, z, phi)})
+        print(f"shm_ros {method}: {t:.3f} s, {mem:.0f} MiB", flush=True)
+        (f, z, phi), t, mem = _timed(_pyoma, window, method, sel)
+        rows.append({"tool": "pyOMA2 1.4.3", "method": method, "time_s": t, "peak_mib": mem,
+                     "modes_reported": int(f.size), "accuracy": _accuracy(truth, f, z, phi)})
+        print(f"pyOMA2 {method}: {t:.3f} s, {mem:.0f} MiB", flush=True)
+
+    camp_windows = [window] + [_window(args.seed + k, duration)[0] for k in range(1, 8)]
+    camps = []
+    for method in ("ssi-cov", "ssi-data"):
+        c = campaign(camp_windows, n_campaign, method)
+        camps.append(c)
+        print(f"campaign {method}: {c['windows']} windows in {c['wall_s']:.1f} s", flush=True)
+
+    load = os.getloadavg()[0]
+    result = {"window": {"channels": N_CH, "samples": window.n_samples, "fs_hz": FS,
+                         "block_rows": BLOCK_ROWS, "max_order": MAX_ORDER},
+              "truth_hz": list(map(float, truth.frequency_hz[:4])),
+              "truth_damping": list(map(float, truth.damping_ratio[:4])),
+              "runs": rows, "campaign": camps, "load_average": load,
+              "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
+    (RESULTS / "bench_identify.json").write_text(json.dumps(result, indent=2))
+    md = _markdown(result)
+    (RESULTS / "bench_identify.md").write_text(md)
+    print(md)
+    return 0
+
+
+def _markdown(r: dict) -> str:
+    lines = ["| tool | method | time (s) | speed-up | peak traced memory (MiB) | "
+             "freq. error % modes 1-4 | damping error % modes 1-4 | MAC modes 1-4 |",
+             "|---|---|---|---|---|---|---|---|"]
+    by = {(x["tool"], x["method"]): x for x in r["runs"]}
+    for x in r["runs"]:
+        ref = by[("pyOMA2 1.4.3", x["method"])]["time_s"]
+        acc = x["accuracy"]
+
+        def col(key, fmt):
+            return " / ".join(fmt.format(a[key]) if a.get("found") else "miss" for a in acc)
+
+        lines.append(f"| {x['tool']} | {x['method']} | {x['time_s']:.3f} | "
+                     f"{ref / x['time_s']:.1f}x | {x['peak_mib']:.0f} | {col('f_err_pct', '{:.2f}')} | "
+                     f"{col('z_err_pct', '{:.1f}')} | {col('mac', '{:.3f}')} |")
+    lines.append("")
+    lines.append("| campaign | windows | workers | wall (s) | wall per window (s) | CPU per window (s) "
+                 "| 1,152 windows, this machine (s) | 1,152 windows, CPU-s / 2 cores (s) |")
+    lines.append("|---|---|---|---|---|---|---|---|")
+    for c in r["campaign"]:
+        lines.append(f"| {c['method']} | {c['windows']} | {c['workers']} | {c['wall_s']:.1f} | "
+                     f"{c['per_window_s']:.3f} | {c['cpu_s'] / c['windows']:.3f} | "
+                     f"{c['extrapolated_1152_s']:.0f} | {c['dedicated_2core_1152_s']:.0f} |")
+    lines.append("")
+    lines.append(f"Truth modes 1-4: {', '.join(f'{f:.3f}' for f in r['truth_hz'])} Hz; "
+                 f"load average at the end {r['load_average']:.1f}.")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
