@@ -262,7 +262,7 @@ class _BagFeeder:
         cids = _gather(mv, P, 2).view("<u2")[:, 0].astype(np.int64)
         logs = _gather(mv, P + 6, 8).view("<u8")[:, 0].astype(np.int64)
         starts = P + 22
-        for cid in np.unique(cids).tolist():
+        for cid in np.flatnonzero(np.bincount(cids)).tolist():
             sel = np.flatnonzero(cids == cid)
             topic, msgtype = chans.get(cid, ("", ""))
             kind = self._kind(topic, msgtype)
@@ -272,23 +272,14 @@ class _BagFeeder:
             what, sid = kind
             st, ln, lg = starts[sel], L[sel], logs[sel]
             if what == "imu":
-                stamps = np.empty(st.size, np.int64)
-                xyz = np.empty((st.size, 3), np.float64)
-                slow = np.ones(st.size, bool)
-                for length in np.unique(ln).tolist():
-                    if length < IMU_MIN_LEN:
-                        continue
-                    same = np.flatnonzero(ln == length)
-                    ok = _imu_rows(_gather(mv, st[same], length), stamps, xyz, same)
-                    slow[same[ok]] = False
-                good = np.ones(st.size, bool)
-                for i in np.flatnonzero(slow).tolist():
+                stamps, xyz, ok = _imu_decode(mv, st, ln)
+                for i in np.flatnonzero(~ok).tolist():
                     try:
                         stamps[i], xyz[i] = _imu_slow(buf[st[i]:st[i] + ln[i]], i)
+                        ok[i] = True
                     except ValueError as exc:
                         self.core.report_error(f"{self.path}:{topic}", f"cannot decode Imu: {exc}")
-                        good[i] = False
-                self.held_imu.setdefault(sid, []).append((lg[good], stamps[good], xyz[good]))
+                self.held_imu.setdefault(sid, []).append((lg[ok], stamps[ok], xyz[ok]))
             else:
                 for a, b, t in zip(st.tolist(), ln.tolist(), lg.tolist()):
                     self.held_other.append((t, len(self.held_other), topic, msgtype, what, sid,
@@ -482,22 +473,11 @@ def decode_imu_batch(datas: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
     more than everything else of the offline path together. Little-endian CDR only; anything else
     (or a size that does not fit) goes through the rosbags deserialiser, message by message.
     """
-    n = len(datas)
-    stamps = np.empty(n, np.int64)
-    xyz = np.empty((n, 3), np.float64)
-    by_len: dict[int, list[int]] = {}
-    for i, d in enumerate(datas):
-        by_len.setdefault(len(d), []).append(i)
-    slow: list[int] = []
-    for length, idx in by_len.items():
-        ii = np.asarray(idx)
-        if length < IMU_MIN_LEN:
-            slow.extend(idx)
-            continue
-        rows = np.frombuffer(b"".join(datas[i] for i in idx), dtype=np.uint8).reshape(len(idx), length)
-        ok = _imu_rows(rows, stamps, xyz, ii)
-        slow.extend(ii[~ok].tolist())
-    for i in slow:
+    lengths = np.fromiter((len(d) for d in datas), np.int64, len(datas))
+    starts = np.concatenate(([0], np.cumsum(lengths)[:-1])).astype(np.int64)
+    mv = np.frombuffer(b"".join(datas), dtype=np.uint8)
+    stamps, xyz, ok = _imu_decode(mv, starts, lengths)
+    for i in np.flatnonzero(~ok).tolist():
         stamps[i], xyz[i] = _imu_slow(datas[i], i)
     return stamps, xyz
 
@@ -505,24 +485,29 @@ def decode_imu_batch(datas: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
 IMU_MIN_LEN = 16 + 200 + 24 + 72
 
 
-def _imu_rows(rows: np.ndarray, stamps: np.ndarray, xyz: np.ndarray, into: np.ndarray) -> np.ndarray:
-    """Decode equal-length Imu CDR messages (``rows`` (m, length) uint8) into ``stamps``/``xyz``
-    at positions ``into``; returns which rows could be decoded this way."""
-    length = rows.shape[1]
-    le = (rows[:, 0] == 0) & (rows[:, 1] == 1)  # CDR little endian
-    head = np.ascontiguousarray(rows[:, 4:16]).view("<u4")  # sec, nanosec, frame_id length (+NUL)
-    sec = head[:, 0].astype(np.int32).astype(np.int64)
-    nsec = head[:, 1].astype(np.int64)
-    pos = 16 + head[:, 2].astype(np.int64)
+def _imu_decode(mv: np.ndarray, starts: np.ndarray, lengths: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stamps and linear acceleration of the Imu CDR messages at ``mv[starts:starts+lengths]``;
+    ``ok`` is False where the fast layout does not apply (those entries are left undefined)."""
+    n = starts.size
+    stamps = np.zeros(n, np.int64)
+    xyz = np.zeros((n, 3), np.float64)
+    ok = lengths >= IMU_MIN_LEN
+    if not ok.any():
+        return stamps, xyz, ok
+    r = np.flatnonzero(ok)
+    head = _gather(mv, starts[r], 16)
+    le = (head[:, 0] == 0) & (head[:, 1] == 1)  # CDR little endian
+    words = head[:, 4:16].copy().view("<u4")  # sec, nanosec, frame_id length (with its NUL)
+    pos = 16 + words[:, 2].astype(np.int64)
     aligned = 4 + ((pos - 4 + 7) // 8) * 8  # 8-byte alignment counted after the 4-byte header
     off = aligned + 200  # orientation (32) + its covariance (72) + gyro (24) + its covariance (72)
-    ok = le & (off + 24 + 72 == length)
-    r = np.flatnonzero(ok)
-    if r.size:
-        acc = np.take_along_axis(rows[r], off[r, None] + np.arange(24), axis=1)
-        stamps[into[r]] = sec[r] * 1_000_000_000 + nsec[r]
-        xyz[into[r]] = np.ascontiguousarray(acc).view("<f8")
-    return ok
+    good = le & (off + 24 + 72 == lengths[r])
+    ok[r[~good]] = False
+    r, off = r[good], off[good]
+    stamps[r] = words[good, 0].astype(np.int32).astype(np.int64) * 1_000_000_000 + words[good, 1]
+    xyz[r] = _gather(mv, starts[r] + off, 24).view("<f8")
+    return stamps, xyz, ok
 
 
 def _imu_slow(data: bytes, i: int) -> tuple[int, tuple[float, float, float]]:
