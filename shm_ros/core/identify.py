@@ -8,7 +8,7 @@ automatic clustering -> real mode shapes labelled by sensor id (contracts sectio
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 import scipy.linalg as sla
@@ -40,6 +40,7 @@ class IdentifyConfig:
     stability: StabilityConfig = field(default_factory=StabilityConfig)
     picking: PickingConfig = field(default_factory=PickingConfig)
     use_filters: bool = True  # two-A + MPC filters (False = plain stabilization diagram)
+    exclude_input: bool = True  # output-only methods leave the window's input channel out
     uncertainty: bool = True  # jackknife over data blocks (SSI-cov)
     uncertainty_blocks: int = 10
 
@@ -87,7 +88,11 @@ def identify_window_detailed(window: Window, config: IdentifyConfig | None = Non
     cfg = config or IdentifyConfig()
     if cfg.method not in METHODS:
         raise ValueError(f"identify.method must be one of {METHODS}, got {cfg.method!r}")
-    prep = preprocess(window.samples, window.sample_rate_hz, window.channel_names, cfg.preprocess,
+    pcfg = cfg.preprocess
+    if (cfg.method != "ssi-io" and cfg.exclude_input and pcfg.channels is None
+            and window.input_channel in window.channel_names):
+        pcfg = replace(pcfg, channels=[c for c in window.channel_names if c != window.input_channel])
+    prep = preprocess(window.samples, window.sample_rate_hz, window.channel_names, pcfg,
                       window.channel_status)
     notes = list(prep.notes)
     inp = None

@@ -1,0 +1,55 @@
+"""Stabilization diagram plot: poles per model order, by how far they got through the filters,
+the picked modes, and the mean spectrum of the outputs behind them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from shm_ros.core.stabilization import Diagram  # noqa: E402
+
+__all__ = ["plot_stabilization"]
+
+
+def plot_stabilization(diagram: Diagram, path: str | Path, title: str = "",
+                       freq_max_hz: float | None = None) -> Path:
+    """Write the diagram of one window to ``path`` (PNG/SVG/PDF by suffix); returns the path."""
+    p, fl = diagram.poles, diagram.flags
+    fig, ax = plt.subplots(figsize=(9, 5.5), dpi=110)
+    groups = [
+        ("all poles", np.ones(len(p), bool), dict(marker=".", s=6, c="0.75")),
+        ("stable in frequency", fl.stable_freq & ~fl.stable, dict(marker="x", s=14, c="tab:orange")),
+        ("stable (f, damping, MAC)", fl.stable & ~fl.candidates(True),
+         dict(marker="o", s=14, facecolors="none", edgecolors="tab:blue")),
+        ("stable + two-A + MPC + physical", fl.candidates(True),
+         dict(marker="o", s=16, c="tab:green")),
+    ]
+    for label, mask, style in groups:
+        if np.any(mask):
+            ax.scatter(p.frequency_hz[mask], p.order[mask], label=label, **style)
+    for m in diagram.picked:
+        ax.axvline(m.frequency_hz, color="tab:red", lw=0.8, alpha=0.7)
+        ax.text(m.frequency_hz, ax.get_ylim()[1] if len(p) else 1, f"{m.frequency_hz:.3g}",
+                rotation=90, va="top", ha="right", fontsize=7, color="tab:red")
+    if diagram.spectrum_hz is not None and diagram.spectrum is not None and len(p):
+        ax2 = ax.twinx()
+        spec = np.asarray(diagram.spectrum)
+        ax2.semilogy(diagram.spectrum_hz, np.maximum(spec, spec.max() * 1e-12), color="0.4", lw=0.8)
+        ax2.set_ylabel("mean PSD of the outputs")
+    fmax = freq_max_hz or (float(np.max(p.frequency_hz)) if len(p) else 1.0)
+    ax.set_xlim(0, fmax)
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("model order")
+    ax.set_title(title or "stabilization diagram")
+    ax.legend(loc="lower right", fontsize=7, framealpha=0.9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
