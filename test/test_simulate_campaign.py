@@ -80,6 +80,16 @@ def test_accel_block_bag_follows_the_contract(tmp_path):
         assert w["start_ns"] == start
         assert len(w["frequencies_hz"]) == 6 and set(w["mode_shapes"]) == set(spec.sensor_ids)
     assert spec.name == sc.structure["name"] and spec.girder.elements_per_span == 10
+    for w in truth["windows"]:  # real shapes scaled to a largest component of +1 (contracts section 3)
+        shapes = np.array([w["mode_shapes"][s] for s in spec.sensor_ids])
+        assert np.allclose(np.max(shapes, axis=0), 1.0) and np.all(np.max(np.abs(shapes), axis=0) <= 1.0)
+    import csv
+
+    rows = list(csv.DictReader(files.truth_table.open()))
+    assert len(rows) == 3 and rows[0]["time"] == truth["windows"][0]["start"]
+    assert float(rows[2]["mode3_hz"]) == pytest.approx(truth["windows"][2]["frequencies_hz"][2], rel=1e-7)
+    assert float(rows[1]["mode1_shape_s5"]) == pytest.approx(truth["windows"][1]["mode_shapes"]["s5"][0], abs=1e-6)
+    assert float(rows[0]["temperature_c"]) == pytest.approx(truth["windows"][0]["temperature_measured_c"], abs=1e-4)
 
 
 def test_imu_bag_in_sqlite3_with_faults(tmp_path):
@@ -188,3 +198,15 @@ def test_ingest_cuts_exactly_one_window_per_burst(tmp_path, fmt):
         assert win.temperature_c == pytest.approx(t["temperature_measured_c"], abs=1e-3)
     rec = c.window(1).recording
     assert np.array_equal(res.windows[1].samples, rec.values[:, [rec.sensor_ids.index(s) for s in res.windows[1].channel_names]])
+
+
+def test_truth_table_reads_as_a_tracked_modes_table(tmp_path):
+    from shm_ros.io.tables import read_tracked_modes
+
+    c = simulate_campaign(named_scenario("building", n_windows=2, window_s=90.0, seed=2))
+    files = write_campaign(c, tmp_path)
+    obs = read_tracked_modes(files.truth_table)
+    truth = json.loads(files.truth.read_text())
+    assert obs.frequencies_hz.shape == (2, 6)
+    assert np.allclose(obs.frequencies_hz, [w["frequencies_hz"] for w in truth["windows"]], rtol=1e-7)
+    assert obs.sensor_ids == c.sensor_ids

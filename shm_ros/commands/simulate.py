@@ -1,8 +1,8 @@
 """`shm-ros simulate SCENARIO --out DIR`: a recording whose truth is known.
 
 Writes ``DIR/bag`` (contract bag: AccelBlock or per-sample Imu, temperature), ``DIR/structure.yaml``
-(the NOMINAL structure file) and ``DIR/truth.json`` (true modal properties per window, hidden effects,
-faults, seed). Scenarios: girder, building, building-earthquake, or a YAML file (--scenario-file).
+(the NOMINAL structure file), ``DIR/truth.json`` (true modal properties per window, hidden effects,
+faults, seed) and ``DIR/truth_modes.csv`` (the true modes as a tracked-modes table). Scenarios: girder, building, building-earthquake, or a YAML file (--scenario-file).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", default=None,
                    help="girder | building | building-earthquake (default: girder, or the scenario file's)")
-    p.add_argument("--out", required=True, help="output directory (bag/, structure.yaml, truth.json)")
+    p.add_argument("--out", required=True, help="output directory (bag/, structure.yaml, truth.json, truth_modes.csv)")
     p.add_argument("--scenario-file", help="YAML scenario: {scenario: NAME, <option>: value, effects: [...], faults: [...]}")
     p.add_argument("--windows", type=int, help="number of windows (bursts)")
     p.add_argument("--duration", type=float,

@@ -1,4 +1,5 @@
-"""Write a simulated campaign: the bag, the NOMINAL structure file and ``truth.json``.
+"""Write a simulated campaign: the bag, the NOMINAL structure file, ``truth.json`` and the true
+modes as a tracked-modes table ``truth_modes.csv`` (contracts section 4).
 
 ``write_campaign(campaign, out_dir)`` streams windows into ``OUT/bag`` (rosbag2, MCAP by default with
 zstd chunk compression, or sqlite3), writes ``OUT/structure.yaml`` (the nominal structure file, which
@@ -33,6 +34,7 @@ class CampaignFiles:
     bag: Path
     structure: Path
     truth: Path
+    truth_table: Path
     n_windows: int
     bag_bytes: int
     seconds: float
@@ -121,9 +123,43 @@ def write_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     payload = {**campaign.truth_header(), "topics": _topics(campaign, prefix), "windows": entries}
     config = {"scenario": sc.to_dict(), **(command_config or {})}
     truth.write_text(json.dumps(stamp_output(payload, config=config, seed=sc.seed), indent=1, default=_json_default))
+    table = out / "truth_modes.csv"
+    write_truth_table(entries, campaign.sensor_ids, table)
     size = sum(p.stat().st_size for p in bag.rglob("*") if p.is_file())
-    return CampaignFiles(bag=bag, structure=structure, truth=truth, n_windows=campaign.n_windows, bag_bytes=size,
-                         seconds=time.perf_counter() - t0)
+    return CampaignFiles(bag=bag, structure=structure, truth=truth, truth_table=table, n_windows=campaign.n_windows,
+                         bag_bytes=size, seconds=time.perf_counter() - t0)
+
+
+def write_truth_table(entries: list[dict], sensor_ids: list[str], path: str | Path) -> Path:
+    """The true modes as a tracked-modes table (contracts section 4): one row per window, ``time``
+    (window start, ISO 8601), ``mode<k>_hz``, ``mode<k>_damping``, ``mode<k>_shape_<sensor>``, and
+    covariates ``temperature_c`` (the recorded mean, as ``ingest`` computes it), ``temperature_true_c``,
+    ``rms_accel`` (mean over sensors, m/s^2) and ``pga`` (m/s^2, earthquakes; 0 otherwise)."""
+    import csv
+
+    n_modes = max((len(e["frequencies_hz"]) for e in entries), default=0)
+    header = ["time"]
+    for k in range(1, n_modes + 1):
+        header += [f"mode{k}_hz", f"mode{k}_damping"] + [f"mode{k}_shape_{s}" for s in sensor_ids]
+    header += ["temperature_c", "temperature_true_c", "rms_accel", "pga"]
+    path = Path(path)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        for e in entries:
+            row: list = [e["start"]]
+            for k in range(n_modes):
+                if k < len(e["frequencies_hz"]):
+                    row += [f"{e['frequencies_hz'][k]:.8g}", f"{e['damping_ratios'][k]:.6g}"]
+                    row += [f"{e['mode_shapes'][s][k]:.6g}" for s in sensor_ids]
+                else:
+                    row += [""] * (2 + len(sensor_ids))
+            t = e.get("temperature_measured_c")
+            rms = np.mean(list(e["rms_accel_m_s2"].values()))
+            pga = (e.get("event") or {}).get("pga_m_s2", 0.0)
+            row += ["" if t is None else f"{t:.4f}", f"{e['temperature_c']:.4f}", f"{rms:.6g}", f"{pga:.6g}"]
+            w.writerow(row)
+    return path
 
 
 def _topics(campaign: Campaign, prefix: str) -> dict:
