@@ -105,3 +105,38 @@ def test_bridge_study_table(tmp_path, capsys):
             assert min(r["mac"]) > 0.99
     # shapes alone say little about the overall stiffness level: frequencies fit worse
     assert np.mean(rows["alpha=0, beta=1"]["rmse"]) > np.mean(rows["alpha=1, beta=0"]["rmse"])
+
+
+@pytest.fixture(scope="module")
+def simulated_bags(tmp_path_factory):
+    d = tmp_path_factory.mktemp("bags")
+    assert main(["simulate", "building", "--out", str(d / "ambient"), "--windows", "3",
+                 "--window-s", "120", "--quiet", "--seed", "2"]) == 0
+    assert main(["simulate", "building-earthquake", "--out", str(d / "quake"), "--windows", "1",
+                 "--window-s", "40", "--quiet", "--seed", "2"]) == 0
+    return d
+
+
+@pytest.mark.parametrize("likelihood", ["gaussian", "time"])
+def test_update_from_bag(simulated_bags, likelihood):
+    """--bag: ingest -> identify -> modes paired with the model by MAC (or the input/output record)."""
+    src = simulated_bags / ("ambient" if likelihood == "gaussian" else "quake")
+    out = src / f"upd_{likelihood}"
+    code = main(["update", "--structure", str(src / "structure.yaml"), "--bag", str(src / "bag"),
+                 "--out", str(out), "--likelihood", likelihood, "--window",
+                 "120" if likelihood == "gaussian" else "40", "--no-evidence", "--no-plots", *FAST])
+    assert code == 0
+    post = json.loads((out / "posterior.json").read_text())
+    truth = json.loads((src / "truth.json").read_text())
+    assert post["diagnostics"]["likelihood"] == likelihood
+    # the simulator's truth is a scattered, finer model: every tracked mode of the calibrated
+    # nominal model should come within a few percent of a true frequency
+    f_true = np.array(truth["windows"][0]["frequencies_hz"])
+    if likelihood == "gaussian":
+        modes = post["fit"]["modes"]
+        assert len(modes) >= 2
+        for m in modes:
+            assert np.min(np.abs(m["frequency_model_hz"] / f_true - 1)) < 0.03, modes
+            assert abs(m["frequency_model_hz"] / m["frequency_obs_hz"] - 1) < 0.03, modes
+    else:
+        assert post["fit"]["nrms_mean"] < 0.3

@@ -78,14 +78,63 @@ def _observations(args: argparse.Namespace, spec: Any, model: Any):
 
 
 def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
-    """Observations from a bag: the identify/track stages' cores, or the input/output record."""
-    try:
-        from shm_ros.core.bayes import bagdata
-    except ImportError as exc:  # pragma: no cover - depends on the build
-        raise ValueError(f"--bag needs the ingest/identify/track stages ({exc})") from exc
+    """Observations from a bag: windows (ingest) -> modes per window (identify) -> modes paired
+    with the nominal model's modes by MAC; or, for ``--likelihood time``, the window with the
+    strongest input as an input/output acceleration record."""
+    from shm_ros.io.recording import windows_from_bag
+
+    windows, _ = windows_from_bag(args.bag, spec, args.window or 600.0)
+    if not windows:
+        raise ValueError(f"{args.bag}: no usable window in the recording")
+    observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
     if args.likelihood == "time":
-        return bagdata.acceleration_record(args.bag, spec, model, window_s=args.window)
-    return bagdata.tracked_modes(args.bag, spec, window_s=args.window)
+        return _acceleration_record(args, spec, windows, observed)
+    from shm_ros.core.bayes.pairing import observations_from_estimates
+    from shm_ros.core.identify import identify_window
+
+    estimates = []
+    for w in windows:
+        try:
+            estimates.append(identify_window(w))
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            print(f"shm-ros update: note: window {w.window_id}: not identified ({exc})", file=sys.stderr)
+    sensors = [s for s in observed if any(s in e.sensor_ids for e in estimates)]
+    if not sensors:
+        raise ValueError(f"{args.bag}: no identified window covers a sensor of the model")
+    sol = model.modes(None, min(8, model.n_dof))
+    phi = model.sensor_matrix(sensors) @ sol.shapes
+    return observations_from_estimates(estimates, sol.frequencies_hz, phi.T, sensors)
+
+
+def _acceleration_record(args, spec, windows, observed):
+    from scipy.signal import detrend
+
+    from shm_ros.core.bayes.timedomain import AccelerationRecord
+
+    inp = spec.input_sensor
+    if inp is None:
+        raise ValueError(f"{args.structure}: --likelihood time needs the structure's 'input' sensor")
+    usable = [w for w in windows if inp in w.channel_names]
+    if not usable:
+        raise ValueError(f"{args.bag}: no window carries the input sensor {inp!r}")
+
+    def strength(w):
+        x = w.samples[:, w.channel_names.index(inp)]
+        return float(np.nanmax(np.abs(x - np.nanmean(x))))
+
+    w = max(usable, key=strength)
+    outs = [s for s in observed if s in w.channel_names]
+    cols = [w.channel_names.index(s) for s in [inp, *outs]]
+    data = w.samples[:, cols]
+    good = np.all(np.isfinite(data), axis=1)
+    if not good.all():  # keep the longest clean stretch: nothing is interpolated
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], good.astype(int), [0]])))
+        runs = edges.reshape(-1, 2)
+        a, b = runs[np.argmax(runs[:, 1] - runs[:, 0])]
+        data = data[a:b]
+    data = detrend(data, axis=0, type="linear")  # gravity offset and drift
+    return AccelerationRecord(1.0 / w.sample_rate_hz, data[:, 0], data[:, 1:], outs,
+                              notes=[f"window {w.window_id} (strongest input) used"])
 
 
 def run(args: argparse.Namespace) -> int:

@@ -75,3 +75,55 @@ def pair_modes_optimal(f_obs: np.ndarray, phi_obs: np.ndarray | None,
     out = np.zeros(len(f_obs), dtype=int)
     out[r] = c
     return out
+
+
+def observations_from_estimates(estimates, f_ref: np.ndarray, phi_ref: np.ndarray, sensor_ids: list[str],
+                                mac_min: float = 0.8, max_rel_shift: float = 0.3,
+                                min_fraction: float = 0.5):
+    """Per-window identified modes -> :class:`ModalObservations` numbered after reference modes.
+
+    Used when updating starts from a recording without a tracked table: each window's modes are
+    paired with the reference (nominal model) modes ``f_ref`` (m,), ``phi_ref`` (m, s) at
+    ``sensor_ids`` by the same MAC-plus-frequency score as the likelihood (optimal assignment); a
+    pair counts when MAC >= ``mac_min`` and the frequency is within ``max_rel_shift`` of the
+    reference. Reference modes found in fewer than ``min_fraction`` of the windows are dropped;
+    the rest are numbered 1, 2, ... by ascending reference frequency.
+    """
+    from .observations import ModalObservations
+
+    n_w, m, s = len(estimates), len(f_ref), len(sensor_ids)
+    F = np.full((n_w, m), np.nan)
+    P = np.full((n_w, m, s), np.nan)
+    D = np.full((n_w, m), np.nan)
+    times, temps = np.zeros(n_w), np.full(n_w, np.nan)
+    for w, e in enumerate(estimates):
+        times[w] = e.start_ns * 1e-9
+        if e.temperature_c is not None:
+            temps[w] = e.temperature_c
+        if not e.modes:
+            continue
+        cols = [e.sensor_ids.index(sid) if sid in e.sensor_ids else -1 for sid in sensor_ids]
+        fw = np.array([md.frequency_hz for md in e.modes])
+        pw = np.array([[md.mode_shape[c] if c >= 0 else np.nan for c in cols] for md in e.modes])
+        ok = ~np.isnan(pw)
+        pw0 = np.where(ok, pw, 0.0)
+        score = pairing_scores(fw, pw0, f_ref[None], phi_ref.T[None])[0]  # (n_window_modes, m)
+        from scipy.optimize import linear_sum_assignment
+
+        r, c = linear_sum_assignment(-np.where(np.isfinite(score), score, -1e6))
+        for i, k in zip(r, c):
+            macv = float(mac(pw0[i], phi_ref[k]))
+            if macv >= mac_min and abs(fw[i] / f_ref[k] - 1.0) <= max_rel_shift:
+                F[w, k] = fw[i]
+                P[w, k] = pw[i]
+                D[w, k] = e.modes[i].damping_ratio
+    keep = np.flatnonzero(np.mean(np.isfinite(F), axis=0) >= min_fraction) if n_w else np.zeros(0, int)
+    if keep.size == 0:
+        raise ValueError("no identified mode matches a model mode in enough windows "
+                         f"(MAC >= {mac_min}, frequency within {100 * max_rel_shift:.0f} %)")
+    keep = keep[np.argsort(f_ref[keep])]
+    notes = [f"reference mode {k + 1} ({f_ref[k]:.3f} Hz) found in {np.mean(np.isfinite(F[:, k])):.0%} "
+             "of windows; dropped" for k in range(m) if k not in keep]
+    return ModalObservations(times=times, mode_numbers=list(range(1, keep.size + 1)),
+                             frequencies_hz=F[:, keep], shapes=P[:, keep], sensor_ids=list(sensor_ids),
+                             damping=D[:, keep], covariates={"temperature_c": temps}, notes=notes)
