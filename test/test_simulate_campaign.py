@@ -186,12 +186,13 @@ def test_ingest_cuts_exactly_one_window_per_burst(tmp_path, fmt):
     temperature = mean of the temperature samples inside the window (contracts section 1)."""
     from shm_ros.io.recording import ingest_bag
 
-    sc = named_scenario("girder", n_windows=3, window_s=150.0, seed=4, output=fmt)
+    sc = named_scenario("girder", n_windows=3, window_s=150.0, seed=4, output=fmt, unrelated_topics=True)
     c = simulate_campaign(sc)
     files = write_campaign(c, tmp_path)
     res = ingest_bag(files.bag, files.structure, window_s=150.0)
     truth = json.loads(files.truth.read_text())
     assert len(res.windows) == 3
+    assert [t.split()[0] for t in res.ignored_topics] == ["/shm/daq/status"]
     for win, t in zip(res.windows, truth["windows"]):
         assert win.start_ns == t["start_ns"] and win.end_ns == t["end_ns"]
         assert win.samples.shape == (15000, 9)

@@ -37,6 +37,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--format", choices=("imu", "block"), help="per-sample sensor_msgs/Imu or AccelBlock (default block)")
     p.add_argument("--storage", choices=("mcap", "sqlite3"), help="bag storage (default mcap)")
     p.add_argument("--no-compress", action="store_true", help="do not zstd-compress MCAP chunks")
+    p.add_argument("--unrelated-topics", action="store_true",
+                   help="also record a std_msgs/String status topic that the pipeline must ignore")
     p.add_argument("--seed", type=int, help="random seed (default 0); the same seed gives byte-identical bags")
     p.add_argument("--workers", type=int, default=1, help="processes computing windows (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
@@ -68,6 +70,8 @@ def build_scenario(args: argparse.Namespace):
             setattr(sc, field, v)
     if args.no_compress:
         sc.compress = False
+    if args.unrelated_topics:
+        sc.unrelated_topics = True
     if args.windows is not None:
         sc.n_windows = args.windows
     if args.duration is not None:

@@ -104,6 +104,9 @@ def write_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                 while t_next < tstamps.size and tstamps[t_next] < end:
                     writer.temperature(temp_topic, int(tstamps[t_next]), float(tvalues[t_next]), variance=0.0025)
                     t_next += 1
+                if sc.unrelated_topics:  # what else a field recorder captures: must be ignored
+                    status = writer._types["std_msgs/msg/String"](data=f"daq ok, burst {w.index}")
+                    writer.write(f"{prefix}/daq/status", "std_msgs/msg/String", start, status)
                 if sc.output == "imu":
                     _write_imu(writer, prefix, w)
                 else:

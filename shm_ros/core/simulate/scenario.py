@@ -93,6 +93,7 @@ class Scenario:
     compress: bool = True
     prefix: str = "/shm"
     block_s: float = 1.0  # AccelBlock length
+    unrelated_topics: bool = False  # also write a std_msgs/String status topic (to be ignored)
     temperature_period_s: float = 60.0
     # truth model versus nominal model (no inverse crime)
     refine: int = 4  # girder: elements per span x refine
