@@ -410,3 +410,20 @@ def test_channel_map_from_structure_sources():
     assert np.array_equal(s[:, 0], xyz[:, 0]) and np.array_equal(s[:, 1], -xyz[:, 1])
     assert np.array_equal(s[:, 2], 2 * xyz[:, 0])
     assert ws[0].input_channel == "g0"
+
+
+def test_tick_closes_a_burst_that_has_ended_without_new_data():
+    rng = np.random.default_rng(31)
+    n = int(7 * FS)
+    core = IngestCore(ChannelMap.simple(["a"]), IngestConfig(window_s=10.0, max_latency_s=0.5))
+    x = rng.standard_normal(n)
+    for i in range(n):
+        core.add_imu("a", T0 + i * P, 0.0, 0.0, float(x[i]))
+    assert core.pop_windows() == []  # 7 s of a 10 s window: the burst may still go on
+    core.tick(T0 + n * P + int(0.8e9))  # 0.8 s later: not yet a pause (> 1 s) after the latency
+    assert core.pop_windows() == []
+    core.tick(T0 + n * P + int(2.0e9))
+    (w,) = core.pop_windows()  # 7 s >= half of 10 s: kept
+    assert w.n_samples == n and np.array_equal(w.samples[:, 0], x)
+    assert any(d.code == "burst" for d in core.pop_diagnostics())
+    assert core.pop_diagnostics() == []  # popped once

@@ -395,7 +395,7 @@ class IngestCore:
         pend[2].append(ay)
         pend[3].append(az)
         self._imu_pending_n += 1
-        if self._imu_pending_n >= 4096:
+        if self._imu_pending_n >= 4096 or (self._rate is None and self._imu_pending_n >= 256):
             self._drain_imu()
         elif self._due_ns is not None and stamp_ns > self._due_ns + self._latency_ns:
             self._drain_imu()
@@ -518,7 +518,10 @@ class IngestCore:
             self._drain_imu()
             if self._rate is None:
                 return
-        if self._due_ns is None or int(final_ns) >= self._due_ns:
+        maxima = [m for m in self._chan_max if m is not None]
+        stopped = bool(maxima) and final_ns - max(maxima) > self.config.burst_pause_s * 1e9
+        if self._due_ns is None or int(final_ns) >= self._due_ns or (
+                stopped and any(b.size for b in self._buf)):
             self._process(int(final_ns))
 
     def flush(self) -> list[Window]:
