@@ -211,3 +211,14 @@ def test_truth_table_reads_as_a_tracked_modes_table(tmp_path):
     assert obs.frequencies_hz.shape == (2, 6)
     assert np.allclose(obs.frequencies_hz, [w["frequencies_hz"] for w in truth["windows"]], rtol=1e-7)
     assert obs.sensor_ids == c.sensor_ids
+
+
+def test_bad_scenario_file_names_the_file_and_field(tmp_path, capsys):
+    f = tmp_path / "bad.yaml"
+    f.write_text("scenario: girder\nwindow_length: 5\n")
+    assert main(["simulate", "--scenario-file", str(f), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert str(f) in err and "window_length" in err
+    f.write_text("scenario: girder\nfaults:\n  - {kind: meltdown}\n")
+    assert main(["simulate", "--scenario-file", str(f), "--out", str(tmp_path / "o2")]) == 2
+    assert "faults[0]" in capsys.readouterr().err
