@@ -427,3 +427,26 @@ def test_tick_closes_a_burst_that_has_ended_without_new_data():
     assert w.n_samples == n and np.array_equal(w.samples[:, 0], x)
     assert any(d.code == "burst" for d in core.pop_diagnostics())
     assert core.pop_diagnostics() == []  # popped once
+
+
+def test_random_garbage_never_raises():
+    rng = np.random.default_rng(77)
+    core = IngestCore(ChannelMap.simple(["a", "b"]), IngestConfig(window_s=2.0, max_latency_s=0.5))
+    t = T0
+    for i in range(3000):
+        t += int(rng.choice([P, P, P, 0, -P, 3 * P, int(2e9), -int(5e9)]))
+        r = rng.random()
+        if r < 0.6:
+            v = rng.choice([0.1, np.nan, np.inf, 1e30, -3.0])
+            core.add_imu(str(rng.choice(["a", "b", "zz"])), t, 0.0, 0.0, float(v))
+        elif r < 0.8:
+            shape = [(5, 2), (0, 2), (3,), (2, 2, 2), (4, 1)][rng.integers(5)]
+            core.add_block(t, float(rng.choice([200.0, 0.0, np.nan, 100.0])), ["a", "b"][: shape[-1] if len(shape) > 1 else 2],
+                           rng.standard_normal(shape), units=str(rng.choice(["m/s^2", "g", "??"])))
+        elif r < 0.9:
+            core.add_temperature("t", t, float(rng.choice([12.0, np.nan])))
+        else:
+            core.tick(t)
+        core.pop_windows()
+    core.flush()
+    assert core.diagnostic_counts  # everything odd was reported
