@@ -48,7 +48,7 @@ class StabilityConfig:
 @dataclass
 class PickingConfig:
     distance_cutoff: float = 0.03  # of |df|/f + (1 - MAC) in average-linkage clustering
-    min_fraction: float = 0.15  # a mode must be found at this fraction of the evaluated orders
+    min_fraction: float = 0.10  # a mode must be found at this fraction of the evaluated orders
     min_poles: int = 5  # ... and at least at this many orders
 
 
