@@ -225,3 +225,28 @@ def test_story_damage_on_a_building_with_foundation_sway_hits_the_named_story():
     k0 = soil.truth_model.building_matrices(soil.truth_model.theta({}), {})["k_story"]
     assert np.allclose(k / k0, [1.0, 0.85] + [1.0] * (k.size - 2))  # foundation spring untouched
     assert np.all(_ratios(_truth(both), _truth(soil)) < 1.0)
+
+
+def test_girder_amplitude_effects_follow_the_window_rms_acceleration():
+    """Girder (equivalent linear per window): deck stiffness x 1/(1 + a/a_ref), modal damping
+    x (1 + a/a_ref), a = the window's RMS acceleration; windows with more traffic are softer."""
+    kw = dict(n_windows=4, window_s=120.0, seed=3, pause_s=3 * 3600.0)
+    plain = _campaign("girder", **kw)
+    eff = _campaign("girder", [("amplitude_stiffness", {"accel_ref_m_s2": 1.0}),
+                               ("amplitude_damping", {"accel_ref_m_s2": 0.2})], **kw)
+    _assert_hidden(eff, plain, "amplitude_stiffness")
+    rows = []
+    for i in range(4):
+        te, tp = _truth(eff, i), _truth(plain, i)
+        eq = te["equivalent_linear"]
+        a = eq["rms_accel_m_s2"]
+        assert abs(a - eq["rms_accel_response_m_s2"]) < 0.02 * a  # the fixed point converged
+        assert eq["stiffness_factor"] == pytest.approx(1 / (1 + a / 1.0), rel=1e-12)
+        assert np.allclose(np.array(te["damping_ratios"]) / np.array(tp["damping_ratios"]), 1 + a / 0.2, rtol=1e-9)
+        r = _ratios(te, tp)
+        s = _energy_share(plain, "EI", i)
+        F = eq["stiffness_factor"]
+        assert np.all(np.abs(r**2 - (1 + s * (F - 1))) <= 0.12 * abs(F - 1))
+        rows.append((a, r[0]))
+    a, r = np.array(rows).T
+    assert np.ptp(a) > 0.2 * a.mean() and np.corrcoef(a, r)[0, 1] < -0.9

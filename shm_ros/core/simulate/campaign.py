@@ -131,7 +131,9 @@ class Campaign:
         n_warm = int(round(min(120.0, max(10.0, 5.0 / slow)) * sc.fs))
         u, event = self._inputs(rng, n_warm + n, cond, i, sys)
         extra: dict[str, Any] = {}
-        if self.truth_model.kind == "girder":
+        if self.truth_model.kind == "girder" and amp:
+            y, modal, extra = self._girder_amplitude(i, cond, factors, amp, n_warm, dt)
+        elif self.truth_model.kind == "girder":
             y = sys.simulate_modal(u, dt)  # u holds modal forces
         elif amp:
             from shm_ros.core.simulate.newmark import simulate_building_nonlinear
@@ -159,6 +161,30 @@ class Campaign:
         truth = self._truth_entry(i, start, end, cond, factors, modal, accel, event, done, extra)
         return SimulatedWindow(index=i, start_ns=start, fs=sc.fs, sensor_ids=self.sensor_ids, accel=accel,
                                recording=rec, truth=truth)
+
+    def _girder_amplitude(self, i: int, cond: Conditions, factors: dict[str, float], amp: list[Effect],
+                          n_warm: int, dt: float, passes: int = 4) -> tuple[np.ndarray, ModalTruth, dict]:
+        """Girder amplitude effects, equivalent-linear per window: the deck stiffness factor
+        1 / (1 + a / a_ref) and damping factor 1 + a / a_ref follow the window's RMS acceleration a
+        (mean over sensors, after warm-up), found by fixed-point passes over the same loads."""
+        keys = {e.key: e for e in amp}
+        k_ref = keys["amplitude_stiffness"].params["accel_ref_m_s2"] if "amplitude_stiffness" in keys else None
+        z_ref = keys["amplitude_damping"].params["accel_ref_m_s2"] if "amplitude_damping" in keys else None
+        n_all = n_warm + int(round(self.scenario.window_s * self.scenario.fs))
+        a = 0.0
+        for _ in range(passes):
+            a_used = a
+            kf = 1.0 / (1.0 + a_used / k_ref) if k_ref else 1.0
+            zf = 1.0 + a_used / z_ref if z_ref else 1.0
+            fac = dict(factors)
+            fac["EI"] = fac.get("EI", 1.0) * kf
+            sys, modal = self.truth_model.system(fac, damping_scale=zf)
+            u, _ = self._inputs(rng_for(self.scenario.seed, 3, i), n_all, cond, i, sys)
+            y = sys.simulate_modal(u, dt)
+            a = float(np.mean(np.sqrt(np.mean(y[n_warm:] ** 2, axis=0))))
+        extra = {"equivalent_linear": {"rms_accel_m_s2": a_used, "stiffness_factor": kf, "damping_factor": zf,
+                                       "rms_accel_response_m_s2": a}}
+        return y, modal, extra
 
     def windows(self, indices: list[int] | None = None) -> Iterator[SimulatedWindow]:
         for i in indices if indices is not None else range(self.n_windows):

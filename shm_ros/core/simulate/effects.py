@@ -56,9 +56,11 @@ EFFECTS: dict[str, tuple[str, dict[str, dict[str, Any]]]] = {
         "shear_building": {"k_soil_rel": 3.0, "mass_rel": 0.15, "soil_damping_ratio": 0.10},
     }),
     "amplitude_stiffness": ("amplitude_dependent_stiffness", {
+        "girder": {"accel_ref_m_s2": 1.0},
         "shear_building": {"drift_ref_m": 0.01},
     }),
     "amplitude_damping": ("amplitude_dependent_damping", {
+        "girder": {"accel_ref_m_s2": 0.2},
         "shear_building": {"velocity_ref_m_s": 0.02},
     }),
     "damper": ("damper_stiffness", {
@@ -171,8 +173,12 @@ class Effect:
             return ("series soil spring under every bearing" if self.kind == "girder"
                     else "foundation sway: soil spring and dashpot under a foundation mass")
         if self.key == "amplitude_stiffness":
+            if self.kind == "girder":
+                return "deck stiffness x 1 / (1 + a / a_ref), a = the window's RMS acceleration (equivalent linear)"
             return "softening story springs f = k d / (1 + |d| / d_ref)"
         if self.key == "amplitude_damping":
+            if self.kind == "girder":
+                return "modal damping x (1 + a / a_ref), a = the window's RMS acceleration (equivalent linear)"
             return "story dashpots f = c v (1 + |v| / v_ref)"
         if self.key == "damper":
             return f"{p['model']} damper braces, k_d = {p['k_rel']} k_story, c_d = {p['c_rel_s']} s x k_d"
@@ -187,7 +193,7 @@ def _default_where(key: str, kind: str) -> str:
     if key == "damper":
         return "stories"
     if key.startswith("amplitude"):
-        return "stories"
+        return "deck" if kind == "girder" else "stories"
     return "deck" if kind == "girder" else "stories"
 
 

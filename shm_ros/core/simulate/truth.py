@@ -72,13 +72,14 @@ class TruthModel:
         return th
 
     # -- girder -------------------------------------------------------------------------------
-    def _girder_system(self, theta: np.ndarray, n_keep: int) -> tuple[ModalSystem, np.ndarray, np.ndarray]:
+    def _girder_system(self, theta: np.ndarray, n_keep: int, damping_scale: float = 1.0
+                       ) -> tuple[ModalSystem, np.ndarray, np.ndarray]:
         sol = self.model.modes(theta, n_modes=n_keep)
         f = sol.frequencies_hz
         keep = f <= self.max_frequency_hz
         keep[: min(self.info.get("min_modes", 6), f.size)] = True
         f, phi = f[keep], sol.shapes[:, keep]
-        z = self.modal_damping[: f.size]
+        z = np.minimum(self.modal_damping[: f.size] * damping_scale, 0.5)
         S = self.model.sensor_matrix(self.sensor_ids)
         P = phi[self.load_dofs, :].T  # (m, n_loads): phi_j at each load point
         sys = from_real_modes(f, z, P, S @ phi)
@@ -163,12 +164,15 @@ class TruthModel:
 
     # -- both ---------------------------------------------------------------------------------
     def system(self, factors: dict[str, float], k_scale: np.ndarray | None = None,
-               c_scale: np.ndarray | None = None) -> tuple[ModalSystem, ModalTruth]:
-        """Simulation model and true modal properties under the effect ``factors`` of a window."""
+               c_scale: np.ndarray | None = None, damping_scale: float = 1.0) -> tuple[ModalSystem, ModalTruth]:
+        """Simulation model and true modal properties under the effect ``factors`` of a window.
+
+        Building: ``k_scale``/``c_scale`` per story (equivalent-linear amplitude effects); girder:
+        ``damping_scale`` multiplies every modal damping ratio."""
         theta = self.theta(factors)
         n_truth = self.info["n_truth_modes"]
         if self.kind == "girder":
-            sys, f, z = self._girder_system(theta, self.info["n_keep"])
+            sys, f, z = self._girder_system(theta, self.info["n_keep"], damping_scale)
             shapes = np.column_stack([real_shape(sys.shapes[:, j]) for j in range(n_truth)])
             return sys, ModalTruth(f[:n_truth].copy(), z[:n_truth].copy(), shapes, list(self.sensor_ids))
         mats = self.building_matrices(theta, factors, k_scale, c_scale)
