@@ -76,8 +76,9 @@ class TruthModel:
                        ) -> tuple[ModalSystem, np.ndarray, np.ndarray]:
         sol = self.model.modes(theta, n_modes=n_keep)
         f = sol.frequencies_hz
+        # the recorder's anti-alias filter: modes above 0.9 x Nyquist are neither recorded nor truth
         keep = f <= self.max_frequency_hz
-        keep[: min(self.info.get("min_modes", 6), f.size)] = True
+        keep[0] = True
         f, phi = f[keep], sol.shapes[:, keep]
         z = np.minimum(self.modal_damping[: f.size] * damping_scale, 0.5)
         S = self.model.sensor_matrix(self.sensor_ids)
@@ -173,6 +174,7 @@ class TruthModel:
         n_truth = self.info["n_truth_modes"]
         if self.kind == "girder":
             sys, f, z = self._girder_system(theta, self.info["n_keep"], damping_scale)
+            n_truth = min(n_truth, f.size)
             shapes = np.column_stack([real_shape(sys.shapes[:, j]) for j in range(n_truth)])
             return sys, ModalTruth(f[:n_truth].copy(), z[:n_truth].copy(), shapes, list(self.sensor_ids))
         mats = self.building_matrices(theta, factors, k_scale, c_scale)
