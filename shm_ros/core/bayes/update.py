@@ -262,6 +262,7 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         "rhat": dict(zip(names, map(float, chains.diagnostics.rhat))),
         "ess_bulk": dict(zip(names, map(float, chains.diagnostics.ess_bulk))),
         "likelihood": config.likelihood,
+        "n_windows": int(getattr(observations, "n_windows", 1)),
         "predictor": ritz_note or type(predictor).__name__ if predictor is not None else "time-domain",
     }
 
