@@ -65,6 +65,21 @@ class ModalObservations:
             covariates={k: v[windows] for k, v in self.covariates.items()},
             notes=list(self.notes), time_kind=self.time_kind)
 
+    def without_empty_modes(self) -> tuple["ModalObservations", list[int]]:
+        """The same data without modes that have no frequency in any window (and their numbers)."""
+        present = np.any(np.isfinite(self.frequencies_hz) & (self.frequencies_hz > 0), axis=0)
+        if present.all():
+            return self, []
+        dropped = [self.mode_numbers[k] for k in np.flatnonzero(~present)]
+        keep = np.flatnonzero(present)
+        return ModalObservations(
+            times=self.times, mode_numbers=[self.mode_numbers[k] for k in keep],
+            frequencies_hz=self.frequencies_hz[:, keep],
+            shapes=None if self.shapes is None else self.shapes[:, keep],
+            sensor_ids=list(self.sensor_ids),
+            damping=None if self.damping is None else self.damping[:, keep],
+            covariates=dict(self.covariates), notes=list(self.notes), time_kind=self.time_kind), dropped
+
     def mean_frequencies(self) -> np.ndarray:
         return np.nanmean(self.frequencies_hz, axis=0)
 

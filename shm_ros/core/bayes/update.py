@@ -208,6 +208,15 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
             priors: JointPrior | Sequence[Any] | None) -> Posterior:
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
+    warnings_: list[str] = []
+    if isinstance(observations, ModalObservations):
+        if observations.n_windows == 0:
+            raise ValueError("no windows to update from")
+        observations, dropped = observations.without_empty_modes()
+        if dropped:
+            warnings_.append(f"mode(s) {dropped} have no frequency in any window; left out")
+        if observations.n_modes == 0:
+            raise ValueError("the modal data hold no frequency at all")
     jp = joint_prior_for(model, config, priors)
     lik, predictor = build_likelihood(model, observations, config)
     d = jp.dim
@@ -220,7 +229,7 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         ok = np.isfinite(lp)
         out = np.full(x.shape[0], -np.inf)
         if ok.any():
-            out[ok] = lp[ok] + lik(x[ok])
+            out[ok] = lp[ok] + safe_loglik(lik, x[ok], d)
         out[~np.isfinite(out)] = -np.inf
         return out
 
@@ -247,7 +256,7 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         x_map, lp_map = flat[best].copy(), float(flat_lp[best])
     summary = summarise(flat[:, :d], x_map[:d], jp.names)
 
-    warnings_ = list(chains.warnings)
+    warnings_ += list(chains.warnings)
     diag = {
         "sampler": chains.sampler,
         "rhat_max": chains.diagnostics.rhat_max,
@@ -288,7 +297,8 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         t2 = time.perf_counter()
         marginal = lik if getattr(lik, "variance", "marginal") == "marginal" else \
             _marginal_twin(model, observations, config)
-        ev = nested_evidence(lambda x: marginal(x), jp, n_live=config.n_live, seed=config.seed)
+        ev = nested_evidence(lambda x: safe_loglik(marginal, x, d), jp, n_live=config.n_live,
+                             seed=config.seed)
         log_z, log_z_err = ev.log_evidence, ev.log_evidence_err
         timing["evidence_s"] = time.perf_counter() - t2
         diag["evidence_method"] = ev.method
@@ -298,6 +308,31 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         log_prob=flat_lp, chains=chains.chains, chain_names=names, diagnostics=diag, fit=fit,
         fit_nominal=fit_nominal, log_evidence=log_z, log_evidence_err=log_z_err, noise=noise,
         priors={p.name: p.describe() for p in jp.priors}, warnings=warnings_, timing_s=timing)
+
+
+def safe_loglik(lik: Any, x: np.ndarray, d: int) -> np.ndarray:
+    """Likelihood of a batch with non-physical rows set to -inf instead of failing the batch.
+
+    Every parameter is a multiplicative factor on a positive quantity (stiffness, mass, modulus,
+    damping), so theta <= 0 has zero likelihood; a batch whose matrices are singular for some row
+    (numpy's stacked solvers raise for the whole stack) is evaluated row by row.
+    """
+    x = np.atleast_2d(x)
+    out = np.full(x.shape[0], -np.inf)
+    ok = np.all(x[:, :d] > 0, axis=1)
+    if not ok.any():
+        return out
+    with np.errstate(all="ignore"):
+        try:
+            out[ok] = lik(x[ok])
+        except np.linalg.LinAlgError:
+            for i in np.flatnonzero(ok):
+                try:
+                    out[i] = lik(x[i:i + 1])[0]
+                except np.linalg.LinAlgError:
+                    out[i] = -np.inf
+    out[~np.isfinite(out)] = -np.inf
+    return out
 
 
 def _try_ritz(model: AffineModel, lik: Any, predictor: Any, x_map: np.ndarray, cov: np.ndarray,
