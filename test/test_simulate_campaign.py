@@ -222,3 +222,11 @@ def test_bad_scenario_file_names_the_file_and_field(tmp_path, capsys):
     f.write_text("scenario: girder\nfaults:\n  - {kind: meltdown}\n")
     assert main(["simulate", "--scenario-file", str(f), "--out", str(tmp_path / "o2")]) == 2
     assert "faults[0]" in capsys.readouterr().err
+
+
+def test_n_story_building(tmp_path):
+    assert main(["simulate", "building", "--floors", "12", "--duration", "20", "--out", str(tmp_path), "--quiet"]) == 0
+    spec = load_structure(tmp_path / "structure.yaml")
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    assert spec.shear_building.n_floors == 12 and spec.sensor_ids == ["g0", "f1", "f6", "f9", "f12"]
+    assert truth["truth_model"]["n_dof"] == 12

@@ -26,6 +26,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--window-s", type=float, help="length of each burst, s (girder/building 600, earthquake 300)")
     p.add_argument("--pause-s", type=float, help="pause between bursts, s (default 2; must exceed 1)")
     p.add_argument("--fs", type=float, help="sample rate, Hz (default 100)")
+    p.add_argument("--floors", type=int, help="building scenarios: number of stories (default 8)")
     p.add_argument("--start", help="start time, ISO 8601 UTC (girder 2024-03-01T00:00:00Z, building 2024-05-01T00:00:00Z)")
     p.add_argument("--effects", default="",
                    help="hidden effects, comma-separated key[@TIME][:name=value...]: temperature_linear, "
@@ -60,9 +61,11 @@ def build_scenario(args: argparse.Namespace):
             raise ValueError(f"{args.scenario_file}: a scenario file must be a YAML mapping")
         if args.scenario:
             data["scenario"] = args.scenario
+        if args.floors is not None:
+            data["n_floors"] = args.floors
         sc = scenario_from_dict(data, source=args.scenario_file)
     else:
-        sc = named_scenario(args.scenario or "girder")
+        sc = named_scenario(args.scenario or "girder", n_floors=args.floors)
     for opt, field in (("window_s", "window_s"), ("pause_s", "pause_s"), ("fs", "fs"), ("start", "start"),
                        ("seed", "seed"), ("format", "output"), ("storage", "storage")):
         v = getattr(args, opt)

@@ -16,6 +16,8 @@ from dataclasses import asdict, dataclass, field
 from datetime import datetime, timezone
 from typing import Any
 
+import numpy as np
+
 from shm_ros.core.simulate.sensors import FaultSpec
 
 GIRDER_STRUCTURE: dict[str, Any] = {
@@ -42,23 +44,35 @@ GIRDER_STRUCTURE: dict[str, Any] = {
     ],
 }
 
-_MASSES = [6.0e5] * 7 + [5.0e5]
-_STIFF = [1.00e9, 9.5e8, 9.0e8, 8.5e8, 8.0e8, 7.0e8, 6.0e8, 5.0e8]
-BUILDING_STRUCTURE: dict[str, Any] = {
-    "name": "eight-story-building",
-    "kind": "shear_building",
-    "shear_building": {"floors": [{"mass": m, "stiffness": k} for m, k in zip(_MASSES, _STIFF)]},
-    "damping": {"kind": "rayleigh", "ratios": [0.02, 0.02]},
-    "sensors": [{"id": "g0", "at": {"floor": 0}, "direction": "x"}]
-    + [{"id": f"f{k}", "at": {"floor": k}, "direction": "x"} for k in (1, 4, 6, 8)],
-    "input": {"sensor": "g0"},
-    "parameters": [
-        {"name": "k_lower", "applies_to": "shear_building.floors[0,1,2,3].stiffness",
-         "prior": {"dist": "normal", "mean": 1.0, "std": 0.1}},
-        {"name": "k_upper", "applies_to": "shear_building.floors[4,5,6,7].stiffness",
-         "prior": {"dist": "normal", "mean": 1.0, "std": 0.1}},
-    ],
-}
+def shear_building_structure(n_floors: int = 8) -> dict[str, Any]:
+    """Nominal n-story shear building: 6e5 kg floors (5e5 kg roof), story stiffness tapering from
+    1.0 GN/m to 0.5 GN/m, sensors on the ground (input) and on floors 1, n/2, 3n/4 and n (x)."""
+    if n_floors < 2:
+        raise ValueError(f"a shear building needs at least 2 floors, got {n_floors}")
+    masses = [6.0e5] * (n_floors - 1) + [5.0e5]
+    stiff = ([1.00e9, 9.5e8, 9.0e8, 8.5e8, 8.0e8, 7.0e8, 6.0e8, 5.0e8] if n_floors == 8
+             else [float(v) for v in np.linspace(1.0e9, 5.0e8, n_floors)])
+    floors = sorted({1, max(2, n_floors // 2), max(2, (3 * n_floors) // 4), n_floors})
+    half = n_floors // 2
+    return {
+        "name": f"{n_floors}-story-building" if n_floors != 8 else "eight-story-building",
+        "kind": "shear_building",
+        "shear_building": {"floors": [{"mass": m, "stiffness": k} for m, k in zip(masses, stiff)]},
+        "damping": {"kind": "rayleigh", "ratios": [0.02, 0.02]},
+        "sensors": [{"id": "g0", "at": {"floor": 0}, "direction": "x"}]
+        + [{"id": f"f{k}", "at": {"floor": k}, "direction": "x"} for k in floors],
+        "input": {"sensor": "g0"},
+        "parameters": [
+            {"name": "k_lower", "applies_to": f"shear_building.floors[{','.join(str(i) for i in range(half))}].stiffness",
+             "prior": {"dist": "normal", "mean": 1.0, "std": 0.1}},
+            {"name": "k_upper",
+             "applies_to": f"shear_building.floors[{','.join(str(i) for i in range(half, n_floors))}].stiffness",
+             "prior": {"dist": "normal", "mean": 1.0, "std": 0.1}},
+        ],
+    }
+
+
+BUILDING_STRUCTURE: dict[str, Any] = shear_building_structure(8)
 
 
 @dataclass
@@ -135,8 +149,9 @@ class Scenario:
 NAMED = ("girder", "building", "building-earthquake")
 
 
-def named_scenario(name: str, **options: Any) -> Scenario:
-    """A named scenario (see module doc) with ``options`` overriding its fields."""
+def named_scenario(name: str, n_floors: int | None = None, **options: Any) -> Scenario:
+    """A named scenario (see module doc) with ``options`` overriding its fields; ``n_floors`` gives
+    the building scenarios an n-story building (:func:`shear_building_structure`)."""
     if name == "girder":
         base = Scenario()
     elif name in ("building", "building-earthquake"):
@@ -146,6 +161,10 @@ def named_scenario(name: str, **options: Any) -> Scenario:
                         earthquake_every_window=name == "building-earthquake")
     else:
         raise ValueError(f"unknown scenario {name!r} (known: {', '.join(NAMED)})")
+    if n_floors is not None:
+        if base.kind != "shear_building":
+            raise ValueError(f"scenario {name}: n_floors applies to the building scenarios")
+        base.structure = shear_building_structure(int(n_floors))
     for k, v in options.items():
         if not hasattr(base, k):
             raise ValueError(f"scenario {name}: unknown option {k!r}")
@@ -157,6 +176,7 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<scenario>") -> Scen
     """A scenario file: ``{scenario: NAME, <field>: value, effects: [{key, ...params}], faults: [...]}``."""
     data = dict(data)
     name = data.pop("scenario", data.pop("name", "girder"))
+    n_floors = data.pop("n_floors", None)
     effects = []
     for i, e in enumerate(data.pop("effects", []) or []):
         if isinstance(e, str):
@@ -176,7 +196,7 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<scenario>") -> Scen
         if k in data:
             data[k] = tuple(data[k])
     try:
-        sc = named_scenario(name, **data)
+        sc = named_scenario(name, n_floors=n_floors, **data)
     except ValueError as exc:
         raise ValueError(f"{source}: {exc}") from None
     sc.effects, sc.faults = effects, faults
