@@ -450,3 +450,29 @@ def test_random_garbage_never_raises():
         core.pop_windows()
     core.flush()
     assert core.diagnostic_counts  # everything odd was reported
+
+
+@pytest.mark.parametrize("ppm", [-1000.0, 300.0, 1500.0])
+def test_grid_follows_a_drifting_clock(ppm):
+    """A sensor clock 0.03-0.15 % off the nominal 200 Hz (the rate still rounds to 200 Hz) drifts by
+    many periods over a long window; the grid follows it and every sample is placed, in order."""
+    rng = np.random.default_rng(int(abs(ppm)))
+    n = int(150 * FS)
+    period = P * (1 - ppm * 1e-6)  # stamps of a clock running ppm fast
+    base = T0 + np.round(np.arange(n) * period).astype(np.int64)
+    chans = ["a", "b", "c"]
+    core = offline(chans, window_s=60.0)
+    xs = {}
+    for i, c in enumerate(chans):
+        t = base + rng.integers(-int(0.15 * P), int(0.15 * P), n)
+        t[0] = base[0]
+        xs[c] = rng.standard_normal(n)
+        core.add_imu_array(c, t, z3(xs[c]))
+    ws = core.flush()
+    assert [w.n_samples for w in ws] == [12000, 12000, 6000]
+    for j, c in enumerate(chans):
+        assert np.array_equal(np.concatenate([w.samples[:, j] for w in ws]), xs[c])
+    assert all(w.flags is None for w in ws)
+    assert ws[1].sample_rate_hz == pytest.approx(FS * (1 + ppm * 1e-6), rel=2e-5)
+    assert ws[1].start_ns == pytest.approx(base[12000], abs=0.2 * P)
+    assert "clock_drift" in codes(core) and not ({"gap", "unsnappable"} & codes(core))

@@ -359,6 +359,9 @@ class IngestCore:
         self._due_ns: int | None = None  # process when the stream's final time passes this
         self._committed_ns: int | None = None  # grid time before which everything is emitted
         self._burst_origin: int | None = None
+        self._anchor_t = 0
+        self._anchor_k = 0
+        self._period = 0.0
         self._burst_k = 0
         self._scan_ns: int | None = None  # stamps below this are scanned for pauses
         self._scan_last: int | None = None  # newest stamp of the open burst seen by the scan
@@ -679,7 +682,6 @@ class IngestCore:
             self._temp_t = np.concatenate((self._temp_t, np.asarray(self._temps_t, np.int64)))
             self._temp_v = np.concatenate((self._temp_v, np.asarray(self._temps_v, np.float64)))
             self._temps_t, self._temps_v = [], []
-        P = self._period_ns()
         W = self._window_len()
         pause_ns = self.config.burst_pause_s * 1e9
         end_of_stream = final_ns is None
@@ -690,10 +692,9 @@ class IngestCore:
                 if not firsts or min(firsts) >= fin:
                     break
                 self._open_burst(min(firsts))
-            origin, k0 = self._burst_origin, self._burst_k
-            assert origin is not None
-            span_start = _edge(origin, k0, P)  # stamps in [span_start, span_end) snap into it
-            span_end = _edge(origin, k0 + W, P)
+            k0 = self._burst_k
+            span_start = self._ge(k0)  # stamps in [span_start, span_end) snap into this window
+            span_end = self._ge(k0 + W)
             lim = min(span_end, fin)
             lo = span_start if self._scan_ns is None else max(span_start, self._scan_ns)
             parts = [b.t[(b.t >= lo) & (b.t < lim)] for b in self._buf]
@@ -705,7 +706,7 @@ class IngestCore:
                 if jumps.size:
                     end_stamp = int(seq_u[jumps[0]])
                     if end_stamp >= span_start:
-                        self._cut(origin, k0, self._slot(end_stamp) + 1, "pause")
+                        self._cut(k0, self._slot(end_stamp) + 1, "pause", end_stamp)
                     self._close_burst()
                     continue
                 self._scan_last = int(u[-1])
@@ -724,39 +725,48 @@ class IngestCore:
                     break  # the burst may go on: wait
                 if ended:
                     if last >= span_start:
-                        self._cut(origin, k0, self._slot(last) + 1, "end" if end_of_stream else "pause")
+                        self._cut(k0, self._slot(last) + 1, "end" if end_of_stream else "pause", last)
                     self._close_burst()
                     continue
-                self._cut(origin, k0, k0 + W, None)
+                self._cut(k0, k0 + W, None)
                 self._burst_k = k0 + W
                 continue
             if last is not None and fin - last > pause_ns:
                 if last >= span_start:
-                    self._cut(origin, k0, self._slot(last) + 1, "pause")
+                    self._cut(k0, self._slot(last) + 1, "pause", last)
                 self._close_burst()
                 continue
             break
         # when to try again: the end of the open window, or a pause after the newest sample;
         # at most every check interval of stream time, so that a long window is not rescanned often
         if self._burst_origin is not None:
-            due = _grid(self._burst_origin, self._burst_k + W, P)
+            due = self._gt(self._burst_k + W)
             if self._scan_last is not None:
                 due = min(due, max(self._scan_last + int(pause_ns) + 1,
                                    fin + int(self.config.check_interval_s * 1e9)))
             self._due_ns = due
         else:
             firsts = [int(b.t.min()) for b in self._buf if b.t.size]
-            self._due_ns = None if not firsts else _grid(min(firsts), W, P)
+            self._due_ns = None if not firsts else _grid(min(firsts), W, self._period_ns())
         if self._temp_t.size and self._committed_ns is not None:
             keep = self._temp_t >= self._committed_ns
             self._temp_t, self._temp_v = self._temp_t[keep], self._temp_v[keep]
 
+    # The grid of the open burst: grid point k is at anchor_t + (k - anchor_k) * period. It starts
+    # at the burst's first sample with the nominal period and follows the stamps' clock when it
+    # drifts (see _track), so long bursts from a clock a little off the nominal rate stay aligned.
+    def _gt(self, k: int) -> int:
+        return _grid(self._anchor_t, k - self._anchor_k, self._period)
+
+    def _ge(self, k: int) -> int:
+        return _edge(self._anchor_t, k - self._anchor_k, self._period)
+
     def _slot(self, t: int) -> int:
-        assert self._burst_origin is not None
-        return int(np.rint((t - self._burst_origin) / self._period_ns()))
+        return self._anchor_k + int(np.rint((t - self._anchor_t) / self._period))
 
     def _open_burst(self, origin: int) -> None:
         self._burst_origin = origin
+        self._anchor_t, self._anchor_k, self._period = origin, 0, self._period_ns()
         self._burst_k = 0
         self._scan_ns = None
         self._scan_last = None
@@ -768,11 +778,64 @@ class IngestCore:
         self._scan_ns = None
         self._scan_last = None
 
-    def _cut(self, origin: int, k0: int, k1: int, why: str | None) -> None:
-        """Place the samples of grid rows [k0, k1) and emit the window(s) they make."""
+    def _track(self, k0: int, k1: int) -> None:
+        """Follow the stamps' clock: fit t = a + b (k - k0) to the stamps of grid rows [k0, k1)
+        (all channels, outliers beyond half a period left out, the fit widened step by step as
+        in :func:`estimate_rate`); when it departs from the grid by more than a tenth of a period
+        at either end, the grid from k0 on is re-anchored to the fit. Nothing is resampled: this
+        only moves the common grid that stamps are snapped to."""
+        P = self._period
+        lo, hi = self._ge(k0), self._ge(k1)
+        parts = [b.t[(b.t >= lo) & (b.t < hi)] for b in self._buf]
+        ts = np.sort(np.concatenate(parts)) if parts else np.empty(0, np.int64)
+        if ts.size < 64:
+            return
+        t0 = self._gt(k0)
+        rel = (ts - t0).astype(np.float64)
+        a, b = 0.0, P
+        n_rows = k1 - k0
+        if n_rows < 64:
+            return
+        rows, stages = 64, []
+        while rows < n_rows:
+            stages.append(rows)
+            rows *= 4
+        stages.append(n_rows)
+        se_b = np.inf
+        for rows in stages:  # widen the fit over 64, 256, ... rows as the period gets known
+            m = int(np.searchsorted(rel, (rows - 0.5) * P))
+            r, kk = rel[:m], np.rint((rel[:m] - a) / b)
+            res = r - (a + b * kk)
+            good = np.abs(res) < 0.5 * b
+            if good.sum() < 32 or np.ptp(kk[good]) < 32:
+                return
+            kg, rg = kk[good], r[good]
+            b, a = np.polyfit(kg, rg, 1)
+            spread = float(np.sum((kg - kg.mean()) ** 2))
+            se_b = float(np.std(rg - (a + b * kg))) / math.sqrt(spread) if spread > 0 else np.inf
+        # the period follows a trend of more than a tenth of a period over the window; the grid
+        # point k0 stays put unless the stamps sit a quarter period or more away from it (constant
+        # offsets between IMUs are what the half-period tolerance is for)
+        # (a significant trend only: 4 standard errors of the fitted period)
+        slope_drift = abs(b - P) * n_rows if abs(b - P) > 4 * se_b else 0.0
+        shift = int(round(a)) if abs(a) >= 0.25 * P else 0
+        if (slope_drift > 0.1 * P or shift) and abs(b - P) < self.config.rate_tolerance * P:
+            self._anchor_t, self._anchor_k = t0 + shift, k0
+            self._period = float(b) if slope_drift > 0.1 * P else P
+            self._diag(OK, "clock_drift", "accel",
+                       f"stamps run at {1e9 / b:.7g} Hz, {a / 1e6:.3g} ms off the grid (grid was "
+                       f"{1e9 / P:.7g} Hz): the grid follows the stamps' clock from here", t0)
+
+    def _cut(self, k0: int, k1: int, why: str | None, last_stamp: int | None = None) -> None:
+        """Place the samples of grid rows [k0, k1) and emit the window(s) they make (``last_stamp``:
+        the burst's last stamp when it ends here)."""
         if k1 <= k0:
             return
-        P = self._period_ns()
+        self._track(k0, k1)
+        if last_stamp is not None:
+            k1 = max(k0 + 1, self._slot(last_stamp) + 1)  # on the (possibly re-anchored) grid
+        P = self._period
+        at, ak = self._anchor_t, self._anchor_k
         W = self._window_len()
         n = k1 - k0
         C = self.n_channels
@@ -780,8 +843,8 @@ class IngestCore:
         vals = np.full((n, C), np.nan)
         flags = np.zeros((n, C), np.uint8)
         filled = np.zeros((n, C), bool)
-        span_start = _edge(origin, k0, P)
-        span_end = _edge(origin, k1, P)
+        span_start = self._ge(k0)
+        span_end = self._ge(k1)
         notes: list[str] = []
         for c, b in enumerate(self._buf):
             sel = (b.t < span_end)
@@ -800,10 +863,10 @@ class IngestCore:
                 t, v, f, seq = t[keep], v[keep], f[keep], seq[keep]
                 if t.size == 0:
                     continue
-            rel = (t - origin).astype(np.float64)
-            kf = rel / P
-            k = np.rint(kf).astype(np.int64)
+            rel = (t - at).astype(np.float64)
+            k = np.rint(rel / P).astype(np.int64)
             resid = np.abs(rel - k * P)
+            k += ak
             snappable = resid < tol
             n_bad = int((~snappable).sum())
             # collisions: best (smallest residual, then earliest arrival) wins each grid row
@@ -860,8 +923,7 @@ class IngestCore:
         for c in np.flatnonzero(dropped):
             self._diag(WARN, "channel_dropped", self._src(c),
                        f"only {cover[c]:.0%} of the samples present: channel dropped for "
-                       f"[{iso_utc(_grid(origin, k0, P))}, {iso_utc(_grid(origin, k1, P))})",
-                       _grid(origin, k0, P))
+                       f"[{iso_utc(self._gt(k0))}, {iso_utc(self._gt(k1))})", self._gt(k0))
             flags[~filled[:, c], c] |= np.uint8(SampleFlag.MISSING)
         active = ~dropped
         if active.any():
@@ -882,13 +944,13 @@ class IngestCore:
                     first_miss = int(np.flatnonzero(miss)[0])
                     self._diag(WARN, "gap", self._src(c),
                                f"{int(miss.sum())} grid point(s) without a sample: window split there",
-                               _grid(origin, k0 + first_miss, P), int(miss.sum()))
+                               self._gt(k0 + first_miss), int(miss.sum()))
             if lost:
                 self.stats.samples_not_windowed["gap_rows"] += lost
         for s, e in zip(starts.tolist(), ends.tolist()):
             m = e - s
-            t_s = _grid(origin, k0 + s, P)
-            t_e = _grid(origin, k0 + e, P)
+            t_s = self._gt(k0 + s)
+            t_e = self._gt(k0 + e)
             if m < min_len:
                 reason = "remainder of burst" if (e == n and why is not None) else "piece between gaps"
                 self.dropped.append(DroppedSpan(t_s, t_e, m, f"{reason} shorter than half a window"))
@@ -918,7 +980,7 @@ class IngestCore:
     def _emit(self, start_ns: int, vals: np.ndarray, flags: np.ndarray, dropped: np.ndarray,
               notes: list[str]) -> None:
         cfg = self.config
-        rate = float(self._rate)  # type: ignore[arg-type]
+        rate = 1e9 / self._period  # the grid's rate (the nominal one unless the clock drifted)
         n, C = vals.shape
         vals = np.ascontiguousarray(vals)
         flags = flags.copy()
