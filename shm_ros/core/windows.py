@@ -11,6 +11,10 @@ Time and windows (contracts section 1)
   point when it lies strictly within ``snap_tolerance`` (default half) of a period of it; nothing is
   interpolated. A stamp that cannot be snapped (too far from every grid point, or beaten to its grid
   point by a closer stamp of the same channel) leaves its grid point empty: a gap.
+* The grid starts at the nominal rate (a fitted Imu rate within 0.5 % of a whole number of Hz is
+  taken as that number). When the stamps' clock drifts from it (a sensor crystal a little off),
+  the period is re-fitted to the stamps of each window and the grid follows (info ``clock_drift``);
+  separate clocks drifting apart still produce gaps.
 * A burst ends where no channel has a sample for more than ``burst_pause_s`` (1 s). Inside a burst,
   windows of ``window_s`` are counted from the burst's first sample; a window is half-open
   ``[start, end)`` with ``end`` = last sample + one period.
@@ -41,6 +45,7 @@ out-of-order stamp     stamp < latest stamp of the channel     placed by its sta
 clock jump backwards   out-of-order stamp in a region already  sample rejected (cannot be placed), reported
                        emitted (or colliding with kept ones)
 unsnappable stamp      ``|t - grid| >= tol`` or collision      not placed -> its grid point is a gap
+clock drift            significant trend of stamps vs grid     grid period re-fitted (info), no resampling
 gap (one channel or    empty grid row                          window split there; pieces < window/2
 all)                                                           dropped and reported
 pause > burst_pause_s  no sample at all for > 1 s              burst boundary (info), remainder rule
@@ -810,9 +815,13 @@ class IngestCore:
             if good.sum() < 32 or np.ptp(kk[good]) < 32:
                 return
             kg, rg = kk[good], r[good]
-            b, a = np.polyfit(kg, rg, 1)
-            spread = float(np.sum((kg - kg.mean()) ** 2))
-            se_b = float(np.std(rg - (a + b * kg))) / math.sqrt(spread) if spread > 0 else np.inf
+            kc, rc = kg - kg.mean(), rg - rg.mean()
+            spread = float(kc @ kc)
+            if spread <= 0:
+                return
+            b = float(kc @ rc) / spread  # least-squares line, closed form
+            a = float(rg.mean() - b * kg.mean())
+            se_b = float(np.std(rc - b * kc)) / math.sqrt(spread)
         # the period follows a trend of more than a tenth of a period over the window; the grid
         # point k0 stays put unless the stamps sit a quarter period or more away from it (constant
         # offsets between IMUs are what the half-period tolerance is for)
