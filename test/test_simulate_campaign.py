@@ -222,6 +222,10 @@ def test_bad_scenario_file_names_the_file_and_field(tmp_path, capsys):
     f.write_text("scenario: girder\nfaults:\n  - {kind: meltdown}\n")
     assert main(["simulate", "--scenario-file", str(f), "--out", str(tmp_path / "o2")]) == 2
     assert "faults[0]" in capsys.readouterr().err
+    f.write_text("scenario: girder\nstructure: {name: x, kind: girder, girder: {spans: [10.0]}}\n")
+    assert main(["simulate", "--scenario-file", str(f), "--out", str(tmp_path / "o3")]) == 2
+    err = capsys.readouterr().err
+    assert str(f) in err and "structure" in err and "sensors" in err
 
 
 def test_n_story_building(tmp_path):

@@ -195,6 +195,14 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<scenario>") -> Scen
     for k in ("truth_damping", "pga_range_m_s2"):
         if k in data:
             data[k] = tuple(data[k])
+    if "structure" in data:  # validate here so that errors name the scenario file
+        from shm_ros.core.structure import structure_from_dict
+
+        if not isinstance(data["structure"], dict):
+            raise ValueError(f"{source}: structure: expected a mapping (a structure file's content)")
+        kind = structure_from_dict(copy.deepcopy(data["structure"]), source=f"{source} (structure)").kind
+        if kind not in ("girder", "shear_building"):
+            raise ValueError(f"{source}: structure: kind {kind!r} cannot be simulated (girder or shear_building)")
     try:
         sc = named_scenario(name, n_floors=n_floors, **data)
     except ValueError as exc:
