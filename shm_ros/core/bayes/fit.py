@@ -23,7 +23,8 @@ from .pairing import mac, pair_modes
 def modal_fit(predictor: ModalPredictor, obs: ModalObservations, theta: np.ndarray) -> dict:
     f_model, phi_model = predictor(np.atleast_2d(theta))
     f_ref = obs.mean_frequencies()
-    phi_ref = obs.reference_shapes() if obs.has_shapes else None
+    shapes = obs.has_shapes and list(predictor.sensor_ids) == list(obs.sensor_ids)
+    phi_ref = obs.reference_shapes() if shapes else None
     idx = pair_modes(f_ref, phi_ref, f_model, phi_model if phi_ref is not None else None)[0]
     fp = f_model[0, idx]
     rel = (obs.frequencies_hz - fp[None]) / obs.frequencies_hz
@@ -33,7 +34,7 @@ def modal_fit(predictor: ModalPredictor, obs: ModalObservations, theta: np.ndarr
         "modes": [],
     }
     macs = np.full(obs.n_modes, np.nan)
-    if obs.has_shapes:
+    if shapes:
         assert obs.shapes is not None
         for k in range(obs.n_modes):
             rows = obs.shapes[:, k, :]
