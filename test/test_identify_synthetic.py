@@ -96,3 +96,29 @@ def test_two_A_and_mpc_remove_spurious_clusters_and_keep_truth():
     assert plain_spurious >= 2, "campaign too clean to show the filter: " + msg
     assert filtered_spurious <= 0.5 * plain_spurious, msg
     assert lost == 0, msg
+
+
+def test_jackknife_uncertainty_covers_the_truth():
+    """The reported frequency/damping standard deviations are meaningful: pooled over modes 1-4
+    and the windows, the truth lies within two reported standard deviations at least 80 % of the
+    time (a calibrated Gaussian would give 95 %), and the deviations are not inflated either."""
+    zf, zz = [], []
+    for seed in SEEDS:
+        y, fs, truth, names = so.ambient_record(seed, noise=0.05)
+        res = identify_window_detailed(Window(f"syn{seed}", 0, fs, names, np.array(y)),
+                                       IdentifyConfig(uncertainty=True))
+        modes = res.estimate.modes
+        idx = so.match_modes(truth, np.array([m.frequency_hz for m in modes]))[:4]
+        for k, j in enumerate(idx):
+            if j < 0:
+                continue
+            m = modes[j]
+            assert np.isfinite(m.frequency_std_hz) and np.isfinite(m.damping_std)
+            zf.append((m.frequency_hz - truth.frequency_hz[k]) / m.frequency_std_hz)
+            zz.append((m.damping_ratio - truth.damping_ratio[k]) / m.damping_std)
+    zf, zz = np.abs(zf), np.abs(zz)
+    msg = (f"|z|<=2: frequency {np.mean(zf <= 2):.2f}, damping {np.mean(zz <= 2):.2f}; "
+           f"median |z|: {np.median(zf):.2f}, {np.median(zz):.2f}")
+    print(msg)
+    assert np.mean(zf <= 2) >= 0.8 and np.mean(zz <= 2) >= 0.8, msg
+    assert np.median(zf) >= 0.25 and np.median(zz) >= 0.25, "standard deviations inflated: " + msg
