@@ -113,6 +113,16 @@ def test_v2_real_record_header_and_values(tmp_path):
     assert ws[0].is_event and ws[0].pga_m_s2 > 0.5
 
 
+def test_v2_file_with_several_channel_sections(tmp_path):
+    with zipfile.ZipFile(V2_ZIP) as z:
+        a, b = z.read("CHAN002.V2").decode("latin-1"), z.read("CHAN007.V2").decode("latin-1")
+    (tmp_path / "two.v2").write_text(a + b, encoding="latin-1")  # each section ends with a /& line
+    (rec,) = read_v2(tmp_path / "two.v2")
+    assert rec.channel_names == ["chan2", "chan7"] and rec.samples.shape == (12800, 2)
+    (full,) = read_v2(V2_ZIP)
+    assert np.array_equal(rec.samples, full.samples[:, [1, 6]])
+
+
 def test_v2_damaged_text_names_file_and_line():
     with zipfile.ZipFile(V2_ZIP) as z:
         text = z.read("CHAN001.V2").decode("latin-1")

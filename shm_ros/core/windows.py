@@ -644,9 +644,6 @@ class IngestCore:
         cm = self._chan_max[col]
         self._chan_max[col] = tmax if cm is None else max(cm, tmax)
 
-    def _half_period_ns(self) -> float:
-        return 0.0 if self._rate is None else 0.5e9 / self._rate
-
     def _final_ns(self) -> int | None:
         maxima = [m for m in self._chan_max if m is not None]
         if not maxima:
