@@ -476,3 +476,20 @@ def test_grid_follows_a_drifting_clock(ppm):
     assert ws[1].sample_rate_hz == pytest.approx(FS * (1 + ppm * 1e-6), rel=2e-5)
     assert ws[1].start_ns == pytest.approx(base[12000], abs=0.2 * P)
     assert "clock_drift" in codes(core) and not ({"gap", "unsnappable"} & codes(core))
+
+
+def test_imu_in_g_found_from_the_gravity_magnitude():
+    rng = np.random.default_rng(41)
+    n = int(10 * FS)
+    t = T0 + np.arange(n) * P
+    tilt = np.array([0.6, 0.0, 0.8])  # mounted tilted: gravity split over x and z
+    core = IngestCore(ChannelMap.simple({"h": "y"}), IngestConfig(window_s=10.0, max_latency_s=float("inf")))
+    core.add_imu_array("h", t, tilt + 0.002 * rng.standard_normal((n, 3)))  # values in g
+    (w,) = core.flush()
+    diags = [d for d in core.diagnostics if d.code == "units"]
+    assert diags and "look" in diags[0].message and diags[0].source == "accel/h.linear_acceleration"
+    assert np.allclose(w.samples[:, 0], 0.0, atol=0.02)  # y axis, not rescaled
+    ok = IngestCore(ChannelMap.simple({"h": "y"}), IngestConfig(window_s=10.0, max_latency_s=float("inf")))
+    ok.add_imu_array("h", t, 9.80665 * tilt + 0.02 * rng.standard_normal((n, 3)))
+    ok.flush()
+    assert "units" not in codes(ok)

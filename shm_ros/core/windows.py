@@ -54,7 +54,8 @@ channel mostly absent  coverage < ``min_coverage`` in a span   channel ``dropped
 dead / stuck channel   peak-to-peak <= ``dead_ptp_m_s2`` or    status ``dead`` (values kept)
                        longest constant run > half the window
 implausible units      static level ~1 (g) / ~981 (cm/s^2) on  warning + window note; values NOT rescaled
-                       a channel declared m/s^2
+                       a channel declared m/s^2, or the Imu's
+                       |linear_acceleration| at rest
 unknown units string   AccelBlock ``units``                    block rejected (error), nothing guessed
 rate mismatch          block rate / channel rate != grid rate  block rejected / channel reported (error)
 malformed message      shape, types, non-finite stamp          message rejected (error)
@@ -359,6 +360,7 @@ class IngestCore:
         self._imu_pending_n = 0
         self._rate: float | None = self.config.sample_rate_hz
         self._rate_probe: dict[str, list[int]] = {}
+        self._gravity_checked: set[str] = set()
         self._seq = 0
         self._chan_max: list[int | None] = [None] * self.n_channels
         self._due_ns: int | None = None  # process when the stream's final time passes this
@@ -427,6 +429,8 @@ class IngestCore:
         if t.size == 0:
             return
         self._probe_rate(topic_id, t)
+        if topic_id not in self._gravity_checked and t.size >= 64:
+            self._check_gravity(topic_id, a)
         seq = self._next_seq(t.size)
         for col, axis, sign in routes:
             v = a[:, axis] if sign == 1.0 else a[:, axis] * sign
@@ -607,6 +611,26 @@ class IngestCore:
                 self._reject(f"accel/{topic_id}.linear_acceleration", f"non-numeric values: {exc}")
                 continue
             self.add_imu_array(topic_id, t, xyz)
+
+    def _check_gravity(self, topic_id: str, a: np.ndarray) -> None:
+        """An Imu at rest reads |a| = g on its three axes together: ~1 means g, ~981 cm/s^2."""
+        self._gravity_checked.add(topic_id)
+        mag = float(np.nanmedian(np.sqrt(np.sum(a * a, axis=1))))
+        guess = None
+        if 0.85 < mag < 1.15:
+            guess = "g"
+        elif 850 < mag < 1150:
+            guess = "cm/s^2"
+        elif 8500 < mag < 11500:
+            guess = "mm/s^2"
+        if guess:
+            self._diag(WARN, "units", f"accel/{topic_id}.linear_acceleration",
+                       f"|linear_acceleration| = {mag:.4g} at rest looks like {guess}, not m/s^2 "
+                       "(REP-145: m/s^2 with gravity): values NOT rescaled")
+        elif not 0 < mag < 50 and math.isfinite(mag):
+            self._diag(WARN, "units", f"accel/{topic_id}.linear_acceleration",
+                       f"|linear_acceleration| = {mag:.4g} m/s^2 is implausible for a structure "
+                       "(expected about 9.81 with gravity): values NOT rescaled")
 
     def _probe_rate(self, topic_id: str, t: np.ndarray) -> None:
         if self._rate is not None:
