@@ -28,9 +28,9 @@ CONFIG = UpdateConfig(sampler="emcee", evidence=False, n_chains=24,
 
 CASES = {
     "building": dict(make=lambda: (spec_and_model(building_dict()), spec_and_model(building_dict())[1]),
-                     truth=np.array([0.93, 1.06, 0.97])),
+                     truth=np.array([0.93, 1.06, 0.97]), reduction="iirs"),
     "girder": dict(make=lambda: (spec_and_model(girder_dict(10)), spec_and_model(girder_dict(40))[1]),
-                   truth=np.array([1.06, 0.88])),
+                   truth=np.array([1.06, 0.88]), reduction="auto"),
 }
 _cache: dict = {}
 
@@ -49,7 +49,7 @@ def _run(case: str, seed: int, n_windows: int):
         spec, model, truth_model, sensors = _setup(case)
         rng = np.random.default_rng(1000 * seed + n_windows)
         obs = synth_modal(truth_model, CASES[case]["truth"], sensors, n_windows, rng)
-        cfg = UpdateConfig(**{**CONFIG.__dict__, "seed": seed})
+        cfg = UpdateConfig(**{**CONFIG.__dict__, "seed": seed, "reduction": CASES[case]["reduction"]})
         _cache[key] = update(model, obs, cfg, priors=spec.parameters)
     return _cache[key]
 
@@ -69,9 +69,11 @@ def test_credible_interval_coverage(case):
     std = np.array([[p.parameters[n].std for n in names] for p in posts])
     ok = (np.abs(mean - truth) <= 0.03 * np.abs(truth)) | (np.abs(mean - truth) <= 2 * std)
     assert ok.all(), f"mean far from truth: {mean[~ok]} (std {std[~ok]})"
-    # the reduction is what the building case exercises: make sure it was used
+    # the building case exercises IIRS reduction inside the likelihood: make sure it was used
     if case == "building":
-        assert all(p.diagnostics["rhat_max"] < CONFIG.rhat_target + 0.05 for p in posts)
+        assert all(p.diagnostics["predictor"] == "ReducedModalPredictor" for p in posts)
+    print(f"{case}: R-hat max over runs {max(p.diagnostics['rhat_max'] for p in posts):.4f}, "
+          f"ESS min {min(p.diagnostics['ess_min'] for p in posts):.0f}")
 
 
 @pytest.mark.parametrize("case", ["building", "girder"])
