@@ -161,3 +161,12 @@ def test_identify_window_on_a_simple_record_and_config_errors():
         identify_window(w, IdentifyConfig(reference_channels=["nope"]))
     with pytest.raises(ValueError, match="unknown option"):
         IdentifyConfig.from_dict({"stability": {"freq_tol": 0.01, "bogus": 1}})
+
+
+def test_example_configuration_loads(shared_dir):
+    import yaml
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "identify.yaml"
+    cfg = IdentifyConfig.from_dict(yaml.safe_load(path.read_text()))
+    assert cfg.preprocess.lowpass_hz == 20.0 and cfg.stability.two_a_mac_min == 0.9

@@ -131,6 +131,7 @@ def run(args: argparse.Namespace) -> int:
         if d.level >= 2:
             print(str(d), file=sys.stderr)
     plots = Path(args.plots) if args.plots else None
+    cfg.spectrum = plots is not None
     records = []
     n_ok = 0
     for w in res.windows:

@@ -43,6 +43,7 @@ class IdentifyConfig:
     exclude_input: bool = True  # output-only methods leave the window's input channel out
     uncertainty: bool = True  # jackknife over data blocks (SSI-cov)
     uncertainty_blocks: int = 10
+    spectrum: bool = False  # keep the mean output spectrum in the diagram (for plots)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -171,9 +172,10 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
              for p, sf, sz in zip(picked, std_f, std_z)]
     est = ModalEstimate(window_id="", start_ns=0, end_ns=int(round(data.shape[0] / fs * 1e9)),
                         sensor_ids=out_names, modes=modes, method=cfg.method)
-    f_sp, p_sp = sig.welch(y, fs=fs, nperseg=min(4096, y.shape[0]), axis=0)
-    diagram = Diagram(poles=poles, flags=flags, picked=picked, singular_values=model.singular_values,
-                      spectrum_hz=f_sp, spectrum=p_sp.mean(axis=1))
+    diagram = Diagram(poles=poles, flags=flags, picked=picked, singular_values=model.singular_values)
+    if cfg.spectrum:
+        f_sp, p_sp = sig.welch(y, fs=fs, nperseg=min(4096, y.shape[0]), axis=0)
+        diagram.spectrum_hz, diagram.spectrum = f_sp, p_sp.mean(axis=1)
     return IdentificationResult(est, diagram, fs, out_names, notes)
 
 
