@@ -85,3 +85,25 @@ def test_errors_name_the_problem(problem):
         update(model, obs, UpdateConfig(), priors=spec.parameters[1:])
     with pytest.raises(TypeError, match="AccelerationRecord"):
         update(model, obs, UpdateConfig(likelihood="time"), priors=spec.parameters)
+
+
+def test_summary_record_matches_the_message_definition(reference):
+    """Every field of PosteriorSummary.msg / ParameterEstimate.msg (except the header) is filled."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "msg_defs" / "msg"
+
+    def fields(name):
+        out = []
+        for line in (root / name).read_text().splitlines():
+            line = line.split("#")[0].strip()
+            if line:
+                out.append(line.split()[1])
+        return out
+
+    rec = reference.summary_record("eight-story")
+    assert set(fields("PosteriorSummary.msg")) - {"header"} == set(rec)
+    assert set(fields("ParameterEstimate.msg")) == set(rec["parameters"][0])
+    assert rec["n_windows"] == 50 and rec["sampler"] == "emcee" and np.isnan(rec["log_evidence"])
+    p = rec["parameters"][0]
+    assert p["ci95_low"] < p["mean"] < p["ci95_high"] and p["rhat"] < 1.1 and p["ess"] > 100

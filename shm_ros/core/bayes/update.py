@@ -111,6 +111,32 @@ class Posterior:
     def theta(self, which: str = "mean") -> np.ndarray:
         return np.array([getattr(self.parameters[n], which) for n in self.parameter_names])
 
+    def summary_record(self, structure_name: str = "") -> dict[str, Any]:
+        """The fields of ``shm_interfaces/msg/PosteriorSummary`` (and of its ``ParameterEstimate``
+        items), by name, for the one place that converts to messages (``shm_ros.ros.convert``)."""
+        d = self.diagnostics
+        nan = float("nan")
+        return {
+            "structure_name": structure_name,
+            "sampler": str(d.get("sampler", "")),
+            "likelihood": str(d.get("likelihood", "")),
+            "n_windows": int(d.get("n_windows", 0)),
+            "parameters": [{
+                "name": n, "map": s.map, "mean": s.mean, "std": s.std,
+                "ci95_low": s.ci95[0], "ci95_high": s.ci95[1],
+                "rhat": float(d.get("rhat", {}).get(n, nan)),
+                "ess": float(d.get("ess_bulk", {}).get(n, nan)),
+            } for n, s in self.parameters.items()],
+            "rhat_max": float(d.get("rhat_max", nan)),
+            "ess_min": float(d.get("ess_min", nan)),
+            "acceptance": float(d.get("acceptance", nan)),
+            "frequency_rmse_pct": float(self.fit.get("frequency_rmse_pct", nan) or nan),
+            "mac_mean": float(self.fit.get("mac_mean") if self.fit.get("mac_mean") is not None else nan),
+            "log_evidence": nan if self.log_evidence is None else float(self.log_evidence),
+            "converged": bool(d.get("converged", False)),
+            "warnings": list(self.warnings),
+        }
+
     def to_dict(self) -> dict[str, Any]:
         """The ``posterior.json`` payload of contracts section 6 (without schema/provenance)."""
         return {
