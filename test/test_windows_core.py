@@ -493,3 +493,19 @@ def test_imu_in_g_found_from_the_gravity_magnitude():
     ok.add_imu_array("h", t, 9.80665 * tilt + 0.02 * rng.standard_normal((n, 3)))
     ok.flush()
     assert "units" not in codes(ok)
+
+
+def test_channel_at_another_rate_is_dropped_not_shredding_the_window():
+    rng = np.random.default_rng(51)
+    n = int(20 * FS)
+    core = offline(["a", "b", "slow"], window_s=10.0)
+    core.add_imu_array("a", T0 + np.arange(n) * P, z3(rng.standard_normal(n)))
+    core.add_imu_array("b", T0 + np.arange(n) * P, z3(rng.standard_normal(n)))
+    xs = rng.standard_normal(n // 2)
+    core.add_imu_array("slow", T0 + np.arange(n // 2) * 2 * P, z3(xs))  # a 100 Hz sensor
+    ws = core.flush()
+    assert [w.n_samples for w in ws] == [2000, 2000]
+    assert all(w.channel_status[2] == "dropped" for w in ws)
+    assert np.array_equal(ws[0].samples[::2, 2], xs[:1000])  # its samples are kept where they are
+    assert np.isnan(ws[0].samples[1::2, 2]).all()
+    assert any(d.code == "rate_mismatch" and "accel/slow" in d.source for d in core.diagnostics)

@@ -57,7 +57,8 @@ implausible units      static level ~1 (g) / ~981 (cm/s^2) on  warning + window 
                        a channel declared m/s^2, or the Imu's
                        |linear_acceleration| at rest
 unknown units string   AccelBlock ``units``                    block rejected (error), nothing guessed
-rate mismatch          block rate / channel rate != grid rate  block rejected / channel reported (error)
+rate mismatch          block rate / channel rate != grid rate  block rejected / channel ``dropped`` for the
+                                                               window (error); never resampled
 malformed message      shape, types, non-finite stamp          message rejected (error)
 unknown topic/channel  not in the channel map                  ignored, reported once (warning)
 late sample            stamp before the last emitted window    rejected, reported
@@ -879,6 +880,7 @@ class IngestCore:
         span_start = self._ge(k0)
         span_end = self._ge(k1)
         notes: list[str] = []
+        mismatch = np.zeros(C, bool)
         for c, b in enumerate(self._buf):
             sel = (b.t < span_end)
             if not sel.any():
@@ -946,16 +948,18 @@ class IngestCore:
                 r = estimate_rate(t[:4096], nominal=False)
                 if r is not None:
                     if abs(r - self._rate) > self.config.rate_tolerance * self._rate:
+                        mismatch[c] = True
                         self._diag(ERROR, "rate_mismatch", self._src(c),
-                                   f"samples at {r:.4g} Hz, grid at {self._rate:g} Hz: not resampled "
-                                   "(collisions/gaps follow)", int(t[0]))
+                                   f"samples at {r:.4g} Hz, grid at {self._rate:g} Hz: not resampled; "
+                                   "the channel is dropped for this window", int(t[0]))
         self._committed_ns = span_end
         # channels mostly absent are dropped for this span instead of splitting it everywhere
         cover = filled.mean(axis=0)
-        dropped = cover < self.config.min_coverage
+        dropped = (cover < self.config.min_coverage) | mismatch
         for c in np.flatnonzero(dropped):
             self._diag(WARN, "channel_dropped", self._src(c),
-                       f"only {cover[c]:.0%} of the samples present: channel dropped for "
+                       f"{'wrong rate' if mismatch[c] else f'only {cover[c]:.0%} of the samples present'}: "
+                       "channel dropped for "
                        f"[{iso_utc(self._gt(k0))}, {iso_utc(self._gt(k1))})", self._gt(k0))
             flags[~filled[:, c], c] |= np.uint8(SampleFlag.MISSING)
         active = ~dropped
