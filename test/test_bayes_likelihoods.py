@@ -132,3 +132,22 @@ def test_unknown_sensor_is_named(building):
     spec, model, obs = building
     with pytest.raises(ValueError, match="'f3'"):
         FullModalPredictor(model, ["f2", "f3"], 4)
+
+
+def test_posterior_expands_measured_shapes_to_unmeasured_floors(building):
+    """The data's shapes at floors 2/4/6/8, expanded with the IIRS transformation of the MAP model,
+    match the true shapes at all 8 floors (the building paper's mode-shape expansion)."""
+    from shm_ros.core.bayes.update import UpdateConfig, update
+
+    spec, model, obs = building
+    post = update(model, obs, UpdateConfig(n_steps=200, rhat_target=1.2, ess_target=100,
+                                           evidence=False, reduction="iirs"), priors=spec.parameters)
+    mm = post.map_modes
+    assert mm["dof_labels"] == model.dof_labels and len(mm["observed_shapes_expanded"]) == 4
+    true = model.modes(TRUTH, 4).shapes
+    unmeasured = [i for i in range(8) if f"f{i + 1}" not in SENSORS]
+    for k in range(4):
+        exp_k = np.array(mm["observed_shapes_expanded"][k])
+        assert mac(exp_k, true[:, k]) > 0.995
+        assert mac(exp_k[unmeasured], true[unmeasured, k]) > 0.99
+        assert mac(np.array(mm["model_shapes"][k]), true[:, k]) > 0.9999

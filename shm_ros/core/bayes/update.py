@@ -107,6 +107,9 @@ class Posterior:
     priors: dict[str, dict[str, Any]] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     timing_s: dict[str, float] = field(default_factory=dict)
+    # modes of the MAP model at every DOF, paired to the data's modes; the data's own (reference)
+    # shapes expanded from the sensors to every DOF with the IIRS transformation at the MAP
+    map_modes: dict[str, Any] = field(default_factory=dict)
 
     def theta(self, which: str = "mean") -> np.ndarray:
         return np.array([getattr(self.parameters[n], which) for n in self.parameter_names])
@@ -150,6 +153,7 @@ class Posterior:
             "priors": self.priors,
             "warnings": self.warnings,
             "timing_s": self.timing_s,
+            "map_modes": self.map_modes,
         }
 
 
@@ -318,6 +322,8 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         fit = lik.fit(x_map[:d])
         fit_nominal = lik.fit(model.nominal_theta())
 
+    map_modes = _map_modes(model, observations, x_map[:d], fit) if predictor is not None else {}
+
     log_z = log_z_err = None
     if config.evidence:
         t2 = time.perf_counter()
@@ -333,7 +339,36 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         parameter_names=list(jp.names), parameters=summary, samples=flat[:, :d].copy(),
         log_prob=flat_lp, chains=chains.chains, chain_names=names, diagnostics=diag, fit=fit,
         fit_nominal=fit_nominal, log_evidence=log_z, log_evidence_err=log_z_err, noise=noise,
-        priors={p.name: p.describe() for p in jp.priors}, warnings=warnings_, timing_s=timing)
+        priors={p.name: p.describe() for p in jp.priors}, warnings=warnings_, timing_s=timing,
+        map_modes=map_modes)
+
+
+def _map_modes(model: AffineModel, obs: ModalObservations, theta: np.ndarray, fit: dict) -> dict:
+    """MAP model modes at all DOFs (paired as in ``fit``) and the data's shapes expanded by IIRS."""
+    idx = [m["model_mode_index"] - 1 for m in fit["modes"]]
+    sol = model.modes(theta, max(idx) + 1)
+    out: dict[str, Any] = {
+        "mode_numbers": list(obs.mode_numbers),
+        "dof_labels": list(model.dof_labels),
+        "frequencies_hz": [float(sol.frequencies_hz[i]) for i in idx],
+        "model_shapes": [_unit_max(sol.shapes[:, i]).tolist() for i in idx],
+        "observed_shapes_expanded": None,
+    }
+    ref = obs.reference_shapes() if obs.has_shapes else None
+    if ref is not None and np.all(np.isfinite(ref)):
+        try:
+            from shm_ros.core.models.reduction import expand_sensor_shapes
+
+            full = expand_sensor_shapes(model, obs.sensor_ids, ref.T, theta)
+            out["observed_shapes_expanded"] = [_unit_max(full[:, k]).tolist() for k in range(full.shape[1])]
+        except (KeyError, ValueError, np.linalg.LinAlgError):
+            pass  # sensors not on DOFs (girder read by shape functions): no expansion
+    return out
+
+
+def _unit_max(v: np.ndarray) -> np.ndarray:
+    k = int(np.argmax(np.abs(v)))
+    return v / v[k] if v[k] != 0 else v
 
 
 def safe_loglik(lik: Any, x: np.ndarray, d: int) -> np.ndarray:
