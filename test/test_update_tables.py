@@ -69,3 +69,20 @@ def test_structural_errors_name_the_file(tmp_path, content, msg):
 def test_missing_file(tmp_path):
     with pytest.raises(TableError, match="no such file"):
         read_tracked_modes(tmp_path / "nope.csv")
+
+
+def test_referring_frequencies_to_a_temperature_removes_the_trend():
+    rng = np.random.default_rng(3)
+    temp = rng.uniform(-5, 25, 60)
+    f = np.column_stack([2.0 - 0.004 * (temp - 10), 5.0 - 0.01 * (temp - 10)])
+    f += 0.002 * rng.standard_normal(f.shape)
+    temp[7] = np.nan
+    obs = ModalObservations(np.arange(60.0), [1, 2], f, covariates={"temperature_c": temp})
+    ref = obs.referred_to("temperature_c", 10.0)
+    assert ref.n_windows == 59
+    assert np.all(np.std(ref.frequencies_hz, axis=0) < 0.003)
+    assert np.all(np.std(obs.frequencies_hz[np.isfinite(temp)], axis=0) > 0.03)
+    np.testing.assert_allclose(ref.frequencies_hz.mean(axis=0), [2.0, 5.0], atol=0.002)
+    assert "slopes per mode" in ref.notes[-1]
+    with pytest.raises(ValueError, match="no covariate column 'wind'"):
+        obs.referred_to("wind")

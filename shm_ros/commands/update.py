@@ -50,6 +50,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--n-live", type=int, default=300, help="live points of nested sampling")
     p.add_argument("--study", action="store_true",
                    help="run the prior x (alpha, beta) sweep and print the RMSE/MAC table")
+    p.add_argument("--refer-to", metavar="COVARIATE[=VALUE]", default=None,
+                   help="remove a linear dependence of the frequencies on a covariate column "
+                        "(e.g. temperature_c=10) before updating")
     p.add_argument("--window", type=float, default=None, help="--bag: window length, s")
     p.add_argument("--seed", type=int, default=0, help="random seed")
     p.add_argument("--no-plots", action="store_true", help="skip corner and trace plots")
@@ -92,12 +95,16 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
     from shm_ros.core.bayes.pairing import observations_from_estimates
     from shm_ros.core.identify import identify_window
 
+    from threadpoolctl import threadpool_limits
+
     estimates = []
-    for w in windows:
-        try:
-            estimates.append(identify_window(w))
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            print(f"shm-ros update: note: window {w.window_id}: not identified ({exc})", file=sys.stderr)
+    with threadpool_limits(1, "blas"):  # same result whatever the machine's thread count
+        for w in windows:
+            try:
+                estimates.append(identify_window(w))
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                print(f"shm-ros update: note: window {w.window_id}: not identified ({exc})",
+                      file=sys.stderr)
     sensors = [s for s in observed if any(s in e.sensor_ids for e in estimates)]
     if not sensors:
         raise ValueError(f"{args.bag}: no identified window covers a sensor of the model")
@@ -152,6 +159,9 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"{args.structure}: field 'parameters': nothing to update")
         model = build_model(spec)
         obs = _observations(args, spec, model)
+        if args.refer_to:
+            name, _, value = args.refer_to.partition("=")
+            obs = obs.referred_to(name, float(value) if value else None)
         for note in getattr(obs, "notes", []):
             print(f"shm-ros update: note: {note}", file=sys.stderr)
         config = _config(args)

@@ -103,3 +103,38 @@ class ModalObservations:
             signs[signs == 0] = 1.0
             out[k] = np.nanmean(rows * signs[:, None], axis=0)
         return out
+
+    def referred_to(self, covariate: str, reference: float | None = None) -> "ModalObservations":
+        """Frequencies with a linear dependence on ``covariate`` removed, referred to ``reference``.
+
+        Per mode, ``f = a + b (c - reference)`` is fitted by least squares over the windows where
+        both are present and ``b (c - reference)`` is subtracted; windows without the covariate are
+        dropped. Use before updating when e.g. temperature moves all frequencies together, so that
+        the windows are closer to independent given theta (docs/updating.md). ``reference``
+        defaults to the covariate's mean.
+        """
+        if covariate not in self.covariates:
+            raise ValueError(f"no covariate column {covariate!r} (have: {sorted(self.covariates)})")
+        c = np.asarray(self.covariates[covariate], dtype=float)
+        keep = np.isfinite(c)
+        if keep.sum() < 3:
+            raise ValueError(f"covariate {covariate!r} is present in fewer than 3 windows")
+        out = self.subset(np.flatnonzero(keep))
+        c = c[keep]
+        ref = float(np.mean(c)) if reference is None else float(reference)
+        f = out.frequencies_hz.copy()
+        slopes = []
+        for k in range(out.n_modes):
+            ok = np.isfinite(f[:, k])
+            if ok.sum() < 3:
+                slopes.append(0.0)
+                continue
+            b = np.polyfit(c[ok] - ref, f[ok, k], 1)[0]
+            f[ok, k] -= b * (c[ok] - ref)
+            slopes.append(float(b))
+        out.frequencies_hz = f
+        out.notes = list(out.notes) + [
+            f"frequencies referred to {covariate} = {ref:.3g} (slopes per mode: "
+            + ", ".join(f"{s:.3g}" for s in slopes) + " Hz per unit)"]
+        return out
+
