@@ -509,3 +509,19 @@ def test_channel_at_another_rate_is_dropped_not_shredding_the_window():
     assert np.array_equal(ws[0].samples[::2, 2], xs[:1000])  # its samples are kept where they are
     assert np.isnan(ws[0].samples[1::2, 2]).all()
     assert any(d.code == "rate_mismatch" and "accel/slow" in d.source for d in core.diagnostics)
+
+
+def test_a_fault_that_goes_on_is_reported_in_every_window():
+    rng = np.random.default_rng(61)
+    n = int(40 * FS)
+    x = rng.standard_normal(n)
+    x[::100] = np.nan  # 20 NaNs in each 10 s window
+    core = offline(["a"], window_s=10.0, max_repeats=2)
+    core.add_imu_array("a", T0 + np.arange(n) * P, z3(x))
+    ws = core.flush()
+    nan_diags = [d for d in core.diagnostics if d.code == "nan"]
+    assert len(ws) == 4 and len(nan_diags) == 4 and all(d.count == 20 for d in nan_diags)
+    assert sum(core.diagnostic_counts[k] for k in core.diagnostic_counts if k[0] == "nan") == 80
+    core.add_imu("zz", T0, 0.0, 0.0, 1.0)
+    core.add_imu("zz", T0 + P, 0.0, 0.0, 1.0)
+    assert sum(d.code == "unknown_topic" for d in core.diagnostics) == 1

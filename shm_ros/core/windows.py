@@ -99,6 +99,7 @@ UNIT_FACTORS = {
 }
 
 OK, WARN, ERROR = 0, 1, 2  # the levels of diagnostic_msgs/DiagnosticStatus
+MAX_KEPT_DIAGNOSTICS = 10_000  # the newest are kept; counts are kept for all
 LEVEL_NAMES = {OK: "info", WARN: "warning", ERROR: "error"}
 
 
@@ -235,7 +236,7 @@ PARAMETER_HELP: dict[str, str] = {
     "pga_threshold_m_s2": "peak |a - median| that triggers an event (pga, either, both)",
     "check_interval_s": "streaming: at most this often (stamp time) a burst end is looked for, s",
     "rate_tolerance": "relative difference of a channel's rate from the grid's that is reported",
-    "max_repeats": "identical diagnostics kept one by one before they are only counted",
+    "max_repeats": "diagnostics of one code and source recorded between two windows (the rest counted)",
 }
 
 
@@ -382,6 +383,7 @@ class IngestCore:
         self._windows: list[Window] = []
         self._diags: list[Diagnostic] = []
         self._diag_new = 0
+        self._records_since: Counter = Counter()  # records per (code, source) since the last window
         self.diagnostic_counts: Counter = Counter()  # (code, source) -> occurrences
         self.dropped: list[DroppedSpan] = []
         self.stats = IngestStats()
@@ -557,7 +559,8 @@ class IngestCore:
 
     @property
     def diagnostics(self) -> list[Diagnostic]:
-        """Every diagnostic kept so far (repeats beyond ``max_repeats`` only counted)."""
+        """The diagnostics kept (the newest ``MAX_KEPT_DIAGNOSTICS`` or more; repeats of one code
+        and source beyond ``max_repeats`` between two windows are only counted)."""
         return list(self._diags)
 
     # ------------------------------------------------------------------ internals: feeding
@@ -570,10 +573,17 @@ class IngestCore:
     def _diag(self, level: int, code: str, source: str, message: str, stamp_ns: int | None = None,
               count: int = 1, once: bool = False) -> None:
         key = (code, source)
+        first = key not in self.diagnostic_counts
         self.diagnostic_counts[key] += count
-        if self.diagnostic_counts[key] - count < (1 if once else self.config.max_repeats):
+        # records of one (code, source) are limited between two emitted windows (so that a live
+        # node keeps reporting a fault that goes on), and to one for "once" notices
+        if (first if once else self._records_since[key] < self.config.max_repeats):
+            self._records_since[key] += 1
             self._diags.append(Diagnostic(level, code, source, message, stamp_ns, count))
             self._diag_new += 1
+            if len(self._diags) > 2 * MAX_KEPT_DIAGNOSTICS:  # bounded memory in a long-running node
+                del self._diags[:MAX_KEPT_DIAGNOSTICS]
+                self._diag_new = min(self._diag_new, len(self._diags))
 
     def _reject(self, source: str, message: str, stamp_ns: int | None = None) -> None:
         self.stats.messages_rejected += 1
@@ -1099,6 +1109,7 @@ class IngestCore:
         if is_event:
             self._diag(OK, "event", "accel", f"event detected in {where}, PGA {pga:.3g} m/s^2", start_ns)
         self.stats.windows += 1
+        self._records_since.clear()
         self.stats.samples_windowed += n * C - int(((flags & SampleFlag.MISSING) != 0).sum())
         self._windows.append(w)
 
