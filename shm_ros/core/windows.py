@@ -379,6 +379,7 @@ class IngestCore:
         self._temp_t = np.empty(0, np.int64)
         self._temp_v = np.empty(0, np.float64)
         self._channel_factor: list[float | None] = [None] * self.n_channels  # declared units seen
+        self._seen_source: list[str | None] = [None] * self.n_channels  # topic.field that fed it
         self._units_warned: set[tuple[int, str]] = set()
         self._windows: list[Window] = []
         self._diags: list[Diagnostic] = []
@@ -657,6 +658,7 @@ class IngestCore:
 
     def _append(self, col: int, t: np.ndarray, v: np.ndarray, seq: np.ndarray, source: str) -> None:
         buf = self._buf[col]
+        self._seen_source[col] = source
         if self._committed_ns is not None:
             late = t < self._committed_ns
             if late.any():
@@ -1014,6 +1016,9 @@ class IngestCore:
             self._emit(t_s, vals[s:e], flags[s:e], dropped, piece_notes)
 
     def _src(self, c: int) -> str:
+        seen = self._seen_source[c]
+        if seen is not None:
+            return f"{seen} (sensor {self.channels[c]})"
         s = self.map.sources[c]
         out = []
         if s.imu_topic is not None:
