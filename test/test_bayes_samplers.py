@@ -21,8 +21,8 @@ def log_gauss(x: np.ndarray) -> np.ndarray:
 def log_banana(x: np.ndarray) -> np.ndarray:
     """Skewed (non-Gaussian) 2-D target with a hard bound at x0 > 0 (like a stiffness factor)."""
     x = np.atleast_2d(x)
-    out = -0.5 * ((np.log(np.clip(x[:, 0], 1e-300, None)) / 0.3) ** 2) - np.log(np.clip(x[:, 0], 1e-300, None)) \
-        - 0.5 * ((x[:, 1] - x[:, 0]) / 0.1) ** 2
+    lx = np.log(np.clip(x[:, 0], 1e-300, None))
+    out = -0.5 * (lx / 0.3) ** 2 - lx - 0.5 * ((x[:, 1] - x[:, 0]) / 0.1) ** 2
     return np.where(x[:, 0] > 0, out, -np.inf)
 
 
