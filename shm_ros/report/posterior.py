@@ -48,8 +48,9 @@ def posterior_plots(chains: np.ndarray, log_prob: np.ndarray, names: list[str], 
         fig.savefig(paths["corner"], dpi=90, bbox_inches="tight")
         plt.close(fig)
         axes = az.plot_trace(idata, var_names=names, compact=False,
-                             figsize=(10, 1.8 * len(names) + 1))
+                             figsize=(10, 2.4 * len(names) + 1))
         fig = np.ravel(axes)[0].get_figure()
+        fig.tight_layout()
         paths["trace"] = str(out_dir / "trace.png")
         fig.savefig(paths["trace"], dpi=80, bbox_inches="tight")
         plt.close(fig)
