@@ -531,10 +531,12 @@ def salvage_mcap(path: str | Path) -> Iterator[BagMessage]:
     Yields every message of every complete chunk in file order, then raises :class:`BagError`
     naming the file where the data ends or is damaged.
     """
-    from mcap.records import Channel, Message, Schema
-    from mcap.stream_reader import StreamReader
-
     path = Path(path)
+    try:
+        from mcap.records import Channel, Message, Schema
+        from mcap.stream_reader import StreamReader
+    except ImportError as exc:
+        raise BagError(f"{path}: cannot read it record by record without the 'mcap' package") from exc
     files = sorted(path.glob("*.mcap")) if path.is_dir() else [path]
     for f in files:
         schemas: dict[int, str] = {}
