@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from shm_ros.core.types import SampleFlag
-from shm_ros.core.windows import ChannelMap, IngestConfig, IngestCore, sta_lta
+from shm_ros.core.windows import ChannelMap, ChannelSource, IngestConfig, IngestCore, sta_lta
 
 T0 = 1_714_521_600_000_000_000  # 2024-05-01T00:00:00Z
 FS = 200.0
@@ -525,3 +525,51 @@ def test_a_fault_that_goes_on_is_reported_in_every_window():
     core.add_imu("zz", T0, 0.0, 0.0, 1.0)
     core.add_imu("zz", T0 + P, 0.0, 0.0, 1.0)
     assert sum(d.code == "unknown_topic" for d in core.diagnostics) == 1
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_streaming_with_delayed_topics_equals_offline(seed):
+    """Messages of different topics arrive out of step (each delayed by up to 0.4 s, a pause and a
+    gap in the stream): a live core with max_latency_s = 1 cuts the same windows as offline."""
+    rng = np.random.default_rng(500 + seed)
+    keep = np.ones(int(50 * FS), bool)
+    keep[int(18 * FS):int(19.5 * FS)] = False  # a 1.5 s pause: burst boundary
+    keep[int(31 * FS):int(31.2 * FS)] = False  # a 0.2 s gap: window split
+    k = np.flatnonzero(keep)
+    grid = T0 + k * P
+    data = {c: rng.standard_normal((k.size, 3)) for c in ("a", "b")}
+    stamps = {"a": grid, "b": grid + rng.integers(-P // 4, P // 4, k.size)}
+    stamps["b"][0] = grid[0] + 1
+    block = rng.standard_normal((k.size, 1))
+    events = []  # (arrival, kind, payload)
+    for c in ("a", "b"):
+        delay = rng.uniform(0, 0.4e9)
+        for i in range(k.size):
+            events.append((int(stamps[c][i] + delay), 0, (c, int(stamps[c][i]), *data[c][i])))
+    for j in range(0, k.size, 40):  # 0.2 s blocks of a DAQ channel (no block spans the gaps)
+        seg = slice(j, min(j + 40, k.size))
+        if k[seg.stop - 1] - k[j] != seg.stop - 1 - j:
+            continue
+        events.append((int(grid[seg.stop - 1]) + int(0.05e9), 1, (int(grid[j]), block[seg])))
+    events.sort(key=lambda e: e[0])
+    cmap = ChannelMap([ChannelSource("a", "a", "z"), ChannelSource("b", "b", "z"),
+                       ChannelSource("d", None, "z", "d")])
+    live = IngestCore(cmap, IngestConfig(window_s=5.0, max_latency_s=1.0))
+    off = IngestCore(cmap, IngestConfig(window_s=5.0, max_latency_s=float("inf")))
+    got = []
+    for _, kind, payload in events:
+        for core in (live, off):
+            if kind == 0:
+                core.add_imu(*payload)
+            else:
+                core.add_block(payload[0], FS, ["d"], payload[1])
+        got += live.pop_windows()
+    assert got, "windows come out while streaming"
+    got += live.flush()
+    ref = off.flush()
+    assert [w.start_ns for w in got] == [w.start_ns for w in ref]
+    assert [w.n_samples for w in got] == [w.n_samples for w in ref]
+    for a, b in zip(got, ref):
+        assert np.array_equal(a.samples, b.samples, equal_nan=True)
+    starts = [(w.start_ns - T0) / 1e9 for w in ref]
+    assert any(abs(s - 19.5) < 0.01 for s in starts)  # the second burst is counted from its start

@@ -360,6 +360,7 @@ class IngestCore:
                 self._block_routes.setdefault(s.block_channel, []).append((col, float(s.sign)))
         self._imu_pending: dict[str, tuple[list[int], list[float], list[float], list[float]]] = {}
         self._imu_pending_n = 0
+        self._busy = False  # inside a drain or a cut: no nested processing
         self._rate: float | None = self.config.sample_rate_hz
         self._rate_probe: dict[str, list[int]] = {}
         self._gravity_checked: set[str] = set()
@@ -600,6 +601,14 @@ class IngestCore:
             return
         pending, self._imu_pending = self._imu_pending, {}
         self._imu_pending_n = 0
+        busy, self._busy = self._busy, True  # every topic in first, then one look at the windows
+        try:
+            self._drain_topics(pending)
+        finally:
+            self._busy = busy
+        self._after_add()
+
+    def _drain_topics(self, pending: dict) -> None:
         for topic_id, (ts, xs, ys, zs) in pending.items():
             if not ts:
                 continue
@@ -691,7 +700,7 @@ class IngestCore:
         return int(np.median(maxima)) - self._latency_ns
 
     def _after_add(self) -> None:
-        if self._rate is None:
+        if self._rate is None or self._busy:
             return
         final = self._final_ns()
         if final is not None and (self._due_ns is None or final >= self._due_ns):
@@ -709,6 +718,13 @@ class IngestCore:
 
     def _process(self, final_ns: int | None) -> None:
         """Cut every window whose data is final (``final_ns`` None = end of stream)."""
+        busy, self._busy = self._busy, True
+        try:
+            self._process_now(final_ns)
+        finally:
+            self._busy = busy
+
+    def _process_now(self, final_ns: int | None) -> None:
         self._drain_imu()
         if self._rate is None:
             if final_ns is None and any(b.size for b in self._buf):
