@@ -329,11 +329,17 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         t2 = time.perf_counter()
         marginal = lik if getattr(lik, "variance", "marginal") == "marginal" else \
             _marginal_twin(model, observations, config)
-        ev = nested_evidence(lambda x: safe_loglik(marginal, x, d), jp, n_live=config.n_live,
-                             seed=config.seed)
+        saved = getattr(marginal, "predictor", None)
+        note = _one_point_predictor(model, marginal, x_map[:d], cov[:d, :d])
+        try:
+            ev = nested_evidence(lambda x: safe_loglik(marginal, x, d), jp, n_live=config.n_live,
+                                 seed=config.seed)
+        finally:
+            if saved is not None:
+                marginal.predictor = saved
         log_z, log_z_err = ev.log_evidence, ev.log_evidence_err
         timing["evidence_s"] = time.perf_counter() - t2
-        diag["evidence_method"] = ev.method
+        diag["evidence_method"] = ev.method + (f", {note}" if note else "")
     timing["total_s"] = time.perf_counter() - t0
     return Posterior(
         parameter_names=list(jp.names), parameters=summary, samples=flat[:, :d].copy(),
@@ -417,6 +423,34 @@ def _try_ritz(model: AffineModel, lik: Any, predictor: Any, x_map: np.ndarray, c
         lik.predictor = ritz
         return f"ritz({ritz.basis_size} of {model.n_dof} DOF; max freq error {ferr:.1e})"
     return None
+
+
+def _one_point_predictor(model: AffineModel, lik: Any, theta: np.ndarray, cov: np.ndarray) -> str | None:
+    """Nested sampling evaluates one point at a time, where the IIRS iteration's per-call cost
+    dominates; the full model gives the same modes (checked: 1e-6 in frequency, MAC, at 32 points
+    around the MAP) and is far cheaper per point for small models, so it is used for the evidence."""
+    from .forward import FullModalPredictor, ReducedModalPredictor
+
+    pred = getattr(lik, "predictor", None)
+    if not isinstance(pred, ReducedModalPredictor) or model.n_dof > 40:
+        return None
+    full = FullModalPredictor(model, pred.sensor_ids, pred.n_modes)
+    rng = np.random.default_rng(0)
+    L = np.linalg.cholesky(cov + 1e-300 * np.eye(theta.size))
+    pts = np.vstack([theta, theta + 6.0 * rng.standard_normal((31, theta.size)) @ L.T])
+    pts = pts[np.all(pts > 0, axis=1)]
+    f_r, p_r = pred(pts)
+    f_f, p_f = full(pts)
+    n = len(lik.stats.f_ref)
+    from .pairing import mac
+
+    ok = np.max(np.abs(f_r[:, :n] / f_f[:, :n] - 1)) < 1e-6
+    if p_r.shape[1]:
+        ok &= np.max(1 - mac(np.swapaxes(p_r[:, :, :n], 1, 2), np.swapaxes(p_f[:, :, :n], 1, 2))) < 1e-6
+    if not ok:
+        return None
+    lik.predictor = full
+    return "full model (equal to the IIRS model to 1e-6, cheaper per point)"
 
 
 def _marginal_twin(model: AffineModel, data: Any, config: UpdateConfig):
