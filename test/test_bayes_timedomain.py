@@ -67,3 +67,24 @@ def test_time_likelihood_recovers_story_stiffness():
         assert abs(s.mean - TRUTH[i]) <= 0.02 * TRUTH[i]
     assert post.fit["nrms_mean"] < 0.06
     assert set(post.noise) == {f"sigma2_accel_{c}" for c in CHANNELS}
+
+
+def test_sampled_channel_variance_integrates_to_marginal():
+    """One channel: integrating the sampled-variance likelihood over its IG prior gives the
+    marginal likelihood used by default."""
+    spec, model = spec_and_model(building_dict())
+    rec = _record(model, 3, seconds=6.0)
+    one = AccelerationRecord(rec.dt, rec.input_accel, rec.outputs[:, -1:], ["f8"])
+    marg = TimeDomainLikelihood(model, one)
+    samp = TimeDomainLikelihood(model, one, variance="sampled")
+    theta = TRUTH * 1.003
+    grid = np.linspace(np.log(1e-8), np.log(1e1), 6001)
+    X = np.column_stack([np.repeat(theta[None], grid.size, 0), grid])
+    ss = samp.residual_ss(theta)[0]  # one simulation; the grid only varies the variance
+    N = one.outputs.shape[0]
+    f = -0.5 * N * np.log(2 * np.pi * np.exp(grid)) - 0.5 * ss / np.exp(grid) + samp.extra_logprior(X[:, 3:])
+    m = f.max()
+    num = m + np.log(np.trapezoid(np.exp(f - m), grid))
+    assert abs(num - marg(theta[None])[0]) < 1e-3
+    # the sampled form itself evaluates to the same expression
+    assert abs(samp(X[:1])[0] - (f[0] - samp.extra_logprior(X[:1, 3:])[0])) < 1e-6 * abs(f[0])
