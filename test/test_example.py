@@ -16,7 +16,7 @@ def _t(text: str) -> datetime:
 def test_example_runs_through_the_node_graph_and_finds_the_true_modes(tmp_path):
     out = tmp_path / "example"
     run = subprocess.run([sys.executable, "-m", "shm_ros.cli", "example", "--out", str(out),
-                          "--windows", "2", "--window-s", "180"],
+                          "--windows", "2", "--window-s", "300"],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     assert "messages lost: 0" in run.stdout
@@ -29,8 +29,10 @@ def test_example_runs_through_the_node_graph_and_finds_the_true_modes(tmp_path):
         assert _t(w["start"]) == _t(tw["start"])
         found = [m["frequency_hz"] for m in w["modes"]]
         assert found == sorted(found)
-        for f_true in tw["frequencies_hz"][:3]:  # the first three true modes, within 1 %
-            assert min(abs(f - f_true) / f_true for f in found) < 0.01, (found, f_true)
+        # The first three true modes, within 2 % (this checks the plumbing; identification accuracy
+        # has its own acceptance tests; passing traffic lowers the recorded mode 1 a little).
+        for f_true in tw["frequencies_hz"][:3]:
+            assert min(abs(f - f_true) / f_true for f in found) < 0.02, (found, f_true)
         shape = w["modes"][0]["mode_shape"]
         assert max(shape.values(), key=abs) == 1.0
         assert set(shape) == set(truth["sensor_ids"])
