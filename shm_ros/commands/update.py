@@ -95,7 +95,7 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
     observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
     if args.likelihood == "time":
         return _acceleration_record(args, spec, windows, observed)
-    from shm_ros.core.bayes.pairing import observations_from_estimates
+    from shm_ros.core.bayes.pairing import observations_for_model
     from shm_ros.core.identify import identify_window
 
     from threadpoolctl import threadpool_limits
@@ -108,12 +108,10 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
             except (ValueError, np.linalg.LinAlgError) as exc:
                 print(f"shm-ros update: note: window {w.window_id}: not identified ({exc})",
                       file=sys.stderr)
-    sensors = [s for s in observed if any(s in e.sensor_ids for e in estimates)]
-    if not sensors:
-        raise ValueError(f"{args.bag}: no identified window covers a sensor of the model")
-    sol = model.modes(None, min(8, model.n_dof))
-    phi = model.sensor_matrix(sensors) @ sol.shapes
-    return observations_from_estimates(estimates, sol.frequencies_hz, phi.T, sensors)
+    try:
+        return observations_for_model(model, estimates, observed)
+    except ValueError as exc:
+        raise ValueError(f"{args.bag}: {exc}") from None
 
 
 def _acceleration_record(args, spec, windows, observed):

@@ -133,3 +133,19 @@ def estimate_from_msg(msg: Any) -> ModalEstimate:
         method=msg.method, temperature_c=_get_temperature(msg),
         covariates=dict(zip(msg.covariate_names, (float(v) for v in msg.covariate_values))),
     )
+
+
+def posterior_to_msg(record: dict[str, Any]) -> Any:
+    """``Posterior.summary_record()`` (the message's fields by name) -> ``PosteriorSummary``."""
+    from shm_interfaces.msg import ParameterEstimate, PosteriorSummary
+
+    msg = PosteriorSummary()
+    for key, value in record.items():
+        if key == "parameters":
+            msg.parameters = [ParameterEstimate(**{k: (float(v) if k != "name" else v)
+                                                   for k, v in p.items()}) for p in value]
+        elif key == "warnings":
+            msg.warnings = [str(w) for w in value]
+        else:
+            setattr(msg, key, value)
+    return msg

@@ -26,7 +26,7 @@ from typing import Any
 
 import yaml
 
-NODE_KINDS = ("ingest", "identify", "recorder")
+NODE_KINDS = ("ingest", "identify", "update", "recorder")
 
 
 class ConfigError(ValueError):

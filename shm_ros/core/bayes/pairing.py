@@ -127,3 +127,19 @@ def observations_from_estimates(estimates, f_ref: np.ndarray, phi_ref: np.ndarra
     return ModalObservations(times=times, mode_numbers=list(range(1, keep.size + 1)),
                              frequencies_hz=F[:, keep], shapes=P[:, keep], sensor_ids=list(sensor_ids),
                              damping=D[:, keep], covariates={"temperature_c": temps}, notes=notes)
+
+
+def observations_for_model(model, estimates, sensor_ids: list[str] | None = None,
+                           n_modes: int = 8, **pairing: float):
+    """Identified windows -> :class:`ModalObservations` paired with the nominal model's modes.
+
+    The sensors are those of the model that some estimate covers (or ``sensor_ids``); the
+    reference is the nominal model's lowest ``n_modes`` modes at those sensors.
+    """
+    observed = [s for s in (sensor_ids or list(model.sensor_rows)) if s in model.sensor_rows]
+    sensors = [s for s in observed if any(s in e.sensor_ids for e in estimates)]
+    if not sensors:
+        raise ValueError("no identified window covers a sensor of the model")
+    sol = model.modes(None, min(n_modes, model.n_dof))
+    phi = model.sensor_matrix(sensors) @ sol.shapes
+    return observations_from_estimates(estimates, sol.frequencies_hz, phi.T, sensors, **pairing)
