@@ -42,4 +42,8 @@ def run(args: argparse.Namespace) -> int:
     speed = result.bag_span_s / result.wall_s if result.wall_s > 0 else float("inf")
     print(f"replayed {result.published} messages in {result.wall_s:.1f} s "
           f"({speed:.1f}x real time); acknowledged {result.acknowledged}, lost {result.lost}")
+    if result.error:
+        print(f"shm-ros replay: {result.error} (replayed the {result.published} messages read "
+              "before it)", file=sys.stderr)
+        return 2
     return 1 if result.lost else 0

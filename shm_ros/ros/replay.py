@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String, UInt64
 
-from shm_ros.io.bags import bag_topics, read_messages, topic_kind
+from shm_ros.io.bags import BagError, BagMessage, bag_topics, read_messages, topic_kind
 from shm_ros.ros import topics
 from shm_ros.ros.qos import latched_qos, pipeline_qos
 
@@ -32,6 +33,7 @@ class ReplayResult:
     skipped_topics: dict[str, str] = field(default_factory=dict)
     wall_s: float = 0.0
     bag_span_s: float = 0.0
+    error: str = ""  # the bag could not be read to its end (what was read has been replayed)
 
     @property
     def lost(self) -> int:
@@ -64,6 +66,35 @@ class Replayer(Node):
         return pub
 
 
+def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], Iterator[BagMessage]]]:
+    """Topics of the bag and a reader of its messages. An MCAP bag whose end is missing (a
+    recorder that died) is read record by record: every complete chunk is replayed, then the
+    reader raises :class:`BagError` naming the file."""
+    try:
+        return bag_topics(path), lambda wanted: read_messages(path, topics=wanted)
+    except BagError as exc:
+        from shm_ros.io.recording import salvage_mcap
+
+        p = Path(path)
+        if not (p.suffix == ".mcap" or (p.is_dir() and any(p.glob("*.mcap")))):
+            raise
+        first_error = str(exc)
+    found: dict[str, str] = {}
+    try:
+        for m in salvage_mcap(path):
+            found.setdefault(m.topic, m.msgtype)
+    except BagError:
+        pass
+    if not found:
+        raise BagError(f"{first_error}; no complete message could be read")
+
+    def salvaged(wanted: list[str]) -> Iterator[BagMessage]:
+        keep = set(wanted)
+        return (m for m in salvage_mcap(path) if m.topic in keep)
+
+    return found, salvaged
+
+
 def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
                drain_timeout_s: float = 60.0, recording_only: bool = True,
@@ -78,7 +109,8 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     try:
         # Publishers first (ingest discovers recording topics by polling the graph), then wait for
         # every recording topic to have a subscriber and for the ingest node's acknowledgements.
-        for topic, msgtype in bag_topics(path).items():
+        bag_topic_types, reader = _open_bag(path)
+        for topic, msgtype in bag_topic_types.items():
             if recording_only and topic_kind(topic, msgtype) is None:
                 result.skipped_topics[topic] = msgtype
                 continue
@@ -102,7 +134,8 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         sizes: deque[int] = deque()  # bytes of the messages not yet acknowledged
         in_flight_bytes = 0
         acked_upto = 0
-        for k, m in enumerate(read_messages(path, topics=list(node.pubs))):
+        messages = reader(list(node.pubs))
+        for k, m in enumerate(_until_error(messages, result)):
             t0_bag = m.receive_ns if t0_bag is None else t0_bag
             last_bag = m.receive_ns
             if rate > 0:
@@ -146,3 +179,12 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     finally:
         node.destroy_node()
     return result
+
+
+def _until_error(messages: Iterator[BagMessage], result: ReplayResult) -> Iterator[BagMessage]:
+    """The messages up to a read error, which is kept in ``result.error`` (the replay still drains
+    and tells the graph it is done, so that what was read is windowed)."""
+    try:
+        yield from messages
+    except BagError as exc:
+        result.error = str(exc)
