@@ -29,10 +29,13 @@ class Diagnostics:
             values=[KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
         )
         self._pending.append(status)
-        log = {"ok": self._node.get_logger().info, "warn": self._node.get_logger().warning}.get(
-            level, self._node.get_logger().error)
-        if level != "ok":
-            log(f"{name}: {message}" if name else message)
+        # rclpy refuses a call site that logs at changing severities ("Logger severity cannot be
+        # changed between calls"): one call per severity.
+        text = f"{name}: {message}" if name else message
+        if level == "warn":
+            self._node.get_logger().warning(text)
+        elif level != "ok":
+            self._node.get_logger().error(text)
 
     def publish(self) -> None:
         if not self._pending:

@@ -69,6 +69,9 @@ class IngestNode(Node):
         self.last_msg_wall = time.monotonic()
         self.create_timer(float(value("discovery_period_s")), self._discover)
         self.create_timer(0.05, self._ack)
+        # The count also goes out when it does not change, so that a replay started later learns
+        # where the count stands before it counts its own messages (its flow control needs that).
+        self.create_timer(0.5, self._heartbeat)
         self.create_timer(1.0, self._idle)
         self._discover()
         self.get_logger().info(f"ingest for sensors {self.core.channels}")
@@ -106,7 +109,10 @@ class IngestNode(Node):
                 callback(msg, sensor_id, topic)
             except Exception as exc:  # one bad message must never take the node down
                 self.core.report_error(topic, f"message not processed: {exc!r}")
-            self._emit()
+            try:
+                self._emit()
+            except Exception as exc:  # nor a failure to publish what came out of it
+                self.get_logger().error(f"{topic}: output not published: {exc!r}")
             if self.received - self.acked >= 50:
                 self._ack()
         return handle
@@ -143,6 +149,10 @@ class IngestNode(Node):
         if self.received != self.acked:
             self.ack_pub.publish(UInt64(data=self.received))
             self.acked = self.received
+
+    def _heartbeat(self) -> None:
+        self.ack_pub.publish(UInt64(data=self.received))
+        self.acked = self.received
 
     def _idle(self) -> None:
         """No data for a while: let time advance on the stamp clock so finished bursts go out."""

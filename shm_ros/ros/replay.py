@@ -97,12 +97,14 @@ def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], I
 
 def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
-               drain_timeout_s: float = 60.0, recording_only: bool = True,
+               drain_timeout_s: float = 60.0, stall_s: float = 30.0, recording_only: bool = True,
                progress: bool = False) -> ReplayResult:
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
 
     ``rate``: 1.0 = real time, N = N x real time, 0 = as fast as the graph acknowledges.
     ``recording_only``: replay only contract recording topics (accelerometers, blocks, temperature).
+    ``stall_s``: with flow control, give up (``result.error``) when no acknowledgement arrives for
+    this long (the ingest node is gone or stuck) instead of waiting forever.
     """
     node = Replayer(credit)
     result = ReplayResult()
@@ -121,8 +123,10 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.05)
+            # With flow control, wait for a first count from the ingest node: it may have taken
+            # other bags before, and credits are counted from where its count stands now.
             if all(p.get_subscription_count() > 0 for p in node.pubs.values()) and (
-                    rate > 0 or node.ack_seen or node.count_publishers(topics.INGEST_RECEIVED) > 0):
+                    rate > 0 or node.ack_seen):
                 break
         flow = rate <= 0 and node.count_publishers(topics.INGEST_RECEIVED) > 0
         if rate <= 0 and not flow:
@@ -143,7 +147,12 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 while (delay := due - time.monotonic()) > 0:
                     rclpy.spin_once(node, timeout_sec=min(delay, 0.05))
             elif flow:
+                progress_at, progress_ack = time.monotonic(), node.acknowledged
                 while True:
+                    if node.acknowledged != progress_ack:
+                        progress_at, progress_ack = time.monotonic(), node.acknowledged
+                    elif time.monotonic() - progress_at > stall_s:
+                        break
                     acked = node.acknowledged - start_ack
                     while acked_upto < acked and sizes:
                         in_flight_bytes -= sizes.popleft()
@@ -152,6 +161,11 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                             in_flight_bytes + len(m.data) <= credit_bytes or not sizes):
                         break
                     rclpy.spin_once(node, timeout_sec=0.005)
+                if time.monotonic() - progress_at > stall_s:
+                    gone = node.count_publishers(topics.INGEST_RECEIVED) == 0
+                    result.error = (f"{path}: no acknowledgement from the ingest node for {stall_s:g} s"
+                                    f"{' (it left the graph)' if gone else ''}: replay stopped")
+                    break
                 sizes.append(len(m.data))
                 in_flight_bytes += len(m.data)
             node.pubs[m.topic].publish(m.data)
@@ -162,7 +176,7 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 last_report = time.monotonic()
                 node.get_logger().info(f"replayed {k + 1} messages")
         # Drain: wait until the graph has taken everything that was sent.
-        if flow or node.ack_seen:
+        if (flow or node.ack_seen) and not result.error.endswith("replay stopped"):
             end = time.monotonic() + drain_timeout_s
             while node.acknowledged - start_ack < result.published and time.monotonic() < end:
                 rclpy.spin_once(node, timeout_sec=0.05)

@@ -1,0 +1,267 @@
+"""Issue 4 (ROS half), faults: recordings with injected faults replayed through real node processes
+(ingest -> identify, recorder of windows, estimates and /diagnostics) give diagnostics that name the
+topic and field of each fault, flagged samples stay in the windows (flagged, not dropped), and no
+node crashes: every process is alive after the faults and exits 0 on SIGINT.
+
+Faults: NaN samples, a duplicated stamp, a gap on every channel, a dead channel, a clock jump
+backwards, an Imu topic that no sensor uses, a NaN temperature, malformed AccelBlocks (samples that
+do not fill the channels, unknown units), a truncated MCAP bag (`shm-ros replay` replays what it
+can read and exits non-zero naming the bag) and a best-effort publisher (the sensor-data
+subscription must take it).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ros_helpers.graph import node_process, replay, stop
+
+FS = 100.0
+P = 10_000_000  # ns per sample at 100 Hz
+T0 = 1_714_521_600_000_000_000  # 2024-05-01T00:00:00Z
+B2 = T0 + 60 * 10**9  # second burst of the faulty bag
+B3 = T0 + 120 * 10**9  # the bag that gets truncated
+B4 = T0 + 180 * 10**9  # the best-effort publisher
+WINDOW_S = 5.0
+NAN_ROWS = (120, 121, 730)  # f1, burst 1
+DEAD = slice(500, 1000)  # f3 constant for all of window [5 s, 10 s)
+DUP_ROW = 1600  # f2: a second message with this stamp (another value) follows the first
+GAP = slice(2000, 2050)  # 0.5 s missing on every channel (shorter than the 1 s burst pause)
+JUMP_ROW, JUMP_NS = 700, -3_002_300_000  # f2, burst 2: clock jumps back by 3.0023 s
+HERE = Path(__file__).resolve().parent
+
+STRUCTURE = """
+name: three-storey-test-frame
+kind: shear_building
+shear_building:
+  floors:
+    - {mass: 1.0e+5, stiffness: 2.0e+8}
+    - {mass: 1.0e+5, stiffness: 2.0e+8}
+    - {mass: 1.0e+5, stiffness: 2.0e+8}
+sensors:
+  - {id: f1, at: {floor: 1}, direction: x}
+  - {id: f2, at: {floor: 2}, direction: x}
+  - {id: f3, at: {floor: 3}, direction: x}
+"""
+
+
+def _signal(rng, n: int) -> np.ndarray:
+    """Three channels of a lightly damped response to noise (two modes), plus sensor noise."""
+    t = np.arange(n) / FS
+    x = np.zeros((n, 3))
+    for f, shape in ((1.7, (0.45, 0.8, 1.0)), (5.1, (1.0, 0.4, -0.7))):
+        amp = np.convolve(rng.standard_normal(n), np.exp(-np.arange(400) / 120.0), "same") * 2e-3
+        x += np.outer(amp * np.sin(2 * np.pi * f * t + rng.uniform(0, 6)), shape)
+    return x + rng.standard_normal((n, 3)) * 2e-4
+
+
+def _xyz(v: np.ndarray) -> np.ndarray:
+    out = np.zeros((v.size, 3))
+    out[:, 0] = v
+    out[:, 2] = 9.80665
+    return out
+
+
+def write_faulty_bag(path: Path, rng) -> dict:
+    """Two bursts of per-sample Imu with faults, plus bad blocks, an unknown topic, NaN temperature."""
+    from shm_ros.io.bags import ACCEL_BLOCK, BagWriter
+
+    n1, n2 = 3000, 1500
+    x1, x2 = _signal(rng, n1), _signal(rng, n2)
+    x1[list(NAN_ROWS), 0] = np.nan
+    x1[DEAD, 2] = 0.003
+    g1 = T0 + np.arange(n1, dtype=np.int64) * P
+    keep = np.ones(n1, bool)
+    keep[GAP] = False
+    g2 = B2 + np.arange(n2, dtype=np.int64) * P
+    with BagWriter(path, compress=True) as w:
+        streams = {}
+        for j, name in enumerate(["f1", "f2", "f3"]):
+            t, v = g1[keep], x1[keep, j]
+            if name == "f2":  # the duplicate follows the original, with another value
+                at = int(np.searchsorted(t, g1[DUP_ROW])) + 1
+                t, v = np.insert(t, at, g1[DUP_ROW]), np.insert(v, at, 0.5)
+            streams[f"/site/accel/{name}"] = (t, _xyz(v))
+        w.imu_streams(streams)
+        w.temperature("/site/temperature/t1", T0 + 10**9, 12.5)
+        streams = {}
+        for j, name in enumerate(["f1", "f2", "f3"]):
+            t = g2.copy()
+            if name == "f2":
+                t[JUMP_ROW:] += JUMP_NS
+            streams[f"/site/accel/{name}"] = (t, _xyz(x2[:, j]))
+        streams["/site/accel/f9"] = (g2[:200], _xyz(x2[:200, 0]))
+        w.imu_streams(streams)
+        w.temperature("/site/temperature/t1", B2 + 2 * 10**9, float("nan"))
+        Block = w._types[ACCEL_BLOCK]
+        w.write("/site/daq/accel_block", ACCEL_BLOCK, B2 + 10**9, Block(
+            header=w.header(B2 + 10**9), sample_rate_hz=FS, channel_names=["f1", "f2"],
+            samples=np.arange(5.0), units="m/s^2"))
+        w.write("/site/daq/accel_block", ACCEL_BLOCK, B2 + 2 * 10**9, Block(
+            header=w.header(B2 + 2 * 10**9), sample_rate_hz=FS, channel_names=["f1", "f2"],
+            samples=np.zeros(20), units="furlong/fortnight^2"))
+    return {"x1": x1, "g1": g1, "keep": keep, "x2": x2, "g2": g2}
+
+
+def write_truncated_bag(path: Path, rng) -> tuple[np.ndarray, np.ndarray]:
+    from shm_ros.io.bags import BagWriter
+
+    n = 3000
+    x = _signal(rng, n)
+    g = B3 + np.arange(n, dtype=np.int64) * P
+    with BagWriter(path) as w:
+        w.imu_streams({f"/site/accel/{s}": (g, _xyz(x[:, j])) for j, s in enumerate(["f1", "f2", "f3"])})
+    mcap = next(path.glob("*.mcap"))
+    with open(mcap, "r+b") as fh:
+        fh.truncate(int(mcap.stat().st_size * 0.6))
+    return g, x
+
+
+def _diagnostics(bag: Path) -> list[tuple[str, str, str, dict]]:
+    from shm_ros.io.bags import read_messages
+
+    out = []
+    for m in read_messages(bag, topics=["/diagnostics"]):
+        for s in m.decode().status:
+            out.append((s.name, s.message, int(s.level), {kv.key: kv.value for kv in s.values}))
+    return out
+
+
+def _windows(bag: Path) -> list:
+    from shm_ros.io.bags import read_messages
+    from shm_ros.ros.convert import window_from_msg
+
+    return [window_from_msg(m.decode()) for m in read_messages(bag, topics=["/shm/windows"])]
+
+
+def _rows(w, origin: int) -> slice:
+    first = int(round((w.start_ns - origin) / P))
+    return slice(first, first + w.n_samples)
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=True))
+
+
+def test_faults_through_node_processes_are_reported_flagged_and_survived(tmp_path):
+    rng = np.random.default_rng(11)
+    structure = tmp_path / "structure.yaml"
+    structure.write_text(STRUCTURE)
+    faulty = tmp_path / "faulty"
+    truth = write_faulty_bag(faulty, rng)
+    truncated = tmp_path / "truncated"
+    g3, x3 = write_truncated_bag(truncated, rng)
+    n4 = 1000
+    g4 = B4 + np.arange(n4, dtype=np.int64) * P
+    x4 = _signal(rng, n4)
+    be_data = tmp_path / "best_effort.npz"
+    np.savez(be_data, stamps=g4, values=x4, topics=np.array(["f1", "f2", "f3"]))
+
+    out_bag = tmp_path / "pipeline"
+    procs = {
+        "ingest": node_process("ingest", {"structure": str(structure), "window_s": WINDOW_S,
+                                          "idle_flush_s": 2.0}),
+        "identify": node_process("identify", {"max_order": 16}),
+        "recorder": node_process("recorder", {"output": str(out_bag), "topics": [
+            "/shm/windows", "/diagnostics", "/shm/modal_estimates"]}),
+    }
+    results = {}
+    try:
+        time.sleep(1.5)
+        rep_faulty = replay(faulty, timeout=120)
+        rep_trunc = replay(truncated, timeout=120)
+        be = subprocess.run([sys.executable, str(HERE / "ros_helpers" / "best_effort_imu.py"),
+                             str(be_data), "/driver", "2000"], capture_output=True, text=True,
+                            timeout=60)
+        time.sleep(2.0)  # identify the last windows
+        alive = {k: p.poll() is None for k, p in procs.items()}
+    finally:
+        for k, p in procs.items():
+            results[k] = stop(p)
+    detail = "\n".join([rep_faulty.stdout, rep_faulty.stderr, rep_trunc.stdout, rep_trunc.stderr,
+                         be.stdout, be.stderr] + [f"{k}: {c}\n{out[-2500:]}" for k, (c, out) in results.items()])
+    # -- no node crashed: alive after every fault, clean exit on SIGINT
+    assert alive == {"ingest": True, "identify": True, "recorder": True}, detail
+    assert {k: c for k, (c, _) in results.items()} == {"ingest": 0, "identify": 0, "recorder": 0}, detail
+    assert rep_faulty.returncode == 0 and "lost 0" in rep_faulty.stdout, detail
+    assert be.returncode == 0, detail
+    assert "subscribed to /driver/accel/f1" in results["ingest"][1]
+
+    # -- truncated bag: what could be read is replayed (and acknowledged); non-zero exit naming it
+    assert rep_trunc.returncode != 0, detail
+    assert str(truncated) in rep_trunc.stderr and "truncated" in rep_trunc.stderr, detail
+    published = int(rep_trunc.stdout.split("replayed ")[1].split()[0])
+    assert 0 < published < 3 * len(g3) and "lost 0" in rep_trunc.stdout, detail
+
+    # -- diagnostics name the topic/field of every fault
+    diags = _diagnostics(out_bag)
+    found = {(name.removeprefix("ingest: ").split(" (sensor")[0], v.get("code")) for name, _, _, v in diags}
+    expected = {
+        ("accel/f1.linear_acceleration.x", "nan"),
+        ("accel/f2.linear_acceleration.x", "duplicate_stamp"),
+        ("accel/f1.linear_acceleration.x", "gap"),
+        ("accel/f2.linear_acceleration.x", "gap"),
+        ("accel/f3.linear_acceleration.x", "gap"),
+        ("accel/f3.linear_acceleration.x", "dead_channel"),
+        ("accel/f9", "unknown_topic"),
+        ("/site/daq/accel_block", "rejected"),
+        ("/site/daq/accel_block.units", "rejected"),
+        ("temperature/t1.temperature", "nan"),
+    }
+    assert expected <= found, sorted(expected - found)
+    clock = {c for src, c in found if src == "accel/f2.linear_acceleration.x"}
+    assert clock & {"unsnappable", "out_of_order", "late_sample", "rate_mismatch"}, clock
+    messages = {name: msg for name, msg, _, _ in diags}
+    assert "do not fill 2 channels" in messages["ingest: /site/daq/accel_block"]
+    assert "furlong" in messages["ingest: /site/daq/accel_block.units"]
+    assert not [d for d in diags if d[3].get("code") == "input_error"], "a message raised in the node"
+
+    # -- flagged samples are in the windows, flagged, with their raw values; nothing is interpolated
+    from shm_ros.core.types import SampleFlag
+
+    windows = _windows(out_bag)
+    b1 = [w for w in windows if T0 <= w.start_ns < B2]
+    x1, keep = truth["x1"], truth["keep"]
+    covered = np.zeros(len(x1), int)
+    for w in b1:
+        r = _rows(w, T0)
+        covered[r] += 1
+        assert keep[r].all(), f"window {w.window_id} spans the gap"
+        assert _same(w.samples, x1[r]), w.window_id
+    assert np.array_equal(covered, keep.astype(int))  # every row but the gap, once
+    by_start = {int(round((w.start_ns - T0) / P)): w for w in windows}
+    w0, w1, w3 = by_start[0], by_start[500], by_start[1500]
+    for row in NAN_ROWS:
+        w = w0 if row < 500 else w1
+        f = w.flags[row % 500, 0]
+        assert f & SampleFlag.NAN and np.isnan(w.samples[row % 500, 0])
+    assert w1.channel_status[2] == "dead" and np.all(w1.samples[:, 2] == 0.003)
+    assert w3.flags[DUP_ROW - 1500, 1] & SampleFlag.DUPLICATE_STAMP
+    assert w3.samples[DUP_ROW - 1500, 1] == x1[DUP_ROW, 1]  # the first copy is kept
+    assert int(np.count_nonzero(w3.flags)) == 1
+
+    # clock jump on f2 in burst 2: f2 leaves the windows after the jump (MISSING), f1/f3 are intact
+    b2 = [w for w in windows if B2 <= w.start_ns < B3]
+    assert b2, "no window from the burst with the clock jump"
+    for w in b2:
+        r = _rows(w, B2)
+        assert _same(w.samples[:, [0, 2]], truth["x2"][r][:, [0, 2]])
+    after = [w for w in b2 if _rows(w, B2).stop > JUMP_ROW + 100]
+    assert after and all(w.channel_status[1] == "dropped" for w in after)
+
+    # truncated bag and best-effort publisher: their samples arrived, exactly
+    for origin, stop_ns, x, label in ((B3, B4, x3, "truncated bag"), (B4, B4 + 10**12, x4, "best-effort")):
+        ws = [w for w in windows if origin <= w.start_ns < stop_ns]
+        assert ws, f"no window from the {label}"
+        for w in ws:
+            assert _same(w.samples, x[_rows(w, origin)]), label
+    assert sum(w.n_samples for w in windows if w.start_ns >= B4) >= 0.9 * n4
+
+    # identify downstream took every window (an error would be a diagnostic, not a crash)
+    identified = [n for n, _, level, _ in diags if n.startswith("identify: /shm/windows[") and level == 0]
+    assert len(identified) == len(windows), (len(identified), len(windows))
