@@ -1,7 +1,7 @@
 """update: modal estimates in, posterior summary out (re-run as new windows arrive).
 
 Accumulates ``/shm/modal_estimates``; once ``min_new_windows`` new windows have arrived (or on the
-first ``min_windows``), pairs every window's modes with the nominal model by MAC and calls
+first ``min_windows``), warm-starts from the last posterior, pairs every window's modes with the nominal model by MAC and calls
 :func:`shm_ros.core.bayes.update.update`; publishes ``/shm/posterior`` (latched) and writes
 ``posterior.json`` to ``output_dir`` when set.
 """
@@ -49,6 +49,7 @@ class UpdateNode(Node):
         self.min_new = int(get("min_new_windows"))
         self.output_dir = Path(get("output_dir")) if get("output_dir") else None
         self.estimates: list = []
+        self.posterior = None  # the last one: warm start of the next run
         self.used = 0
         self.diag = Diagnostics(self, "update")
         self.pub = self.create_publisher(topics.message_class(topics.TYPES[topics.POSTERIOR]),
@@ -67,13 +68,15 @@ class UpdateNode(Node):
         n = len(self.estimates)
         try:
             obs = observations_for_model(self.model, self.estimates, self.spec.sensor_ids)
-            posterior = update(self.model, obs, self.config, self.spec.parameters)
+            posterior = update(self.model, obs, self.config, self.spec.parameters,
+                               warm_start=self.posterior)
         except Exception as exc:  # a failed update must not take the node down
             self.diag.report("error", f"update with {n} windows failed: {exc}", "posterior")
             self.diag.publish()
             self.used = n
             return
         self.used = n
+        self.posterior = posterior
         self.pub.publish(posterior_to_msg(posterior.summary_record(self.spec.name)))
         if self.output_dir is not None:
             from shm_ros.core.provenance import stamp_output

@@ -217,12 +217,15 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
 
 
 def update(model: AffineModel, observations: Any, config: UpdateConfig | None = None,
-           priors: JointPrior | Sequence[Any] | None = None) -> Posterior:
+           priors: JointPrior | Sequence[Any] | None = None,
+           warm_start: "Posterior | None" = None) -> Posterior:
     """Calibrate the model's parameters to the data; see the module docstring.
 
     ``observations`` is :class:`ModalObservations` (likelihood ``gaussian`` or ``fitness``) or an
     :class:`~shm_ros.core.bayes.timedomain.AccelerationRecord` (likelihood ``time``). ``priors``:
     the structure's parameter specs, a :class:`JointPrior`, or None to use ``config.priors``.
+    ``warm_start``: a previous posterior of the same parameters (e.g. before new windows arrived);
+    its draws join the starting points of the MAP search, so a re-run starts where the last ended.
     """
     config = config or UpdateConfig()
     config.validate()
@@ -230,12 +233,13 @@ def update(model: AffineModel, observations: Any, config: UpdateConfig | None = 
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=config.blas_threads, user_api="blas"):
-            return _update(model, observations, config, priors)
-    return _update(model, observations, config, priors)
+            return _update(model, observations, config, priors, warm_start)
+    return _update(model, observations, config, priors, warm_start)
 
 
 def _update(model: AffineModel, observations: Any, config: UpdateConfig,
-            priors: JointPrior | Sequence[Any] | None) -> Posterior:
+            priors: JointPrior | Sequence[Any] | None, warm_start: "Posterior | None" = None
+            ) -> Posterior:
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     warnings_: list[str] = []
@@ -266,6 +270,9 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
     rng = np.random.default_rng(config.seed)
     prior_std = np.array([p.std if np.isfinite(p.std) else 1.0 for p in jp.priors])
     starts_theta = np.vstack([np.atleast_2d([p.mean for p in jp.priors]), jp.sample(rng, 400)])
+    if warm_start is not None and list(warm_start.parameter_names) == list(jp.names):
+        previous = warm_start.samples[rng.permutation(len(warm_start.samples))[:200]]
+        starts_theta = np.vstack([warm_start.theta("mean")[None, :], previous, starts_theta])
     starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
     scale = np.concatenate([prior_std, np.ones(n_extra)])
     x_map, lp_map = find_map(log_post, starts, scale, seed=config.seed)
