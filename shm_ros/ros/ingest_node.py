@@ -9,6 +9,7 @@ Publishes ``/shm/windows``, ``/diagnostics`` and ``/shm/ingest/received`` (flow 
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Any
 
@@ -174,8 +175,20 @@ def make_node(name: str, parameters: dict[str, Any]) -> IngestNode:
     return IngestNode(name, parameters)
 
 
+def _executor():
+    """rclpy's EventsExecutor: about twice the per-message Imu throughput of the
+    SingleThreadedExecutor (docs/benchmarks.md); ``SHM_INGEST_EXECUTOR=single`` falls back."""
+    if os.environ.get("SHM_INGEST_EXECUTOR", "events") == "single":
+        from rclpy.executors import SingleThreadedExecutor
+
+        return SingleThreadedExecutor()
+    from rclpy.experimental import EventsExecutor
+
+    return EventsExecutor()
+
+
 def main(args: list[str] | None = None) -> int:
-    return spin(lambda: IngestNode(), args)
+    return spin(lambda: IngestNode(), args, _executor)
 
 
 if __name__ == "__main__":

@@ -19,9 +19,11 @@ def _terminate(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
-def spin(factory: Callable[[], Any], args: list[str] | None = None) -> int:
+def spin(factory: Callable[[], Any], args: list[str] | None = None,
+         executor_factory: Callable[[], Any] | None = None) -> int:
     """Run one node until shutdown. Callbacks run in a single-threaded executor (the
-    multi-threaded one is far slower for data topics)."""
+    multi-threaded one is far slower for data topics), or the one ``executor_factory`` makes; it
+    is always spun with a timeout (rclpy's EventsExecutor never runs a callback without one)."""
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
@@ -37,7 +39,7 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None) -> int:
     code = 0
     try:
         node = factory()
-        executor = SingleThreadedExecutor()
+        executor = (executor_factory or SingleThreadedExecutor)()
         executor.add_node(node)
         # Wake up regularly: a signal is only handled once control is back in Python.
         while rclpy.ok():
