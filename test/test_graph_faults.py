@@ -4,8 +4,8 @@ topic and field of each fault, flagged samples stay in the windows (flagged, not
 node crashes: every process is alive after the faults and exits 0 on SIGINT.
 
 Faults: NaN samples, a duplicated stamp, a gap on every channel, a dead channel, a clock jump
-backwards, an Imu topic that no sensor uses, a NaN temperature, malformed AccelBlocks (samples that
-do not fill the channels, unknown units), a truncated MCAP bag (`shm-ros replay` replays what it
+backwards, an Imu topic that no sensor uses, a NaN temperature, an Imu message whose bytes are not
+an Imu, malformed AccelBlocks (samples that do not fill the channels, unknown units), a truncated MCAP bag (`shm-ros replay` replays what it
 can read and exits non-zero naming the bag) and a best-effort publisher (the sensor-data
 subscription must take it).
 """
@@ -98,6 +98,9 @@ def write_faulty_bag(path: Path, rng) -> dict:
         streams["/site/accel/f9"] = (g2[:200], _xyz(x2[:200, 0]))
         w.imu_streams(streams)
         w.temperature("/site/temperature/t1", B2 + 2 * 10**9, float("nan"))
+        # an Imu message whose bytes are not an Imu (a driver bug): reported, the rest goes on
+        w.write_cdr("/site/accel/f1", "sensor_msgs/msg/Imu", B2 + 5 * 10**9,
+                    b"\x00\x01\x00\x00" + b"\x07" * 44)
         Block = w._types[ACCEL_BLOCK]
         w.write("/site/daq/accel_block", ACCEL_BLOCK, B2 + 10**9, Block(
             header=w.header(B2 + 10**9), sample_rate_hz=FS, channel_names=["f1", "f2"],
@@ -219,7 +222,10 @@ def test_faults_through_node_processes_are_reported_flagged_and_survived(tmp_pat
     messages = {name: msg for name, msg, _, _ in diags}
     assert "do not fill 2 channels" in messages["ingest: /site/daq/accel_block"]
     assert "furlong" in messages["ingest: /site/daq/accel_block.units"]
-    assert not [d for d in diags if d[3].get("code") == "input_error"], "a message raised in the node"
+    malformed = [m for n, m, level, _ in diags if n == "ingest: /site/accel/f1" and level == 2]
+    assert malformed and "malformed Imu" in malformed[0], malformed
+    assert not [d for d in diags if "not processed:" in d[1] and "malformed" not in d[1]], \
+        "a message raised in the node"
 
     # -- flagged samples are in the windows, flagged, with their raw values; nothing is interpolated
     from shm_ros.core.types import SampleFlag

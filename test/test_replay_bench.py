@@ -20,7 +20,7 @@ def test_replay_over_dds_loses_no_sample():
     assert set(rows) == {"imu", "block"}
     assert rows["imu"]["messages"] == int(seconds * 200) * 16
     for layout, r in rows.items():
-        print(f"{layout}: {r['realtime_factor']:.1f}x real time, {r['messages_per_s']:.0f} msg/s, "
+        print(f"{layout}: {r['end_to_end_factor']:.1f}x real time end to end, {r['messages_per_s']:.0f} msg/s, "
               f"load {res['load_average'][0]:.1f}")
         assert r["samples_windowed"] == r["samples"] == int(seconds * 200) * 16, r
         assert r["lost_messages"] == 0 and r["values_altered"] == 0 and r["rows_duplicated"] == 0, r

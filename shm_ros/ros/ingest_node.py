@@ -19,6 +19,7 @@ from std_msgs.msg import String, UInt64
 
 from shm_ros.core.windows import ChannelMap, IngestConfig, IngestCore
 from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
+from shm_ros.io.recording import decode_imu_batch
 from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
@@ -26,6 +27,7 @@ from shm_ros.ros.node_main import overrides, spin
 from shm_ros.ros.qos import latched_qos, pipeline_qos, recording_qos
 
 LEVEL = {0: "ok", 1: "warn", 2: "error"}
+IMU_BATCH = 512  # Imu messages decoded together (also every 0.05 s)
 
 
 class IngestNode(Node):
@@ -63,13 +65,15 @@ class IngestNode(Node):
         self.ack_pub = self.create_publisher(UInt64, topics.INGEST_RECEIVED, pipeline_qos())
         self.create_subscription(String, topics.REPLAY_DONE, self._on_replay_done, latched_qos())
         self.subscribed: set[str] = set()
+        self._imu_raw: dict[str, tuple[str, list[bytes]]] = {}
+        self._imu_raw_n = 0
         self.received = 0
         self.acked = -1
         self.windows_out = 0
         self.last_stamp_ns: int | None = None
         self.last_msg_wall = time.monotonic()
         self.create_timer(float(value("discovery_period_s")), self._discover)
-        self.create_timer(0.05, self._ack)
+        self.create_timer(0.05, self._on_ack_timer)
         # The count also goes out when it does not change, so that a replay started later learns
         # where the count stands before it counts its own messages (its flow control needs that).
         self.create_timer(0.5, self._heartbeat)
@@ -94,15 +98,22 @@ class IngestNode(Node):
                 kind = topic_kind(topic, msgtype)
                 if kind is None:
                     continue
-                callback = {"imu": self._on_imu, "block": self._on_block,
-                            "temperature": self._on_temperature}[kind[0]]
+                callback = {"block": self._on_block, "temperature": self._on_temperature}.get(kind[0])
                 cls = topics.message_class({"imu": IMU, "block": ACCEL_BLOCK,
                                             "temperature": TEMPERATURE}[kind[0]])
-                self.create_subscription(cls, topic, self._guard(topic, callback, kind[1]), qos)
+                # a block carries many samples: acknowledged at once, so that a flow-controlled
+                # replay of blocks is not held to the acknowledgement timer
+                ack_every = 1 if kind[0] == "block" else 50
+                if kind[0] == "imu":  # one sample per message: CDR bytes, decoded in batches
+                    self.create_subscription(cls, topic, self._imu_raw_handler(topic, kind[1]), qos,
+                                             raw=True)
+                else:
+                    self.create_subscription(cls, topic, self._guard(topic, callback, kind[1], ack_every),
+                                             qos)
                 self.subscribed.add(topic)
                 self.get_logger().info(f"subscribed to {topic} ({msgtype})")
 
-    def _guard(self, topic: str, callback, sensor_id: str):
+    def _guard(self, topic: str, callback, sensor_id: str, ack_every: int = 50):
         def handle(msg) -> None:
             self.received += 1
             self.last_msg_wall = time.monotonic()
@@ -114,15 +125,60 @@ class IngestNode(Node):
                 self._emit()
             except Exception as exc:  # nor a failure to publish what came out of it
                 self.get_logger().error(f"{topic}: output not published: {exc!r}")
+            if self.received - self.acked >= ack_every:
+                self._ack()
+        return handle
+
+    def _imu_raw_handler(self, topic: str, sensor_id: str):
+        """Per-sample Imu: the CDR bytes are kept and decoded in batches with numpy
+        (``decode_imu_batch``), then fed with ``add_imu_array``; building a Python message
+        object per sample (three covariance arrays) cost more than everything else here."""
+        pending = self._imu_raw.setdefault(topic, (sensor_id, []))[1]
+
+        def handle(data: bytes) -> None:
+            self.received += 1
+            self.last_msg_wall = time.monotonic()
+            pending.append(data)
+            self._imu_raw_n += 1
+            if self._imu_raw_n >= IMU_BATCH:
+                self._feed_imu()
             if self.received - self.acked >= 50:
                 self._ack()
         return handle
 
-    def _on_imu(self, msg, sensor_id: str, topic: str) -> None:
-        t = time_to_ns(msg.header.stamp)
-        a = msg.linear_acceleration
-        self.core.add_imu(sensor_id, t, a.x, a.y, a.z)
-        self.last_stamp_ns = max(self.last_stamp_ns or t, t)
+    def _feed_imu(self) -> None:
+        """Decode and feed the Imu messages taken so far; publish what comes out."""
+        if not self._imu_raw_n:
+            return
+        self._imu_raw_n = 0
+        for topic, (sensor_id, datas) in self._imu_raw.items():
+            if not datas:
+                continue
+            batch = list(datas)
+            datas.clear()
+            try:
+                try:
+                    stamps, xyz = decode_imu_batch(batch)
+                except ValueError:  # a malformed message: find it, keep the others
+                    good = []
+                    for data in batch:
+                        try:
+                            good.append(decode_imu_batch([data]))
+                        except ValueError as exc:
+                            self.core.report_error(topic, f"malformed Imu message not processed: {exc}")
+                    if not good:
+                        continue
+                    stamps = np.concatenate([g[0] for g in good])
+                    xyz = np.concatenate([g[1] for g in good])
+                self.core.add_imu_array(sensor_id, stamps, xyz)
+                t = int(stamps.max())
+                self.last_stamp_ns = max(self.last_stamp_ns or t, t)
+            except Exception as exc:  # one bad batch must never take the node down
+                self.core.report_error(topic, f"messages not processed: {exc!r}")
+        try:
+            self._emit()
+        except Exception as exc:
+            self.get_logger().error(f"output not published: {exc!r}")
 
     def _on_block(self, msg, _sensor_id: str, topic: str) -> None:
         t = time_to_ns(msg.header.stamp)
@@ -146,6 +202,10 @@ class IngestNode(Node):
             self.diag.report(LEVEL.get(d.level, "error"), d.message, d.source, code=d.code, count=d.count)
         self.diag.publish()
 
+    def _on_ack_timer(self) -> None:
+        self._feed_imu()
+        self._ack()
+
     def _ack(self) -> None:
         if self.received != self.acked:
             self.ack_pub.publish(UInt64(data=self.received))
@@ -157,17 +217,20 @@ class IngestNode(Node):
 
     def _idle(self) -> None:
         """No data for a while: let time advance on the stamp clock so finished bursts go out."""
+        self._feed_imu()
         idle = time.monotonic() - self.last_msg_wall
         if self.last_stamp_ns is not None and idle >= self.idle_flush_s:
             self.core.tick(self.last_stamp_ns + int(idle * 1e9))
             self._emit()
 
     def _on_replay_done(self, msg: String) -> None:
+        self._feed_imu()
         self._ack()
         self._emit(self.core.flush())
         self.get_logger().info(f"end of replay of {msg.data}: flushed")
 
     def close(self) -> None:
+        self._feed_imu()
         self._emit(self.core.flush())
 
 

@@ -33,6 +33,7 @@ class ReplayResult:
     skipped_topics: dict[str, str] = field(default_factory=dict)
     wall_s: float = 0.0
     bag_span_s: float = 0.0
+    started_ns: int = 0  # system clock at the first publish
     error: str = ""  # the bag could not be read to its end (what was read has been replayed)
 
     @property
@@ -168,6 +169,8 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                     break
                 sizes.append(len(m.data))
                 in_flight_bytes += len(m.data)
+            if not result.published:
+                result.started_ns = time.time_ns()
             node.pubs[m.topic].publish(m.data)
             result.published += 1
             if k % 200 == 0:
