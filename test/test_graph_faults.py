@@ -271,3 +271,58 @@ def test_faults_through_node_processes_are_reported_flagged_and_survived(tmp_pat
     # identify downstream took every window (an error would be a diagnostic, not a crash)
     identified = [n for n, _, level, _ in diags if n.startswith("identify: /shm/windows[") and level == 0]
     assert len(identified) == len(windows), (len(identified), len(windows))
+
+
+HUNG_INGEST = """
+import rclpy, time
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import Imu
+from std_msgs.msg import UInt64
+rclpy.init()
+node = rclpy.create_node("hung_ingest")
+acks = node.create_publisher(UInt64, "/shm/ingest/received", 100)
+seen = [0]
+def take(msg):
+    seen[0] += 1
+    if seen[0] <= 300:  # acknowledges 300 messages, then hangs (keeps its subscription)
+        acks.publish(UInt64(data=seen[0]))
+node.create_subscription(Imu, "/site/accel/f1", take, qos_profile_sensor_data)
+node.create_timer(0.3, lambda: seen[0] == 0 and acks.publish(UInt64(data=0)))
+print("ready", flush=True)
+end = time.monotonic() + 40
+while rclpy.ok() and time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.1)
+"""
+
+
+def test_replay_stops_with_an_error_when_the_ingest_node_stops_acknowledging(tmp_path):
+    """A flow-controlled replay whose ingest node hangs neither waits forever nor floods: it stops
+    after ``stall_s`` with an error naming the bag, having sent at most one credit past the last
+    acknowledgement."""
+    import rclpy
+
+    from shm_ros.io.bags import BagWriter
+    from shm_ros.ros.replay import replay_bag
+
+    n = 3000
+    bag = tmp_path / "recording"
+    with BagWriter(bag) as w:
+        w.imu_series("/site/accel/f1", T0 + np.arange(n, dtype=np.int64) * P, _xyz(_signal(np.random.default_rng(5), n)[:, 0]))
+    hung = subprocess.Popen([sys.executable, "-c", HUNG_INGEST], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        assert hung.stdout.readline().strip() == "ready"
+        rclpy.init()
+        try:
+            t = time.monotonic()
+            result = replay_bag(bag, credit=256, wait_s=10.0, stall_s=3.0)
+            took = time.monotonic() - t
+        finally:
+            rclpy.try_shutdown()
+    finally:
+        hung.kill()
+        hung.communicate()
+    assert str(bag) in result.error and "no acknowledgement" in result.error, result
+    assert result.acknowledged == 300 and 300 < result.published <= 300 + 256, result
+    assert result.lost == result.published - 300
+    assert took < 15.0, took

@@ -179,8 +179,9 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 last_report = time.monotonic()
                 node.get_logger().info(f"replayed {k + 1} messages")
         # Drain: wait until the graph has taken everything that was sent.
-        if (flow or node.ack_seen) and not result.error.endswith("replay stopped"):
-            end = time.monotonic() + drain_timeout_s
+        if flow or node.ack_seen:
+            stalled = result.error.endswith("replay stopped")
+            end = time.monotonic() + (0.0 if stalled else drain_timeout_s)
             while node.acknowledged - start_ack < result.published and time.monotonic() < end:
                 rclpy.spin_once(node, timeout_sec=0.05)
             result.acknowledged = node.acknowledged - start_ack
