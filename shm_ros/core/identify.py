@@ -133,6 +133,8 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
         out_idx = [j for j in range(len(names)) if j != k]
         y = data[:, out_idx]
         out_names = [names[j] for j in out_idx]
+        if not out_names:
+            raise ValueError(f"ssi-io: no output channel besides the input {input_channel!r}")
         i = cfg.block_rows or max(20, int(np.ceil(cfg.max_order / len(out_names))) + 2)
         model = ssi.ssi_io(y, u, fs, i, cfg.max_order, lq="qr" if cfg.lq == "auto" else cfg.lq)
         refs = None
