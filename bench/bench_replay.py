@@ -187,7 +187,8 @@ def run_layout(layout: str, workdir: Path, seconds: float, channels: int, fs: fl
         "lost_messages": result.lost, "replay_wall_s": result.wall_s, "realtime_factor": factor,
         "end_to_end_s": e2e_s, "end_to_end_factor": span / e2e_s if e2e_s > 0 else float("inf"),
         "messages_per_s": result.published / result.wall_s if result.wall_s > 0 else 0.0,
-        "ingest_cpu_s": ingest_cpu, "replay_cpu_s": replay_cpu, "samples": int(data.size), "lost_samples": int(lost_samples),
+        "ingest_cpu_s": ingest_cpu, "replay_cpu_s": replay_cpu, "samples": int(data.size),
+        "lost_samples": int(lost_samples),
         "target": TARGETS[layout], "ingest_exit": code_i, "recorder_exit": code_r, **check,
     }
     if code_i != 0 or code_r != 0:
@@ -232,7 +233,8 @@ def markdown(res: dict) -> str:
     for r in res["rows"]:
         lines.append(f"| {r['layout']} | {r['messages']:,} | {r['bag_mb']:.1f} | {r['replay_wall_s']:.2f} "
                      f"({r['realtime_factor']:.1f}) | {r['messages_per_s']:,.0f} | {r['end_to_end_s']:.2f} | "
-                     f"{r['end_to_end_factor']:.1f} (>= {r['target']:g}) | {r['ingest_cpu_s']:.1f} | {r['replay_cpu_s']:.1f} | "
+                     f"{r['end_to_end_factor']:.1f} (>= {r['target']:g}) | {r['ingest_cpu_s']:.1f} | "
+                     f"{r['replay_cpu_s']:.1f} | "
                      f"{r['lost_samples']} | {r['values_altered']} |")
     return "\n".join(lines) + "\n"
 

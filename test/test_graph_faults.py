@@ -5,9 +5,9 @@ node crashes: every process is alive after the faults and exits 0 on SIGINT.
 
 Faults: NaN samples, a duplicated stamp, a gap on every channel, a dead channel, a clock jump
 backwards, an Imu topic that no sensor uses, a NaN temperature, an Imu message whose bytes are not
-an Imu, malformed AccelBlocks (samples that do not fill the channels, unknown units), a truncated MCAP bag (`shm-ros replay` replays what it
-can read and exits non-zero naming the bag) and a best-effort publisher (the sensor-data
-subscription must take it).
+an Imu, malformed AccelBlocks (samples that do not fill the channels, unknown units), a truncated
+MCAP bag (`shm-ros replay` replays what it can read and exits non-zero naming the bag) and a
+best-effort publisher (the sensor-data subscription must take it).
 """
 
 from __future__ import annotations
@@ -187,7 +187,8 @@ def test_faults_through_node_processes_are_reported_flagged_and_survived(tmp_pat
         for k, p in procs.items():
             results[k] = stop(p)
     detail = "\n".join([rep_faulty.stdout, rep_faulty.stderr, rep_trunc.stdout, rep_trunc.stderr,
-                         be.stdout, be.stderr] + [f"{k}: {c}\n{out[-2500:]}" for k, (c, out) in results.items()])
+                         be.stdout, be.stderr]
+                        + [f"{k}: {c}\n{out[-2500:]}" for k, (c, out) in results.items()])
     # -- no node crashed: alive after every fault, clean exit on SIGINT
     assert alive == {"ingest": True, "identify": True, "recorder": True}, detail
     assert {k: c for k, (c, _) in results.items()} == {"ingest": 0, "identify": 0, "recorder": 0}, detail
@@ -307,7 +308,8 @@ def test_replay_stops_with_an_error_when_the_ingest_node_stops_acknowledging(tmp
     n = 3000
     bag = tmp_path / "recording"
     with BagWriter(bag) as w:
-        w.imu_series("/site/accel/f1", T0 + np.arange(n, dtype=np.int64) * P, _xyz(_signal(np.random.default_rng(5), n)[:, 0]))
+        w.imu_series("/site/accel/f1", T0 + np.arange(n, dtype=np.int64) * P,
+                     _xyz(_signal(np.random.default_rng(5), n)[:, 0]))
     hung = subprocess.Popen([sys.executable, "-c", HUNG_INGEST], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
     try:
