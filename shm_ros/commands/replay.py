@@ -1,4 +1,9 @@
-"""`shm-ros replay BAG`: publish a recording through the running node graph."""
+"""`shm-ros replay BAG`: publish a recording through the running node graph.
+
+Exit status: 0 when the graph acknowledged every message; 1 when messages were lost; 2 when the bag
+cannot be read (a truncated MCAP is replayed up to where it ends, then reported) or the ingest node
+stopped acknowledging.
+"""
 
 from __future__ import annotations
 
