@@ -16,6 +16,9 @@ SHARED = ROOT.parent / "shared"
 os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("MPLBACKEND", "Agg")
+# The science works on many small matrices, where a multi-threaded BLAS only contends (and on a
+# shared 2-core machine can be 25x slower); node processes started by tests inherit this too.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 

@@ -11,7 +11,6 @@ written with an ``error`` and no modes; the other windows are not affected.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -83,28 +82,8 @@ def build_config(args: argparse.Namespace):
     return cfg
 
 
-def _num(x: float) -> float | None:
+def _num(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(float(x)) else float(x)
-
-
-def estimate_record(est, window) -> dict[str, Any]:
-    """One window of the contract's JSON (section 3), plus optional extras."""
-    from shm_ros.core.windows import iso_utc
-
-    modes = []
-    for m in est.modes:
-        modes.append({
-            "frequency_hz": float(m.frequency_hz), "damping_ratio": float(m.damping_ratio),
-            "mpc": _num(m.mpc),
-            "mode_shape": {sid: float(v) for sid, v in zip(est.sensor_ids, m.mode_shape)},
-            "frequency_std_hz": _num(m.frequency_std_hz), "damping_std": _num(m.damping_std),
-            "frequency_spread_hz": _num(m.frequency_spread_hz),
-            "damping_spread": _num(m.damping_spread), "n_poles": int(m.n_poles),
-        })
-    return {"start": iso_utc(window.start_ns), "end": iso_utc(window.end_ns),
-            "temperature_c": _num(window.temperature_c), "window_id": window.window_id,
-            "method": est.method, "sensor_ids": list(est.sensor_ids), "is_event": bool(window.is_event),
-            "pga_m_s2": _num(window.pga_m_s2), "modes": modes}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -113,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from shm_ros.core.identify import identify_window_detailed
     from shm_ros.core.provenance import stamp_output
     from shm_ros.core.windows import iso_utc
+    from shm_ros.io.modes_json import dump, estimate_record
     from shm_ros.io.recording import ingest_bag
     from shm_ros.io.structure import load_structure
 
@@ -157,9 +137,7 @@ def run(args: argparse.Namespace) -> int:
             rec["plot"] = str(plots / name)
     config = {"identify": asdict(cfg), "window_s": args.window, "bag": str(args.bag),
               "structure": str(args.structure)}
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(stamp_output({"windows": records}, config), indent=1, allow_nan=False))
+    out = dump(stamp_output({"windows": records}, config), args.out)
     n_modes = sum(len(r["modes"]) for r in records)
     print(f"{len(records)} windows ({n_ok} identified), {n_modes} modes -> {out}")
     return 0 if (n_ok or not res.windows) else 1

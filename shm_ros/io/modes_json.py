@@ -10,40 +10,44 @@ from typing import Any
 import numpy as np
 
 from shm_ros.core.provenance import stamp_output
-from shm_ros.core.types import ModalEstimate, Mode
+from shm_ros.core.types import ModalEstimate, Mode, Window
 
 
 def iso(t_ns: int) -> str:
-    from datetime import datetime, timezone
+    from shm_ros.core.windows import iso_utc
 
-    dt = datetime.fromtimestamp(t_ns // 1_000_000_000, tz=timezone.utc)
-    frac = t_ns % 1_000_000_000
-    text = dt.strftime("%Y-%m-%dT%H:%M:%S")
-    return text + (f".{frac // 1_000_000:03d}" if frac else "") + "Z"
+    return iso_utc(t_ns)
 
 
 def _finite(x: float) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-def estimate_record(e: ModalEstimate) -> dict[str, Any]:
+def estimate_record(e: ModalEstimate, window: Window | None = None) -> dict[str, Any]:
+    """One window of the contract's JSON (section 3); ``window`` adds its event flag and PGA."""
     modes = sorted(e.modes, key=lambda m: m.frequency_hz)
-    record = {
-        "window_id": e.window_id,
+    record: dict[str, Any] = {
         "start": iso(e.start_ns),
         "end": iso(e.end_ns),
-        "temperature_c": _finite(e.temperature_c) if e.temperature_c is not None else None,
+        "temperature_c": None if e.temperature_c is None else _finite(e.temperature_c),
+        "window_id": e.window_id,
         "method": e.method,
+        "sensor_ids": list(e.sensor_ids),
         "modes": [{
             "frequency_hz": float(m.frequency_hz),
             "damping_ratio": float(m.damping_ratio),
             "mpc": _finite(m.mpc),
+            "mode_shape": {s: float(v) for s, v in zip(e.sensor_ids, np.asarray(m.mode_shape))},
             "frequency_std_hz": _finite(m.frequency_std_hz),
             "damping_std": _finite(m.damping_std),
+            "frequency_spread_hz": _finite(getattr(m, "frequency_spread_hz", float("nan"))),
+            "damping_spread": _finite(getattr(m, "damping_spread", float("nan"))),
             "n_poles": int(m.n_poles),
-            "mode_shape": {s: float(v) for s, v in zip(e.sensor_ids, np.asarray(m.mode_shape))},
         } for m in modes],
     }
+    if window is not None:
+        record["is_event"] = bool(window.is_event)
+        record["pga_m_s2"] = _finite(window.pga_m_s2)
     if e.covariates:
         record["covariates"] = {k: _finite(v) for k, v in e.covariates.items()}
     return record
@@ -55,12 +59,17 @@ def modes_document(estimates: list[ModalEstimate], config: dict | None = None,
     return stamp_output({"windows": [estimate_record(e) for e in ordered]}, config, seed)
 
 
-def write_modes_json(path: str | Path, estimates: list[ModalEstimate], config: dict | None = None,
-                     seed: int | None = None) -> Path:
+def dump(document: dict[str, Any], path: str | Path) -> Path:
+    """Write a JSON document strictly (NaN/Inf are written as null by the record builders)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(modes_document(estimates, config, seed), indent=1))
+    path.write_text(json.dumps(document, indent=1, allow_nan=False))
     return path
+
+
+def write_modes_json(path: str | Path, estimates: list[ModalEstimate], config: dict | None = None,
+                     seed: int | None = None) -> Path:
+    return dump(modes_document(estimates, config, seed), path)
 
 
 def read_modes_json(path: str | Path) -> list[ModalEstimate]:
