@@ -24,14 +24,14 @@ import json
 import os
 import platform
 import shutil
-import signal
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from shm_ros.ros.supervisor import node_process, stop_process
 
 T0 = 1_714_521_600_000_000_000
 TARGETS = {"imu": 2.0, "block": 20.0}
@@ -79,25 +79,6 @@ def write_bag(path: Path, layout: str, stamps: np.ndarray, data: np.ndarray, fs:
         return (n + step - 1) // step
 
 
-def _node(kind: str, params: dict) -> subprocess.Popen:
-    args = [sys.executable, "-m", f"shm_ros.ros.{kind}_node", "--ros-args"]
-    for key, value in params.items():
-        if isinstance(value, list):
-            value = "[" + ",".join(str(v) for v in value) + "]"
-        args += ["-p", f"{key}:={value}"]
-    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-
-
-def _stop(proc: subprocess.Popen, timeout: float = 60.0) -> tuple[int, str]:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-        return -9, out
-    return proc.returncode, out
 
 
 def _cpu_s(pid: int) -> float:
@@ -155,8 +136,8 @@ def run_layout(layout: str, workdir: Path, seconds: float, channels: int, fs: fl
     structure = workdir / "structure.yaml"
     structure.write_text(structure_yaml(channels))
     out_bag = workdir / f"{layout}_windows"
-    ingest = _node("ingest", {"structure": str(structure), "window_s": window_s})
-    recorder = _node("recorder", {"output": str(out_bag), "topics": ["/shm/windows"]})
+    ingest = node_process("ingest", {"structure": str(structure), "window_s": window_s})
+    recorder = node_process("recorder", {"output": str(out_bag), "topics": ["/shm/windows"]})
     time.sleep(2.0)
     result = None
     try:
@@ -171,8 +152,8 @@ def run_layout(layout: str, workdir: Path, seconds: float, channels: int, fs: fl
         ingest_cpu = _cpu_s(ingest.pid) - cpu0
         time.sleep(1.0)  # the flush after /shm/replay/done, and the recorder's last windows
     finally:
-        code_i, out_i = _stop(ingest)
-        code_r, out_r = _stop(recorder)
+        code_i, out_i = stop_process(ingest, timeout=60.0)
+        code_r, out_r = stop_process(recorder, timeout=60.0)
     check = check_windows(out_bag, stamps, data, fs) if out_bag.exists() else {
         "windows": 0, "rows_missing": len(stamps), "rows_duplicated": 0, "values_altered": 0,
         "bad_windows": 0, "samples_windowed": 0}

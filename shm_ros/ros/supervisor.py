@@ -29,6 +29,33 @@ import yaml
 NODE_KINDS = ("ingest", "identify", "update", "recorder")
 
 
+def node_process(kind: str, params: dict[str, Any], name: str | None = None,
+                 capture: bool = True) -> subprocess.Popen:
+    """Start one node as its own process with ``-p key:=value`` parameters."""
+    args = [sys.executable, "-m", f"shm_ros.ros.{kind}_node", "--ros-args"]
+    if name:
+        args += ["-r", f"__node:={name}"]
+    for key, value in params.items():
+        if isinstance(value, list):
+            value = "[" + ",".join(str(v) for v in value) + "]"
+        args += ["-p", f"{key}:={value}"]
+    out = subprocess.PIPE if capture else None
+    return subprocess.Popen(args, stdout=out, stderr=subprocess.STDOUT if capture else None, text=True)
+
+
+def stop_process(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, str]:
+    """SIGINT, wait, kill if needed; returns (exit code, captured output); -9 when killed."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+        return -9, out or ""
+    return proc.returncode, out or ""
+
+
 class ConfigError(ValueError):
     """The graph config is invalid; the message names the file and the field."""
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 import time
@@ -11,28 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-
-def node_process(kind: str, params: dict, name: str | None = None) -> subprocess.Popen:
-    args = [sys.executable, "-m", f"shm_ros.ros.{kind}_node", "--ros-args"]
-    if name:
-        args += ["-r", f"__node:={name}"]
-    for key, value in params.items():
-        if isinstance(value, list):
-            value = "[" + ",".join(str(v) for v in value) + "]"
-        args += ["-p", f"{key}:={value}"]
-    return subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+from shm_ros.ros.supervisor import node_process, stop_process  # noqa: F401 (re-exported)
 
 
 def stop(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, str]:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        out, _ = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-        return -9, out
-    return proc.returncode, out
+    return stop_process(proc, timeout)
 
 
 @contextmanager
