@@ -41,6 +41,19 @@ def test_correlations_and_gram_are_exact_sums():
     assert np.allclose(r[4, :, 0], z[4:].T @ z[:-4, 1] / (700 - 4))
 
 
+def test_segmented_correlations_equal_the_direct_sums():
+    """Blocks shorter than the record (several segments, a partial last one) give the exact
+    finite sums divided by N - k, for every lag, channel and reference."""
+    rng = np.random.default_rng(5)
+    z = rng.standard_normal((1001, 4)).cumsum(axis=0)  # coloured, non-zero mean
+    refs = np.array([3, 0])
+    n_lags = 17
+    direct = np.stack([z[k:].T @ z[:1001 - k, refs] / (1001 - k) for k in range(n_lags)])
+    for segment in (64, 100, 4096):
+        r = ssi.correlations(z, refs, n_lags, segment=segment)
+        assert np.allclose(r, direct, rtol=1e-10, atol=1e-10 * np.abs(direct).max())
+
+
 def test_ssi_data_gram_and_streamed_qr_give_the_same_poles():
     y, fs = _two_mode_record(2, n=6000)
     p = []

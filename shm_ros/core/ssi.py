@@ -19,7 +19,8 @@ demonstrates this.
 
 The block-Hankel products are never formed as big explicit matrices:
 
-* SSI-cov: output correlations for all lags come from one FFT (:func:`correlations`).
+* SSI-cov: output correlations for all lags come from segmented FFTs whose cross spectra are
+  summed before short inverse transforms (:func:`correlations`).
 * SSI-data / input-output: the lower-triangular factor ``L`` of the LQ factorisation
   ``H / sqrt(j) = L Q^T`` of the data block-Hankel matrix is computed either from the exactly
   assembled Gram matrix ``H H^T`` (Cholesky; its entries are lag products with exact edge
@@ -90,21 +91,32 @@ class PoleSet:
 # ----------------------------------------------------------------------------- correlations / LQ
 
 
-def correlations(y: np.ndarray, refs: np.ndarray, n_lags: int) -> np.ndarray:
+def correlations(y: np.ndarray, refs: np.ndarray, n_lags: int, segment: int = 4096) -> np.ndarray:
     """Unbiased output correlations ``R_k = E[y_{t+k} y_ref,t^T]`` for ``k = 0..n_lags-1``.
 
-    ``y`` is (N, l); returns (n_lags, l, r). Computed with one real FFT per channel (zero-padded,
-    so it is the exact finite sum divided by ``N - k``).
+    ``y`` is (N, l); returns (n_lags, l, r). Exact finite sums divided by ``N - k``, computed by
+    FFT in segments: the sum over ``t`` is split into blocks of ``B`` samples; each block of the
+    references (zero-padded) is correlated with the outputs of the same block plus ``n_lags``
+    samples ahead, with an FFT of length ``P >= B + n_lags`` so that no lag wraps around. The
+    cross spectra are summed over blocks before the inverse FFTs, which are then short
+    (``l * r`` transforms of length ``P`` instead of ``N``).
     """
     n, l = y.shape
     if n_lags >= n:
         raise ValueError(f"{n_lags} correlation lags need more than {n} samples")
-    nfft = scipy.fft.next_fast_len(n + n_lags, real=True)
-    fy = scipy.fft.rfft(y, n=nfft, axis=0)  # (F, l)
-    r = np.empty((n_lags, l, refs.size))
-    for k, ref in enumerate(refs):  # one reference at a time keeps the peak memory small
-        # cross spectrum of y_{t+k} with ref_t: conj(F_ref) * F_y
-        r[:, :, k] = scipy.fft.irfft(fy * np.conj(fy[:, ref])[:, None], n=nfft, axis=0)[:n_lags]
+    refs = np.asarray(refs, dtype=int)
+    p = scipy.fft.next_fast_len(min(max(segment, 4 * n_lags), n) + n_lags, real=True)
+    b = p - n_lags  # samples of t per block
+    nb = -(-n // b)
+    ypad = np.zeros((nb * b + p, l))
+    ypad[:n] = y
+    # outputs y_{s .. s+P-1} of every block (a view), references r_{s .. s+B-1} zero-padded
+    ys = np.lib.stride_tricks.sliding_window_view(ypad, p, axis=0)[: nb * b : b]  # (nb, l, P)
+    fy = scipy.fft.rfft(ys, axis=-1)  # (nb, l, F)
+    fr = scipy.fft.rfft(ypad[: nb * b, refs].reshape(nb, b, refs.size), n=p, axis=1)  # (nb, F, r)
+    # sum over blocks of conj(F_ref) F_y for every frequency: a batched (l x nb) @ (nb x r)
+    cross = np.matmul(fy.transpose(2, 1, 0), np.conj(fr).transpose(1, 0, 2))  # (F, l, r)
+    r = scipy.fft.irfft(cross, n=p, axis=0)[:n_lags]
     r /= (n - np.arange(n_lags))[:, None, None]
     return r
 
