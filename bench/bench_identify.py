@@ -14,6 +14,8 @@ worker processes (BLAS on one thread each), SSI-cov and SSI-data.
 
     python -m bench.bench_identify            # full run (several minutes)
     python -m bench.bench_identify --quick    # smoke run: 2 min window, 24-window campaign
+    python -m bench.bench_identify --methods ssi-cov --campaign 0   # SSI-cov table only
+                                              # (writes bench_identify_ssi-cov.{json,md})
 """
 
 from __future__ import annotations
@@ -167,18 +169,22 @@ def campaign(windows: list[Window], n: int, method: str, workers: int = 2) -> di
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="short window and small campaign")
-    ap.add_argument("--campaign", type=int, default=None, help="campaign size (default 1152)")
+    ap.add_argument("--campaign", type=int, default=None,
+                    help="campaign size (default 1152; 0 skips the campaign)")
+    ap.add_argument("--methods", nargs="+", choices=["ssi-cov", "ssi-data"],
+                    default=["ssi-cov", "ssi-data"], help="methods to compare (default both)")
     ap.add_argument("--seed", type=int, default=2024)
     args = ap.parse_args(argv)
     logging.disable(logging.WARNING)  # pyOMA2 logs every step at INFO
     duration = 120.0 if args.quick else 600.0
-    n_campaign = args.campaign or (24 if args.quick else 1152)
+    n_campaign = args.campaign if args.campaign is not None else (24 if args.quick else 1152)
+    methods = [m for m in ("ssi-cov", "ssi-data") if m in args.methods]
     RESULTS.mkdir(parents=True, exist_ok=True)
 
     windows = [_window(args.seed + k, duration) for k in range(8)]
     window, truth = windows[0]
     rows = []
-    for method in ("ssi-cov", "ssi-data"):
+    for method in methods:
         for tool in ("shm_ros", "pyOMA2 1.4.3"):
             if tool == "shm_ros":
                 run, extra = _ours, ()
@@ -198,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
 
     camp_windows = [w for w, _ in windows]
     camps = []
-    for method in ("ssi-cov", "ssi-data"):
+    for method in methods if n_campaign > 0 else []:
         c = campaign(camp_windows, n_campaign, method)
         camps.append(c)
         print(f"campaign {method}: {c['windows']} windows in {c['wall_s']:.1f} s", flush=True)
@@ -210,9 +216,12 @@ def main(argv: list[str] | None = None) -> int:
               "truth_damping": list(map(float, truth.damping_ratio[:4])),
               "runs": rows, "campaign": camps, "load_average": load,
               "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
-    (RESULTS / "bench_identify.json").write_text(json.dumps(result, indent=2))
+    # a partial run (one method or no campaign) must not overwrite the full run's files
+    full = len(methods) == 2 and n_campaign > 0
+    stem = "bench_identify" if full else "bench_identify_" + "_".join(methods)
+    (RESULTS / f"{stem}.json").write_text(json.dumps(result, indent=2))
     md = _markdown(result)
-    (RESULTS / "bench_identify.md").write_text(md)
+    (RESULTS / f"{stem}.md").write_text(md)
     print(md)
     return 0
 
