@@ -16,6 +16,7 @@ of parameter vectors per call.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -304,3 +305,27 @@ def generalized_modes_batch(K: np.ndarray, M: np.ndarray, n_modes: int) -> Batch
     w2, y = w2[:, :n], y[:, :, :n]
     phi = np.swapaxes(Linv, -1, -2) @ y
     return BatchModalSolution(np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi), phi)
+
+
+def assemble_model(spec: Any, params: list[Any], K0: np.ndarray, M0: np.ndarray,
+                   K_terms: list[np.ndarray], M_terms: list[np.ndarray], dof_labels: list[str],
+                   sensor_dofs: dict[str, int], damping_factors: list[list[int]],
+                   **fields: Any) -> AffineModel:
+    """The :class:`AffineModel` of a structure spec once a builder has its matrices: the parts every
+    kind shares (names, all-zero terms dropped, damping, input sensor); ``fields`` adds the rest."""
+    fields.setdefault("input_dof", sensor_dofs.get(spec.input_sensor) if spec.input_sensor else None)
+    return AffineModel(
+        name=spec.name,
+        parameter_names=[p.name for p in params],
+        K0=K0,
+        M0=M0,
+        K_terms=[t if np.any(t) else None for t in K_terms],
+        M_terms=[t if np.any(t) else None for t in M_terms],
+        dof_labels=dof_labels,
+        sensor_dofs=sensor_dofs,
+        damping_ratios=tuple(spec.damping.ratios),
+        damping_kind=spec.damping.kind,
+        input_sensor=spec.input_sensor,
+        damping_factors=damping_factors,
+        **fields,
+    )

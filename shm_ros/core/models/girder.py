@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shm_ros.core.models.base import AffineModel
+from shm_ros.core.models.base import AffineModel, assemble_model
 from shm_ros.core.structure import GirderSpec, StructureError, StructureSpec
 
 
@@ -207,26 +207,9 @@ def build_girder(
             sensor_rows[s.id] = np.zeros(n_dof)
             sensor_rows[s.id][2 * node] = 1.0
 
-    return AffineModel(
-        name=spec.name,
-        parameter_names=[p.name for p in params],
-        K0=K0,
-        M0=M0,
-        K_terms=[t if np.any(t) else None for t in K_terms],
-        M_terms=[t if np.any(t) else None for t in M_terms],
-        dof_labels=labels,
-        sensor_dofs=sensor_dofs,
-        input_dof=sensor_dofs.get(spec.input_sensor) if spec.input_sensor else None,
-        damping_ratios=tuple(spec.damping.ratios),
-        damping_kind=spec.damping.kind,
-        base_influence=None,
-        sensor_rows=sensor_rows,
-        input_sensor=spec.input_sensor,
-        damping_factors=damping_factors,
-        kind="girder",
-        direction="vertical",
-        node_x=mesh.node_x.copy(),
-    )
+    return assemble_model(spec, params, K0, M0, K_terms, M_terms, labels, sensor_dofs,
+                          damping_factors, base_influence=None, sensor_rows=sensor_rows,
+                          kind="girder", direction="vertical", node_x=mesh.node_x.copy())
 
 
 def deck_observation(node_x: np.ndarray, xs) -> np.ndarray:

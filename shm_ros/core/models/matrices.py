@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shm_ros.core.models.base import AffineModel
+from shm_ros.core.models.base import AffineModel, assemble_model
 from shm_ros.core.structure import StructureError, StructureSpec
 
 
@@ -46,19 +46,5 @@ def build_matrices(spec: StructureSpec, include_parameters: bool = True) -> Affi
     for s in spec.sensors:
         d = s.at["dof"]
         sensor_dofs[s.id] = labels.index(d) if isinstance(d, str) else int(d)
-    return AffineModel(
-        name=spec.name,
-        parameter_names=[p.name for p in params],
-        K0=K0,
-        M0=M0,
-        K_terms=[t if np.any(t) else None for t in K_terms],
-        M_terms=[t if np.any(t) else None for t in M_terms],
-        dof_labels=labels,
-        sensor_dofs=sensor_dofs,
-        input_dof=sensor_dofs.get(spec.input_sensor) if spec.input_sensor else None,
-        damping_ratios=tuple(spec.damping.ratios),
-        damping_kind=spec.damping.kind,
-        input_sensor=spec.input_sensor,
-        damping_factors=damping_factors,
-        kind="matrices",
-    )
+    return assemble_model(spec, params, K0, M0, K_terms, M_terms, labels, sensor_dofs,
+                          damping_factors, kind="matrices")

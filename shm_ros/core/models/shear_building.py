@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shm_ros.core.models.base import AffineModel
+from shm_ros.core.models.base import AffineModel, assemble_model
 from shm_ros.core.structure import StructureError, StructureSpec
 
 
@@ -72,21 +72,7 @@ def build_shear_building(
         fl = spec.sensor(spec.input_sensor).floor
         input_dof = None if not fl else fl - 1
 
-    return AffineModel(
-        name=spec.name,
-        parameter_names=[p.name for p in params],
-        K0=K0,
-        M0=M0,
-        K_terms=[t if np.any(t) else None for t in K_terms],
-        M_terms=[t if np.any(t) else None for t in M_terms],
-        dof_labels=[f"floor{i + 1}.{direction}" for i in range(n)],
-        sensor_dofs=sensor_dofs,
-        input_dof=input_dof,
-        damping_ratios=tuple(spec.damping.ratios),
-        damping_kind=spec.damping.kind,
-        base_influence=np.ones(n),
-        input_sensor=spec.input_sensor,
-        damping_factors=damping_factors,
-        kind="shear_building",
-        direction=direction,
-    )
+    return assemble_model(spec, params, K0, M0, K_terms, M_terms,
+                          [f"floor{i + 1}.{direction}" for i in range(n)], sensor_dofs,
+                          damping_factors, input_dof=input_dof, base_influence=np.ones(n),
+                          kind="shear_building", direction=direction)
