@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ros_helpers.graph import node_process, replay, stop
+from test_graph_replay import STRUCTURE as REPLAY_STRUCTURE
 
 FS = 100.0
 P = 10_000_000  # ns per sample at 100 Hz
@@ -35,19 +36,8 @@ GAP = slice(2000, 2050)  # 0.5 s missing on every channel (shorter than the 1 s 
 JUMP_ROW, JUMP_NS = 700, -3_002_300_000  # f2, burst 2: clock jumps back by 3.0023 s
 HERE = Path(__file__).resolve().parent
 
-STRUCTURE = """
-name: three-storey-test-frame
-kind: shear_building
-shear_building:
-  floors:
-    - {mass: 1.0e+5, stiffness: 2.0e+8}
-    - {mass: 1.0e+5, stiffness: 2.0e+8}
-    - {mass: 1.0e+5, stiffness: 2.0e+8}
-sensors:
-  - {id: f1, at: {floor: 1}, direction: x}
-  - {id: f2, at: {floor: 2}, direction: x}
-  - {id: f3, at: {floor: 3}, direction: x}
-"""
+# The three-storey frame of the replay test, every sensor on its own Imu topic.
+STRUCTURE = REPLAY_STRUCTURE.replace(", source: {topic: roof, axis: y, sign: -1}", "")
 
 
 def _signal(rng, n: int) -> np.ndarray:
