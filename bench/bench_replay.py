@@ -138,12 +138,17 @@ def run_layout(layout: str, workdir: Path, seconds: float, channels: int, fs: fl
     out_bag = workdir / f"{layout}_windows"
     ingest = node_process("ingest", {"structure": str(structure), "window_s": window_s})
     recorder = node_process("recorder", {"output": str(out_bag), "topics": ["/shm/windows"]})
-    time.sleep(2.0)
     result = None
     try:
         cpu0 = _cpu_s(ingest.pid)
         rclpy.init()
         try:
+            # the recorder must be subscribed before the first window goes out
+            probe = rclpy.create_node("bench_replay_probe")
+            ready_by = time.monotonic() + 60.0
+            while probe.count_subscribers("/shm/windows") < 1 and time.monotonic() < ready_by:
+                rclpy.spin_once(probe, timeout_sec=0.1)
+            probe.destroy_node()
             cpu = time.process_time()
             result = replay_bag(bag, wait_s=20.0, drain_timeout_s=120.0)
             replay_cpu = time.process_time() - cpu

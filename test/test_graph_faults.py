@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ros_helpers.graph import node_process, replay, stop
+from ros_helpers.graph import node_process, replay, stop, wait_ready
 from test_graph_replay import STRUCTURE as REPLAY_STRUCTURE
 
 FS = 100.0
@@ -165,13 +165,14 @@ def test_faults_through_node_processes_are_reported_flagged_and_survived(tmp_pat
     }
     results = {}
     try:
-        time.sleep(1.5)
+        wait_ready(subscribers={"/shm/windows": 2, "/diagnostics": 1},
+                   publishers={"/shm/modal_estimates": 1, "/shm/ingest/received": 1})
         rep_faulty = replay(faulty, timeout=120)
         rep_trunc = replay(truncated, timeout=120)
         be = subprocess.run([sys.executable, str(HERE / "ros_helpers" / "best_effort_imu.py"),
                              str(be_data), "/driver", "2000"], capture_output=True, text=True,
                             timeout=60)
-        time.sleep(2.0)  # identify the last windows
+        time.sleep(4.0)  # identify the last windows
         alive = {k: p.poll() is None for k, p in procs.items()}
     finally:
         for k, p in procs.items():

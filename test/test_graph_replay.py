@@ -73,7 +73,8 @@ def test_replayed_bag_gives_windows_with_exactly_the_samples_that_went_in(tmp_pa
     out_bag = tmp_path / "pipeline"
     ingest = node_process("ingest", {"structure": str(structure), "window_s": 10.0})
     recorder = node_process("recorder", {"output": str(out_bag), "topics": ["/shm/windows"]})
-    with running(ingest, recorder) as results:
+    with running(ingest, recorder, subscribers={"/shm/windows": 1},
+                 publishers={"/shm/ingest/received": 1}) as results:
         rep = replay(bag)
     assert rep.returncode == 0, rep.stdout + rep.stderr
     assert "lost 0" in rep.stdout

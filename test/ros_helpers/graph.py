@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -17,9 +16,39 @@ def stop(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, str]:
     return stop_process(proc, timeout)
 
 
+_WAIT = r"""
+import json, sys, time
+import rclpy
+subs, pubs, timeout = json.loads(sys.argv[1]), json.loads(sys.argv[2]), float(sys.argv[3])
+rclpy.init()
+node = rclpy.create_node("test_wait_ready")
+end, ok = time.monotonic() + timeout, False
+while time.monotonic() < end and not ok:
+    ok = (all(node.count_subscribers(t) >= k for t, k in subs.items())
+          and all(node.count_publishers(t) >= k for t, k in pubs.items()))
+    rclpy.spin_once(node, timeout_sec=0.1)
+node.destroy_node()
+rclpy.shutdown()
+sys.exit(0 if ok else 1)
+"""
+
+
+def wait_ready(subscribers: dict[str, int] | None = None, publishers: dict[str, int] | None = None,
+               timeout: float = 90.0) -> None:
+    """Block until the graph has at least these subscriber/publisher counts per topic: node
+    processes import for a while, and pipeline topics keep nothing for late joiners."""
+    import json
+
+    run = subprocess.run([sys.executable, "-c", _WAIT, json.dumps(subscribers or {}),
+                          json.dumps(publishers or {}), str(timeout)],
+                         capture_output=True, text=True, timeout=timeout + 30)
+    assert run.returncode == 0, f"graph not ready: {subscribers} {publishers}\n{run.stderr[-2000:]}"
+
+
 @contextmanager
-def running(*procs: subprocess.Popen, settle_s: float = 1.5):
-    time.sleep(settle_s)
+def running(*procs: subprocess.Popen, subscribers: dict[str, int] | None = None,
+            publishers: dict[str, int] | None = None):
+    wait_ready(subscribers, publishers)
     results: dict[int, tuple[int, str]] = {}
     try:
         yield results
