@@ -25,7 +25,7 @@ from shm_ros.core.models import build_model
 from shm_ros.core.types import ModalEstimate, Mode
 from shm_ros.io.structure import load_structure
 from shm_ros.ros.convert import estimate_to_msg
-from shm_ros.ros.qos import latched_qos, pipeline_qos
+from shm_ros.ros.qos import latched_qos, stream_qos
 
 spec = load_structure(sys.argv[1]); truth = json.loads(sys.argv[2])
 sensors = ["f1", "f3", "f6", "f8"]
@@ -37,7 +37,7 @@ sol = model.modes(theta, 4)
 phi = model.sensor_matrix(sensors) @ sol.shapes
 rclpy.init(); node = Node("estimates_source")
 from shm_interfaces.msg import ModalEstimate as EstimateMsg
-pub = node.create_publisher(EstimateMsg, "/shm/modal_estimates", pipeline_qos())
+pub = node.create_publisher(EstimateMsg, "/shm/modal_estimates", stream_qos())
 got = []
 node.create_subscription(PosteriorSummary, "/shm/posterior", got.append, latched_qos())
 end = time.monotonic() + 60

@@ -100,6 +100,10 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
             rclpy.spin_once(watcher, timeout_sec=0.2)
             if expected_windows is not None and len(seen) >= expected_windows:
                 break
+            dead = [name for name, p in sup.procs.items() if p.poll() is not None]
+            if dead:
+                log(f"node(s) {dead} exited before every window was identified")
+                break
             if len(seen) != last:
                 last, quiet_since = len(seen), time.monotonic()
             if expected_windows is None and seen and time.monotonic() - quiet_since > 20:

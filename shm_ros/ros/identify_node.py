@@ -12,7 +12,7 @@ from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_to_msg, window_from_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.qos import pipeline_qos
+from shm_ros.ros.qos import stream_qos
 
 
 class IdentifyNode(Node):
@@ -37,9 +37,9 @@ class IdentifyNode(Node):
         self.frame_id = str(get("frame_id"))
         self.diag = Diagnostics(self, "identify")
         self.pub = self.create_publisher(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
-                                         topics.MODAL_ESTIMATES, pipeline_qos())
+                                         topics.MODAL_ESTIMATES, stream_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS,
-                                 self._on_window, pipeline_qos())
+                                 self._on_window, stream_qos())
         self.count = 0
         self.get_logger().info(f"identify with {method}, orders up to {self.config.max_order}")
 

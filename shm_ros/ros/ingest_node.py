@@ -24,7 +24,8 @@ from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.qos import latched_qos, pipeline_qos, recording_qos
+from shm_ros.ros.qos import (WINDOW_HISTORY, latched_qos, pipeline_qos, recording_qos,
+                             stream_qos)
 
 LEVEL = {0: "ok", 1: "warn", 2: "error"}
 IMU_BATCH = 512  # Imu messages decoded together (also every 0.05 s)
@@ -61,7 +62,7 @@ class IngestNode(Node):
         self.reliable = bool(value("reliable_input"))
         self.diag = Diagnostics(self, "ingest")
         self.window_pub = self.create_publisher(
-            topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, pipeline_qos())
+            topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, stream_qos(WINDOW_HISTORY))
         self.ack_pub = self.create_publisher(UInt64, topics.INGEST_RECEIVED, pipeline_qos())
         self.create_subscription(String, topics.REPLAY_DONE, self._on_replay_done, latched_qos())
         self.subscribed: set[str] = set()

@@ -5,6 +5,9 @@
   history so bursts from a fast replay are not dropped on the floor.
 - The pipeline's own topics are reliable and keep all samples up to a bounded depth: a downstream
   node that is briefly busy still gets every window and estimate.
+- Windows and modal estimates are also transient-local: a node whose subscription is matched a
+  moment after a publication (discovery is not instantaneous, a restarted node comes back late)
+  still receives the latest ones. The window publisher keeps only a few (each can be megabytes).
 """
 
 from __future__ import annotations
@@ -35,6 +38,16 @@ def pipeline_qos(depth: int = PIPELINE_DEPTH) -> QoSProfile:
     """The pipeline's own topics (windows, modal estimates, ...): reliable, volatile."""
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+WINDOW_HISTORY = 4
+
+
+def stream_qos(depth: int = PIPELINE_DEPTH) -> QoSProfile:
+    """Windows and modal estimates: reliable, transient local (late joiners get the latest)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def latched_qos(depth: int = 1) -> QoSProfile:

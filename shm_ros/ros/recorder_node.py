@@ -10,11 +10,12 @@ from rclpy.node import Node
 from shm_ros.io.bags import BagWriter
 from shm_ros.ros import topics
 from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.qos import latched_qos, pipeline_qos
+from shm_ros.ros.qos import latched_qos, pipeline_qos, stream_qos
 
 DEFAULT_TOPICS = [topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES, topics.POSTERIOR,
                   topics.PREDICTION, topics.VERDICT, topics.DIAGNOSTICS]
 LATCHED = {topics.POSTERIOR, topics.VERDICT}
+STREAMS = {topics.WINDOWS, topics.MODAL_ESTIMATES}
 
 
 class RecorderNode(Node):
@@ -32,7 +33,8 @@ class RecorderNode(Node):
             if msgtype is None:
                 self.get_logger().error(f"parameter topics: no known type for {topic!r}; not recorded")
                 continue
-            qos = latched_qos() if topic in LATCHED else pipeline_qos()
+            qos = (latched_qos() if topic in LATCHED else
+                   stream_qos() if topic in STREAMS else pipeline_qos())
             self.create_subscription(topics.message_class(msgtype), topic,
                                      self._writer_for(topic, msgtype), qos, raw=True)
         self.get_logger().info(f"recording to {out}")

@@ -21,7 +21,7 @@ from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.qos import latched_qos, pipeline_qos
+from shm_ros.ros.qos import latched_qos, stream_qos
 
 
 class UpdateNode(Node):
@@ -55,7 +55,7 @@ class UpdateNode(Node):
         self.pub = self.create_publisher(topics.message_class(topics.TYPES[topics.POSTERIOR]),
                                          topics.POSTERIOR, latched_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
-                                 topics.MODAL_ESTIMATES, self._on_estimate, pipeline_qos())
+                                 topics.MODAL_ESTIMATES, self._on_estimate, stream_qos())
 
     def _on_estimate(self, msg) -> None:
         self.estimates.append(estimate_from_msg(msg))
