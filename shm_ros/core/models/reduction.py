@@ -31,6 +31,15 @@ _CONTROLLER = None
 R_MAX = 0.9  # largest convergence ratio the extrapolation trusts (jump factor <= 10)
 
 
+def _as_stack(K: np.ndarray, M: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+    """One (n, n) pencil or a (B, n, n) stack -> float stacks, and whether it was a single one."""
+    K = np.asarray(K, dtype=float)
+    M = np.asarray(M, dtype=float)
+    if K.ndim == 2:
+        return K[None], M[None], True
+    return K, M, False
+
+
 @contextlib.contextmanager
 def single_threaded_blas() -> Iterator[None]:
     """Run the block with one BLAS thread (via threadpoolctl when installed).
@@ -139,11 +148,7 @@ def iirs(
     ``accelerate`` extrapolates the geometric convergence every third step (same fixed point,
     fewer iterations); ``accelerate=False`` is the plain iteration.
     """
-    K = np.asarray(K, dtype=float)
-    M = np.asarray(M, dtype=float)
-    single = K.ndim == 2
-    if single:
-        K, M = K[None], M[None]
+    K, M, single = _as_stack(K, M)
     n = K.shape[-1]
     m, s = _split(n, masters)
     if s.size == 0:
@@ -287,11 +292,7 @@ def iirs_limit(K: np.ndarray, M: np.ndarray, masters: Sequence[int]) -> Reductio
     Ill-conditioned when a low mode has (nearly) no motion at all masters - then the sensors cannot
     see it either.
     """
-    K = np.asarray(K, dtype=float)
-    M = np.asarray(M, dtype=float)
-    single = K.ndim == 2
-    if single:
-        K, M = K[None], M[None]
+    K, M, single = _as_stack(K, M)
     n = K.shape[-1]
     m, _ = _split(n, masters)
     with single_threaded_blas():
