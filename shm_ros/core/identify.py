@@ -156,7 +156,8 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
     orders = np.arange(max(1, cfg.min_order), model.observability.shape[1] + 1, cfg.order_step)
     st = cfg.stability
     poles = ssi.poles_all_orders(model, orders, two_a=st.two_a, match_scale=(
-        st.two_a_freq_tol, st.two_a_damping_tol, st.two_a_mac_min))
+        st.two_a_freq_tol, st.two_a_damping_tol, st.two_a_mac_min),
+        shapes_for=(st.freq_tol, st.damping_tol))
     flags = classify(poles, cfg.stability, fs)
     picked = pick_modes(poles, flags, cfg.picking, use_filters=cfg.use_filters)
     std_f = np.full(len(picked), np.nan)

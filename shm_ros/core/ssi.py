@@ -38,6 +38,8 @@ import numpy as np
 import scipy.fft
 import scipy.linalg as sla
 
+from shm_ros.core import eigen
+
 __all__ = [
     "SubspaceModel",
     "PoleSet",
@@ -216,8 +218,24 @@ def _check(y: np.ndarray, block_rows: int, max_order: int) -> None:
 
 
 def _observability(mat: np.ndarray, max_order: int) -> tuple[np.ndarray, np.ndarray]:
+    """``O = U_n S_n^(1/2)`` from the leading ``n = max_order`` left singular vectors.
+
+    When ``n`` is well below the rank bound, only the leading part is computed, from the
+    eigenvectors of ``M M^T`` (``dsyevr`` with an index range); that squares the condition
+    number, so it is used only while ``s_n / s_1 > 1e-6`` (relative error of the singular
+    vectors then below ~1e-4 of their gap, far inside the noise) and the full SVD otherwise.
+    Returns ``O`` and the singular values computed (all of them, or the leading ``n``).
+    """
+    m = mat.shape[0]
+    n = min(max_order, *mat.shape)
+    if 2 * n < m:
+        g = sla.blas.dsyrk(1.0, mat)  # upper triangle of M M^T
+        w, v = sla.eigh(g, lower=False, subset_by_index=[m - n, m - 1], driver="evr",
+                        overwrite_a=True, check_finite=False)
+        s = np.sqrt(np.clip(w[::-1], 0.0, None))
+        if s[0] > 0 and s[-1] > 1e-6 * s[0]:
+            return v[:, ::-1] * np.sqrt(s), s
     u, s, _ = sla.svd(mat, full_matrices=False, check_finite=False, lapack_driver="gesdd")
-    n = min(max_order, s.size)
     return u[:, :n] * np.sqrt(s[:n]), s
 
 
@@ -318,26 +336,6 @@ def printed_eq13_estimate(o: np.ndarray, l: int, n: int) -> np.ndarray:
     return sla.solve(up.T @ dn, up.T @ up)
 
 
-def _modal(a: np.ndarray, c: np.ndarray, fs: float):
-    # LAPACK dgeev directly: only the eigenvectors of the poles with positive imaginary part are
-    # assembled (first column of each conjugate pair = real part, second = imaginary part)
-    wr, wi, _, vr, info = sla.lapack.dgeev(a, compute_vl=0, compute_vr=1, overwrite_a=1)
-    if info != 0:
-        raise np.linalg.LinAlgError(f"dgeev failed ({info})")
-    keep = np.flatnonzero(wi > 1e-12)
-    mu = wr[keep] + 1j * wi[keep]
-    psi = vr[:, keep] + 1j * vr[:, keep + 1]
-    lam = np.log(mu) * fs
-    w = np.abs(lam)
-    freq = w / (2 * np.pi)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        zeta = -lam.real / w
-    phi = c @ psi
-    nrm = np.linalg.norm(phi, axis=0)
-    nrm[nrm == 0] = 1.0
-    return freq, zeta, (phi / nrm).T
-
-
 def mac_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """MAC between rows of ``a`` (p, l) and rows of ``b`` (q, l), both complex unit-norm rows."""
     num = np.abs(a.conj() @ b.T) ** 2
@@ -346,16 +344,69 @@ def mac_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.where(den > 0, num / den, 0.0)
 
 
+def _poles(ev: eigen.Eigenvalues, fs: float, inverse: bool = False):
+    """Indices (into ``ev.values``), frequencies and damping ratios of the poles with positive
+    imaginary part (one per conjugate pair). ``inverse``: the eigenvalues are ``1 / mu``."""
+    keep = np.flatnonzero(ev.values.imag > 1e-12)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mu = ev.values[keep]
+        lam = (-np.log(mu).conj() if inverse else np.log(mu)) * fs
+        w = np.abs(lam)
+        zeta = -lam.real / w
+    return keep, w / (2 * np.pi), zeta
+
+
+def _regular_size(r: np.ndarray) -> int:
+    """Number of leading columns of the triangular ``r`` that are numerically independent."""
+    d = np.abs(np.diag(r))
+    if d.size == 0 or d.max() == 0:
+        return 0
+    bad = np.flatnonzero(d <= 1e-12 * d.max())
+    return int(bad[0]) if bad.size else d.size
+
+
+def _leading_block_form(m: np.ndarray, c: np.ndarray, r: np.ndarray, n: int):
+    """``(m R^-1)[:n, :n]`` and ``(c R^-1)[:, :n]`` for the upper triangular ``r``."""
+    rn = r[:n, :n]
+    a = sla.solve_triangular(rn, m[:n, :n].T, trans="T", check_finite=False).T
+    cc = sla.solve_triangular(rn, c[:, :n].T, trans="T", check_finite=False).T
+    return a, cc
+
+
+def _near(f1, z1, f2, z2, tf: float, tz: float) -> np.ndarray:
+    """(len(f1), len(f2)) bool: frequency within ``tf`` and damping within ``tz`` (relative to
+    the first set), the usual frequency/damping criteria."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return ((np.abs(f1[:, None] - f2[None, :]) < tf * f1[:, None])
+                & (np.abs(z1[:, None] - z2[None, :]) < tz * np.abs(z1[:, None])))
+
+
+def _unit_shapes(c: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    phi = c @ vectors
+    nrm = np.linalg.norm(phi, axis=0)
+    nrm[nrm == 0] = 1.0
+    return (phi / nrm).T
+
+
 def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None = None,
                      two_a: bool = True,
-                     match_scale: tuple[float, float, float] = (0.01, 0.05, 0.9)) -> PoleSet:
+                     match_scale: tuple[float, float, float] = (0.01, 0.05, 0.9),
+                     shapes_for: tuple[float, float] | None = None) -> PoleSet:
     """Poles of every model order from the one observability matrix.
 
     ``O_up = Q1 R1`` and ``O_dn = Q2 R2`` are factorised once at the largest order; for the first
     ``n`` columns ``A_f = R1[:n,:n]^-1 (Q1^T O_dn)[:n,:n]`` and
     ``A_b = (Q2^T O_up)[:n,:n]^-1 R2[:n,:n]`` (see module docstring). Each forward pole is paired
     with the backward pole of the same order that is closest in frequency, damping and MAC, each
-    difference scaled by ``match_scale`` = (frequency tol, damping tol, MAC minimum).
+    difference scaled by ``match_scale`` = (frequency tol, damping tol, MAC minimum); a forward
+    pole with no backward pole inside the frequency and damping tolerances keeps the closest one
+    in frequency and damping and MAC 0 (it fails the check either way).
+
+    ``shapes_for = (freq_tol, damping_tol)``: mode shapes (eigenvectors) are computed only for
+    poles that have a pole within these tolerances at a neighbouring evaluated order, i.e. the
+    only poles that can be stable; the others get NaN shapes. ``None``: shapes of every pole.
+    Eigenvalues of every order come first, eigenvectors of the chosen poles after
+    (:mod:`shm_ros.core.eigen`), which about halves the cost of a diagram.
     """
     o = model.observability
     l = model.n_outputs
@@ -364,41 +415,81 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
     orders = np.arange(1, nmax + 1) if orders is None else np.asarray(orders, dtype=int)
     orders = orders[(orders >= 1) & (orders <= nmax)]
     up, dn = o[:-l], o[l:]
+    c = o[:l]
+    # Basis in which the upper part of O is orthonormal (O' = O R1^-1, R1 upper triangular, so
+    # O'[:, :n] spans the same space as O[:, :n]): there the forward A of order n is the leading
+    # n x n block of the single matrix A' = Q1^T O_dn R1^-1, and its eigenvector y gives the mode
+    # shape C' y with C' = C R1^-1. Likewise the inverse of the backward A of order n is similar
+    # to the leading block of B' = Q2^T O_up R2^-1 (eigenvalues 1/mu, shapes C R2^-1 y).
     q1, r1 = sla.qr(up, mode="economic", check_finite=False)
-    m1 = q1.T @ dn
+    nmax = min(nmax, _regular_size(r1))
+    a_all, c_f = _leading_block_form(q1.T @ dn, c, r1, nmax)
     if two_a:
         q2, r2 = sla.qr(dn, mode="economic", check_finite=False)
-        n2 = q2.T @ up
-    cols: dict[str, list] = {k: [] for k in ("order", "f", "z", "phi", "fb", "zb", "macb")}
-    for n in orders:
-        c = o[:l, :n]
+        nb = min(nmax, _regular_size(r2))
+        b_all, c_b = _leading_block_form(q2.T @ up, c, r2, nb)
+    # pass 1: eigenvalues of both estimates at every order
+    fwd: list[tuple] = []
+    for n in orders[orders <= nmax]:
         try:
-            a_f = sla.solve_triangular(r1[:n, :n], m1[:n, :n], check_finite=False)
+            ev = eigen.eigenvalues(a_all[:n, :n], balance=False)
         except (np.linalg.LinAlgError, ValueError):
             continue
-        f, z, phi = _modal(a_f, c, fs)
+        keep, f, z = _poles(ev, fs)
         if f.size == 0:
             continue
+        evb = None
+        if two_a and n <= nb:
+            try:
+                evb = eigen.eigenvalues(b_all[:n, :n], balance=False)
+            except (np.linalg.LinAlgError, ValueError):
+                evb = None
+        fwd.append((n, ev, keep, f, z, evb))
+    if not fwd:
+        e = np.zeros(0)
+        return PoleSet(e.astype(int), e, e, np.zeros((0, l), complex), e, e, e, orders)
+    # which poles need a shape: those with a neighbour at the previous or next order
+    need = [np.ones(item[3].size, bool) for item in fwd]
+    if shapes_for is not None:
+        tf, tz = shapes_for
+        need = [np.zeros(item[3].size, bool) for item in fwd]
+        for k in range(1, len(fwd)):
+            _, _, _, f0, z0, _ = fwd[k - 1]
+            _, _, _, f1, z1, _ = fwd[k]
+            close = _near(f1, z1, f0, z0, tf, tz)
+            need[k] |= close.any(axis=1)
+            need[k - 1] |= close.any(axis=0)
+    # pass 2: shapes of the chosen poles and the two-A partners
+    tf2, tz2, tm2 = match_scale
+    cols: dict[str, list] = {k: [] for k in ("order", "f", "z", "phi", "fb", "zb", "macb")}
+    for (n, ev, keep, f, z, evb), sel in zip(fwd, need):
+        phi = np.full((f.size, l), np.nan, complex)
+        phi[sel] = _unit_shapes(c_f[:, :n], eigen.eigenvectors(ev, keep[sel]))
         fb = np.full(f.size, np.nan)
         zb = np.full(f.size, np.nan)
         macb = np.zeros(f.size)
-        if two_a:
-            try:
-                a_b = sla.solve(n2[:n, :n], r2[:n, :n], check_finite=False)
-                f2, z2, phi2 = _modal(a_b, c, fs)
-            except (np.linalg.LinAlgError, ValueError):
-                f2 = np.zeros(0)
+        if evb is not None:
+            keep2, f2, z2 = _poles(evb, fs, inverse=True)
             if f2.size:
-                # best partner: smallest sum of the differences scaled by their tolerances
-                tf, tz, tm = match_scale
-                mac = mac_matrix(phi, phi2)
                 with np.errstate(divide="ignore", invalid="ignore"):
-                    score = (np.abs(f[:, None] - f2[None, :]) / f[:, None] / tf
-                             + np.abs(z[:, None] - z2[None, :]) / np.abs(z[:, None]) / tz
-                             + (1.0 - mac) / (1.0 - tm))
-                k = np.argmin(np.nan_to_num(score, nan=np.inf), axis=1)
+                    dist = (np.abs(f[:, None] - f2[None, :]) / f[:, None] / tf2
+                            + np.abs(z[:, None] - z2[None, :]) / np.abs(z[:, None]) / tz2)
+                dist = np.nan_to_num(dist, nan=np.inf)
+                inside = _near(f, z, f2, z2, tf2, tz2) & sel[:, None]
+                k = np.argmin(dist, axis=1)
                 fb, zb = f2[k], z2[k]
-                macb = mac[np.arange(f.size), k]
+                cand = np.flatnonzero(inside.any(axis=0))
+                if cand.size:
+                    phi2 = np.full((f2.size, l), np.nan, complex)
+                    # the pole mu = 1/nu with imag(mu) > 0 belongs to conj(nu): conjugate shape
+                    phi2[cand] = _unit_shapes(c_b[:, :n], eigen.eigenvectors(evb, keep2[cand])).conj()
+                    rows = np.flatnonzero(inside.any(axis=1))
+                    mac = mac_matrix(phi[rows], phi2)
+                    score = np.where(inside[rows], dist[rows] + (1.0 - np.nan_to_num(mac)) / (1.0 - tm2),
+                                     np.inf)
+                    best = np.argmin(score, axis=1)
+                    fb[rows], zb[rows] = f2[best], z2[best]
+                    macb[rows] = np.nan_to_num(mac[np.arange(rows.size), best])
         cols["order"].append(np.full(f.size, n))
         cols["f"].append(f)
         cols["z"].append(z)
@@ -406,9 +497,6 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
         cols["fb"].append(fb)
         cols["zb"].append(zb)
         cols["macb"].append(macb)
-    if not cols["order"]:
-        e = np.zeros(0)
-        return PoleSet(e.astype(int), e, e, np.zeros((0, l), complex), e, e, e, orders)
     cat = {k: np.concatenate(v) for k, v in cols.items()}
     return PoleSet(cat["order"], cat["f"], cat["z"], cat["phi"], cat["fb"], cat["zb"],
                    cat["macb"], orders)
