@@ -51,9 +51,9 @@ FS = 100.0
 N_CH = 12
 
 
-def _config(method: str) -> IdentifyConfig:
+def _config(method: str, weighting: str = "pc") -> IdentifyConfig:
     return IdentifyConfig(method=method, block_rows=BLOCK_ROWS, max_order=MAX_ORDER, min_order=1,
-                          order_step=1, uncertainty=False)
+                          order_step=1, uncertainty=False, weighting=weighting)
 
 
 def _window(seed: int, duration: float) -> tuple[Window, so.Truth]:
@@ -62,8 +62,8 @@ def _window(seed: int, duration: float) -> tuple[Window, so.Truth]:
     return Window(f"bench{seed}", 0, fs, names, np.array(y)), truth
 
 
-def _ours(window: Window, method: str):
-    est = identify_window(window, _config(method))
+def _ours(window: Window, method: str, weighting: str = "pc"):
+    est = identify_window(window, _config(method, weighting))
     f = np.array([m.frequency_hz for m in est.modes])
     z = np.array([m.damping_ratio for m in est.modes])
     phi = [m.mode_shape for m in est.modes]
@@ -185,18 +185,23 @@ def main(argv: list[str] | None = None) -> int:
     window, truth = windows[0]
     rows = []
     for method in methods:
-        for tool in ("shm_ros", "pyOMA2 1.4.3"):
-            if tool == "shm_ros":
-                run, extra = _ours, ()
+        # SSI-data: ours with its default PC weighting and with the unweighted (UPC) form that
+        # pyOMA2's SSIdat uses
+        tools = (["shm_ros", "shm_ros (UPC)"] if method == "ssi-data" else ["shm_ros"]) + [
+            "pyOMA2 1.4.3"]
+        for tool in tools:
+            ours = tool.startswith("shm_ros")
+            if ours:
+                run, extra = _ours, (("upc",) if "UPC" in tool else ())
             else:
                 run, extra = _pyoma, (list(truth.frequency_hz[:4]),)
             # timing on the first window (pyOMA2 SSI-dat, tens of seconds, is timed once)
-            reps = 1 if (tool != "shm_ros" and method == "ssi-data") else 3
+            reps = 1 if (not ours and method == "ssi-data") else 3
             (f, z, phi), t, cpu, mem = _timed(run, window, method, *extra, repeat=reps)
             # accuracy over all eight windows
             acc = [_accuracy(truth, f, z, phi)]
             for w, tr in windows[1:]:
-                ex = extra if tool == "shm_ros" else (list(tr.frequency_hz[:4]),)
+                ex = extra if ours else (list(tr.frequency_hz[:4]),)
                 acc.append(_accuracy(tr, *run(w, method, *ex)))
             rows.append({"tool": tool, "method": method, "time_s": t, "cpu_s": cpu,
                          "peak_mib": mem, "accuracy_first": acc[0], "accuracy": _pool(acc)})

@@ -63,6 +63,39 @@ def test_ssi_data_gram_and_streamed_qr_give_the_same_poles():
     assert np.allclose(np.sort(p[0].frequency_hz), np.sort(p[1].frequency_hz), rtol=1e-7)
 
 
+def test_ssi_data_weightings_are_the_textbook_products():
+    """PC: the left singular space of the weighted projection is that of Y_f Y_p^T / j; CVA: that
+    of (Y_f Y_f^T / j)^-1/2 L21 mapped back by (Y_f Y_f^T / j)^1/2; UPC: that of L21. Checked
+    against explicitly formed Hankel matrices; all three find both modes."""
+    y, fs = _two_mode_record(7, n=3000)
+    n, l = y.shape
+    i, order = 6, 4
+    j = n - 2 * i + 1
+    yp = np.vstack([y[a:a + j].T for a in range(i)]) / np.sqrt(j)
+    yf = np.vstack([y[i + a:i + a + j].T for a in range(i)]) / np.sqrt(j)
+    proj = yf @ yp.T @ np.linalg.solve(yp @ yp.T, yp)  # Y_f / Y_p
+    gf = yf @ yf.T
+    w, v = np.linalg.eigh(gf)
+    half, inv_half = (v * np.sqrt(w)) @ v.T, (v / np.sqrt(w)) @ v.T
+    expected = {
+        "upc": np.linalg.svd(proj)[0][:, :order],
+        "pc": np.linalg.svd(yf @ yp.T)[0][:, :order],
+        "cva": half @ np.linalg.svd(inv_half @ proj)[0][:, :order],
+    }
+    for weighting, ref in expected.items():
+        model = ssi.ssi_data(y, fs, i, order, weighting=weighting, lq="qr")
+        angles = sla.subspace_angles(model.observability, ref)
+        assert np.max(angles) < 1e-6, (weighting, angles)
+        poles = ssi.poles_all_orders(model, [order])
+        assert np.min(np.abs(poles.frequency_hz - 2.0)) < 0.04, weighting
+        assert np.min(np.abs(poles.frequency_hz - 5.5)) < 0.11, weighting
+    with pytest.raises(ValueError, match="weighting"):
+        ssi.ssi_data(y, fs, i, order, weighting="pca")
+    w = Window("w", 0, fs, ["a", "b", "c"], y)
+    with pytest.raises(ValueError, match="identify.weighting"):
+        identify_window(w, IdentifyConfig(method="ssi-data", weighting="PC"))
+
+
 def test_all_orders_from_one_factorisation_match_per_order_least_squares():
     y, fs = _two_mode_record(3)
     model = ssi.ssi_cov(y, fs, 15, 20)

@@ -34,11 +34,12 @@ def _identify(seed: int, noise: float, method: str = "ssi-cov"):
     return identify_window_detailed(w, IdentifyConfig(method=method, uncertainty=False)), truth
 
 
+@pytest.mark.parametrize("method", ["ssi-cov", "ssi-data"])
 @pytest.mark.parametrize("noise", [0.02, 0.05])
-def test_modes_1_to_4_against_truth(noise):
+def test_modes_1_to_4_against_truth(noise, method):
     det, ferr, mac, zerr = [], [], [], []
     for seed in SEEDS:
-        res, truth = _identify(seed, noise)
+        res, truth = _identify(seed, noise, method)
         modes = res.estimate.modes
         f = np.array([m.frequency_hz for m in modes])
         idx = so.match_modes(truth, f)[:4]
@@ -50,7 +51,7 @@ def test_modes_1_to_4_against_truth(noise):
         zerr.append([abs(modes[j].damping_ratio / truth.damping_ratio[k] - 1) if j >= 0 else np.inf
                      for k, j in enumerate(idx)])
     det, ferr, mac, zerr = map(np.array, (det, ferr, mac, zerr))
-    summary = (f"noise {noise}: detected {det.mean(0)}, f<=0.5% {np.mean(ferr <= 0.005, 0)}, "
+    summary = (f"{method}, noise {noise}: detected {det.mean(0)}, f<=0.5% {np.mean(ferr <= 0.005, 0)}, "
                f"MAC>=0.98 {np.mean(mac >= 0.98, 0)}, median |dz| {np.median(zerr, 0)}, "
                f"|dz|<=25% {np.mean(zerr <= 0.25, 0)}")
     print(summary)

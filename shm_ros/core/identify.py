@@ -36,6 +36,7 @@ class IdentifyConfig:
     reference_channels: list[str] | None = None  # SSI-cov / SSI-data references (None = all)
     input_channel: str | None = None  # SSI-io input (None = the window's input_channel)
     lq: str = "auto"  # SSI-data / SSI-io LQ factor: auto | gram | qr
+    weighting: str = "pc"  # SSI-data weighting: pc | upc (unweighted) | cva (see ssi.ssi_data)
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     stability: StabilityConfig = field(default_factory=StabilityConfig)
     picking: PickingConfig = field(default_factory=PickingConfig)
@@ -89,6 +90,8 @@ def identify_window_detailed(window: Window, config: IdentifyConfig | None = Non
     cfg = config or IdentifyConfig()
     if cfg.method not in METHODS:
         raise ValueError(f"identify.method must be one of {METHODS}, got {cfg.method!r}")
+    if cfg.weighting not in ssi.WEIGHTINGS:
+        raise ValueError(f"identify.weighting must be one of {ssi.WEIGHTINGS}, got {cfg.weighting!r}")
     pcfg = cfg.preprocess
     if (cfg.method != "ssi-io" and cfg.exclude_input and pcfg.channels is None
             and window.input_channel in window.channel_names):
@@ -152,7 +155,7 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
         if cfg.method == "ssi-cov":
             model = ssi.ssi_cov(y, fs, i, cfg.max_order, refs)
         else:
-            model = ssi.ssi_data(y, fs, i, cfg.max_order, refs, lq=cfg.lq)
+            model = ssi.ssi_data(y, fs, i, cfg.max_order, refs, lq=cfg.lq, weighting=cfg.weighting)
     orders = np.arange(max(1, cfg.min_order), model.observability.shape[1] + 1, cfg.order_step)
     st = cfg.stability
     poles = ssi.poles_all_orders(model, orders, two_a=st.two_a, match_scale=(

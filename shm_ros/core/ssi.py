@@ -261,13 +261,31 @@ def block_hankel_of_correlations(r: np.ndarray, i: int) -> np.ndarray:
     return r[idx].transpose(0, 2, 1, 3).reshape(i * l, i * nr)
 
 
+WEIGHTINGS = ("pc", "upc", "cva")
+
+
 def ssi_data(y: np.ndarray, fs: float, block_rows: int, max_order: int,
-             refs: np.ndarray | None = None, lq: str = "auto") -> SubspaceModel:
-    """Data-driven SSI (reference-based past): SVD of the ``L21`` block of the LQ factorisation.
+             refs: np.ndarray | None = None, lq: str = "auto", weighting: str = "pc"
+             ) -> SubspaceModel:
+    """Data-driven SSI (reference-based past) from the LQ factorisation of the data Hankel matrix.
 
     ``[Y_p(refs); Y_f] / sqrt(j) = L Q^T``; the projection of the future onto the past is
-    ``L21 Q1^T`` and, ``Q1`` being orthonormal, its column space is that of ``L21``.
+    ``P = L21 Q1^T``. The extended observability matrix comes from the SVD of ``W1 P W2``:
+
+    * ``"upc"`` (unweighted principal components, ``W1 = W2 = I``): SVD of ``L21``;
+    * ``"pc"`` (principal components, ``W2 = Y_p^T (Y_p Y_p^T)^-1/2 Y_p``): left singular
+      vectors of ``L21 L11^T = Y_f Y_p^T / j``; modes are ranked by their share of the
+      future-past covariance;
+    * ``"cva"`` (canonical variate analysis, ``W1 = (Y_f Y_f^T / j)^-1/2``): SVD of
+      ``C^-1 L21`` with ``C C^T = L21 L21^T + L22 L22^T``, and ``O = C U S^1/2``.
+
+    UPC whitens the past: when part of the response is coloured and spatially incoherent (local
+    excitation seen directly by the accelerometers), such states compete with the structural
+    ones for the leading singular directions and low model orders carry a frequency bias that
+    shrinks only with the order. PC, the default, does not have that drift.
     """
+    if weighting not in WEIGHTINGS:
+        raise ValueError(f"ssi-data weighting must be one of {WEIGHTINGS}, got {weighting!r}")
     _check(y, block_rows, max_order)
     n, l = y.shape
     refs = np.arange(l) if refs is None else np.asarray(refs, dtype=int)
@@ -279,7 +297,17 @@ def ssi_data(y: np.ndarray, fs: float, block_rows: int, max_order: int,
     future = ((i + np.arange(i))[:, None] * l + np.arange(l)[None, :]).ravel()
     lower = _lq_lower(y, np.concatenate([past, future]), 2 * i, j, lq)
     rp = past.size
-    o, s = _observability(lower[rp:, :rp], max_order)
+    l21 = lower[rp:, :rp]
+    if weighting == "upc":
+        o, s = _observability(l21, max_order)
+    elif weighting == "pc":
+        o, s = _observability(l21 @ lower[:rp, :rp].T, max_order)
+    else:
+        l22 = lower[rp:, rp:]
+        c = sla.cholesky(l21 @ l21.T + l22 @ l22.T, lower=True, check_finite=False)
+        o, s = _observability(sla.solve_triangular(c, l21, lower=True, check_finite=False),
+                              max_order)
+        o = c @ o
     return SubspaceModel(o, s, l, fs, "ssi-data", i)
 
 
