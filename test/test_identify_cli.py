@@ -82,3 +82,24 @@ def test_identify_cli_errors_are_clear(tmp_path, capsys):
                "--config", str(bad)])
     err = capsys.readouterr().err
     assert rc == 2 and "cfg.yaml" in err and "nonsense" in err
+
+
+def test_identify_cli_ssi_data_weighting_reaches_the_configuration(tmp_path, capsys):
+    s, bag, truth, _ = _write_case(tmp_path, duration=150.0)
+    runs = {}
+    for weighting in ("upc", "pc"):
+        out = tmp_path / f"{weighting}.json"
+        rc = main(["identify", str(bag), "--structure", str(s), "--out", str(out), "--window", "150",
+                   "--method", "ssi-data", "--weighting", weighting, "--no-uncertainty"])
+        assert rc == 0
+        doc = json.loads(out.read_text())
+        assert doc["provenance"]["configuration"]["identify"]["weighting"] == weighting
+        runs[weighting] = [m["frequency_hz"] for m in doc["windows"][0]["modes"]]
+        assert min(abs(x - truth.frequency_hz[0]) / truth.frequency_hz[0]
+                   for x in runs[weighting]) < 0.01
+    assert runs["upc"] != runs["pc"]  # a different subspace, not the same computation twice
+    bad = tmp_path / "cfg.yaml"
+    bad.write_text("weighting: pca\n")
+    rc = main(["identify", str(bag), "--structure", str(s), "--out", str(tmp_path / "m.json"),
+               "--method", "ssi-data", "--config", str(bad)])
+    assert rc == 2 and "weighting" in capsys.readouterr().err

@@ -26,6 +26,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--window", type=float, default=600.0, help="window length, s (default 600)")
     p.add_argument("--method", default="ssi-cov", choices=["ssi-cov", "ssi-data", "ssi-io"],
                    help="ssi-cov (default), ssi-data, or input-output ssi-io (needs `input:`)")
+    p.add_argument("--weighting", default=None, choices=["pc", "upc", "cva"],
+                   help="SSI-data weighting (default pc; upc = unweighted)")
     p.add_argument("--plots", default=None, help="directory for stabilization diagrams (PNG)")
     p.add_argument("--max-order", type=int, default=None, help="largest model order (default 60)")
     p.add_argument("--min-order", type=int, default=None, help="smallest model order (default 2)")
@@ -79,7 +81,12 @@ def build_config(args: argparse.Namespace):
         cfg.preprocess.detrend = args.detrend
     if args.no_uncertainty:
         cfg.uncertainty = False
-    return cfg
+    if args.weighting is not None:
+        cfg.weighting = args.weighting
+    try:
+        return cfg.validate()
+    except ValueError as exc:
+        raise ValueError(f"{args.config or 'identify'}: {exc}") from exc
 
 
 def _num(x: float | None) -> float | None:

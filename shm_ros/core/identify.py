@@ -49,6 +49,15 @@ class IdentifyConfig:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def validate(self) -> "IdentifyConfig":
+        """Raise ``ValueError`` naming the option when a choice is unknown."""
+        if self.method not in METHODS:
+            raise ValueError(f"identify.method must be one of {METHODS}, got {self.method!r}")
+        if self.weighting not in ssi.WEIGHTINGS:
+            raise ValueError(f"identify.weighting must be one of {ssi.WEIGHTINGS}, "
+                             f"got {self.weighting!r}")
+        return self
+
     @classmethod
     def from_dict(cls, d: dict) -> "IdentifyConfig":
         d = dict(d)
@@ -88,10 +97,7 @@ def identify_window(window: Window, config: IdentifyConfig | None = None) -> Mod
 def identify_window_detailed(window: Window, config: IdentifyConfig | None = None
                              ) -> IdentificationResult:
     cfg = config or IdentifyConfig()
-    if cfg.method not in METHODS:
-        raise ValueError(f"identify.method must be one of {METHODS}, got {cfg.method!r}")
-    if cfg.weighting not in ssi.WEIGHTINGS:
-        raise ValueError(f"identify.weighting must be one of {ssi.WEIGHTINGS}, got {cfg.weighting!r}")
+    cfg.validate()
     pcfg = cfg.preprocess
     if (cfg.method != "ssi-io" and cfg.exclude_input and pcfg.channels is None
             and window.input_channel in window.channel_names):

@@ -7,6 +7,7 @@ from typing import Any
 
 from rclpy.node import Node
 
+from shm_ros.core import ssi
 from shm_ros.core.identify import METHODS, IdentifyConfig, identify_window
 from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_to_msg, window_from_msg
@@ -24,16 +25,21 @@ class IdentifyNode(Node):
         self.declare_parameter("order_step", defaults.order_step)
         self.declare_parameter("reference_channels", [""])
         self.declare_parameter("uncertainty", False)
+        self.declare_parameter("weighting", defaults.weighting)  # SSI-data: pc | upc | cva
         self.declare_parameter("frame_id", "")
         get = lambda n: self.get_parameter(n).value  # noqa: E731
         method = str(get("method"))
         if method not in METHODS:
             raise SystemExit(f"identify: parameter 'method' must be one of {METHODS}, not {method!r}")
+        weighting = str(get("weighting"))
+        if weighting not in ssi.WEIGHTINGS:
+            raise SystemExit(f"identify: parameter 'weighting' must be one of {ssi.WEIGHTINGS}, "
+                             f"not {weighting!r}")
         refs = [r for r in get("reference_channels") if r]
         self.config = IdentifyConfig(method=method, max_order=int(get("max_order")),
                                      order_step=int(get("order_step")),
                                      reference_channels=refs or None,
-                                     uncertainty=bool(get("uncertainty")))
+                                     uncertainty=bool(get("uncertainty")), weighting=weighting)
         self.frame_id = str(get("frame_id"))
         self.diag = Diagnostics(self, "identify")
         self.pub = self.create_publisher(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
