@@ -45,6 +45,40 @@ def wait_ready(subscribers: dict[str, int] | None = None, publishers: dict[str, 
     assert run.returncode == 0, f"graph not ready: {subscribers} {publishers}\n{run.stderr[-2000:]}"
 
 
+_WAIT_IDENTIFIED = r"""
+import sys, time
+import rclpy
+from shm_interfaces.msg import ModalEstimate, Window
+from shm_ros.ros.qos import stream_qos
+quiet, timeout = float(sys.argv[1]), float(sys.argv[2])
+rclpy.init()
+node = rclpy.create_node("test_wait_identified")
+windows, estimates, last = set(), set(), [time.monotonic()]
+def on_window(m):
+    windows.add(m.window_id); last[0] = time.monotonic()
+node.create_subscription(Window, "/shm/windows", on_window, stream_qos())
+node.create_subscription(ModalEstimate, "/shm/modal_estimates",
+                         lambda m: estimates.add(m.window_id), stream_qos())
+end = time.monotonic() + timeout
+ok = False
+while time.monotonic() < end and not ok:
+    rclpy.spin_once(node, timeout_sec=0.1)
+    ok = bool(windows) and windows <= estimates and time.monotonic() - last[0] > quiet
+node.destroy_node()
+rclpy.shutdown()
+print(len(windows), len(estimates))
+sys.exit(0 if ok else 1)
+"""
+
+
+def wait_identified(quiet_s: float = 5.0, timeout: float = 90.0) -> None:
+    """Block until no new window has been published for ``quiet_s`` and every window seen has a
+    modal estimate (both topics are transient local, so a late probe still sees the latest)."""
+    run = subprocess.run([sys.executable, "-c", _WAIT_IDENTIFIED, str(quiet_s), str(timeout)],
+                         capture_output=True, text=True, timeout=timeout + 30)
+    assert run.returncode == 0, f"windows not all identified: {run.stdout} {run.stderr[-2000:]}"
+
+
 @contextmanager
 def running(*procs: subprocess.Popen, subscribers: dict[str, int] | None = None,
             publishers: dict[str, int] | None = None):
