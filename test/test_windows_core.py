@@ -391,6 +391,67 @@ def test_streaming_per_sample_equals_offline_arrays():
         assert np.array_equal(a.samples, b.samples)
 
 
+def _stream(core, chans, stamps, values, delays_s, upto_s):
+    """Feed, in arrival order, every sample whose arrival time (stamp + the channel's delay) is
+    before ``upto_s`` after T0 and that was not fed yet; returns the windows cut meanwhile."""
+    fed = getattr(core, "_test_fed", {c: 0 for c in chans})
+    core._test_fed = fed
+    events = []
+    for c in chans:
+        t = stamps[c]
+        arrive = (t - T0) / 1e9 + delays_s[c]
+        k1 = int(np.searchsorted(arrive, upto_s))
+        events += [(arrive[k], c, k) for k in range(fed[c], k1)]
+        fed[c] = k1
+    for _, c, k in sorted(events):
+        core.add_imu(c, int(stamps[c][k]), *values[c][k])
+    return core.pop_windows()
+
+
+def test_streaming_cuts_once_every_channel_settled_and_waits_for_a_lagging_one():
+    """settle_s: a window is cut as soon as every channel is settle_s past its end, long before
+    max_latency_s; a lagging channel (delivered 4 s late) holds the cut back and loses nothing; a
+    channel that falls silent holds it until the median rule (max_latency_s) closes it."""
+    rng = np.random.default_rng(8)
+    n = int(45 * FS)
+    chans = ["a", "b", "c"]
+    grid = T0 + np.arange(n) * P
+    stamps = {c: grid for c in chans}
+    values = {c: rng.standard_normal((n, 3)) for c in chans}
+    off = offline(chans, window_s=10.0)
+    for c in chans:
+        off.add_imu_array(c, grid, values[c])
+    ref = off.flush()
+    cfg = dict(window_s=10.0, max_latency_s=120.0, settle_s=0.5)
+    # all channels on time: window [0, 10) is out once every channel passed 10.5 s
+    live = IngestCore(ChannelMap.simple(chans), IngestConfig(**cfg))
+    on_time = {c: 0.0 for c in chans}
+    assert _stream(live, chans, stamps, values, on_time, 10.4) == []
+    first = _stream(live, chans, stamps, values, on_time, 10.6)
+    assert [w.start_ns for w in first] == [ref[0].start_ns]
+    assert np.array_equal(first[0].samples, ref[0].samples)
+    # channel b arrives 4 s late: nothing is cut before b itself passed the end, nothing is lost
+    late = IngestCore(ChannelMap.simple(chans), IngestConfig(**cfg))
+    delays = {"a": 0.0, "b": 4.0, "c": 0.0}
+    assert _stream(late, chans, stamps, values, delays, 14.4) == []
+    got = _stream(late, chans, stamps, values, delays, 14.6)
+    got += _stream(late, chans, stamps, values, delays, 100.0) + late.flush()
+    assert [w.start_ns for w in got] == [w.start_ns for w in ref]
+    for a, b in zip(got, ref):
+        assert np.array_equal(a.samples, b.samples)
+    # channel c silent after 12 s: window [10, 20) waits for the median rule, not for settle_s
+    silent = IngestCore(ChannelMap.simple(chans), IngestConfig(**cfg))
+    cut = {c: grid[: int(12 * FS)] if c == "c" else grid for c in chans}
+    vals = {c: values[c][: cut[c].size] for c in chans}
+    out = _stream(silent, chans, cut, vals, on_time, 45.0)
+    assert [w.start_ns for w in out] == [ref[0].start_ns]  # only the window before c stopped
+    # without settle_s (the default) the same live feed cuts nothing within 45 s
+    plain = IngestCore(ChannelMap.simple(chans), IngestConfig(window_s=10.0, max_latency_s=120.0))
+    assert _stream(plain, chans, stamps, values, on_time, 45.0) == []
+    with pytest.raises(ValueError, match="settle_s"):
+        IngestConfig(settle_s=-1.0)
+
+
 def test_channel_map_from_structure_sources():
     from types import SimpleNamespace as NS
 

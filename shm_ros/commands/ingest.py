@@ -28,7 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-samples", action="store_true", help="write only windows.json, no .npz")
     p.add_argument("--quiet", action="store_true", help="print only the summary line")
     for f in dataclasses.fields(IngestConfig):
-        if f.name in ("window_s", "max_latency_s", "check_interval_s"):
+        if f.name in ("window_s", "max_latency_s", "settle_s", "check_interval_s"):
             continue  # --window; offline reading decides finality itself
         kind = {"int": int, "str": str}.get(str(f.type), float)
         p.add_argument("--" + f.name.replace("_", "-"), dest=f"cfg_{f.name}", type=kind, default=None,

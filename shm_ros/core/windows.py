@@ -188,6 +188,7 @@ class IngestConfig:
     burst_pause_s: float = 1.0
     snap_tolerance: float = 0.5
     max_latency_s: float = 2.0
+    settle_s: float | None = None
     min_coverage: float = 0.5
     clip_run: int = 3
     saturation_m_s2: float | None = None
@@ -215,6 +216,8 @@ class IngestConfig:
                              f"got {self.event_detector!r}")
         if self.sample_rate_hz is not None and not self.sample_rate_hz > 0:
             raise ValueError(f"sample_rate_hz must be > 0, got {self.sample_rate_hz}")
+        if self.settle_s is not None and not self.settle_s >= 0:
+            raise ValueError(f"settle_s must be >= 0, got {self.settle_s}")
 
 
 PARAMETER_HELP: dict[str, str] = {
@@ -223,6 +226,8 @@ PARAMETER_HELP: dict[str, str] = {
     "burst_pause_s": "a pause longer than this (no channel has data) ends a burst, s",
     "snap_tolerance": "a stamp snaps to a grid point strictly closer than this fraction of a period",
     "max_latency_s": "how long (stamp time) to wait for late channels before cutting; inf = at the end",
+    "settle_s": "streaming: cut as soon as EVERY channel is this far (stamp time) past a window's end "
+                "(default: max_latency_s, which then only bounds the wait for a lagging channel)",
     "min_coverage": "a channel with less than this fraction of a window's samples is dropped for it",
     "clip_run": "this many equal samples at a channel's extreme count as clipping",
     "saturation_m_s2": "|a| at or above this is flagged CLIPPED (default: only flat tops)",
@@ -412,7 +417,7 @@ class IngestCore:
         self._imu_pending_n += 1
         if self._imu_pending_n >= 4096 or (self._rate is None and self._imu_pending_n >= 256):
             self._drain_imu()
-        elif self._due_ns is not None and stamp_ns > self._due_ns + self._latency_ns:
+        elif self._due_ns is not None and stamp_ns > self._due_ns + self._wait_ns:
             self._drain_imu()
 
     def add_imu_array(self, topic_id: str, stamps_ns: np.ndarray, xyz: np.ndarray) -> None:
@@ -568,6 +573,12 @@ class IngestCore:
     # ------------------------------------------------------------------ internals: feeding
 
     @property
+    def _wait_ns(self) -> int:
+        """Stamp time past a due point after which buffered samples are worth a look."""
+        settle = self.config.settle_s
+        return self._latency_ns if settle is None else min(self._latency_ns, int(settle * 1e9))
+
+    @property
     def _latency_ns(self) -> int:
         lat = self.config.max_latency_s
         return 2**62 if not math.isfinite(lat) else int(lat * 1e9)
@@ -697,7 +708,14 @@ class IngestCore:
         if not math.isfinite(self.config.max_latency_s):
             return None  # offline, fed channel by channel: everything waits for flush()
         # the median channel, so that one channel with a clock jump forward cannot close windows
-        return int(np.median(maxima)) - self._latency_ns
+        final = int(np.median(maxima)) - self._latency_ns
+        settle = self.config.settle_s
+        if settle is not None and len(maxima) == self.n_channels:
+            # every expected channel has reached ``end + settle``: nothing earlier can still come
+            # (each channel's own stamps arrive in order); a silent or lagging channel holds this
+            # back, and then only the median rule above closes the window
+            final = max(final, min(maxima) - int(settle * 1e9))
+        return final
 
     def _after_add(self) -> None:
         if self._rate is None or self._busy:

@@ -39,8 +39,11 @@ class IngestNode(Node):
         p("window_s", 600.0)
         p("sample_rate_hz", 0.0)  # 0 = from the data
         p("burst_pause_s", 1.0)
-        # Stamp time a window waits for lagging channels before it is cut. DDS does not order
-        # messages across topics, and a fast replay delivers seconds of stamp time per wall tick.
+        # A window is cut once every channel's newest stamp is settle_s past its end (DDS keeps
+        # each topic in order but does not order messages across topics); a silent or lagging
+        # channel is waited for until the median channel is max_latency_s past the end (stamp time:
+        # a fast replay delivers seconds of it per wall tick).
+        p("settle_s", 2.0)
         p("max_latency_s", 120.0)
         p("event_detector", "sta_lta")
         p("pga_threshold_m_s2", 0.5)
@@ -54,6 +57,7 @@ class IngestNode(Node):
             sample_rate_hz=float(value("sample_rate_hz")) or None,
             burst_pause_s=float(value("burst_pause_s")),
             max_latency_s=float(value("max_latency_s")),
+            settle_s=float(value("settle_s")),
             event_detector=str(value("event_detector")),
             pga_threshold_m_s2=float(value("pga_threshold_m_s2")),
         ))
