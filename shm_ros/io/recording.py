@@ -124,10 +124,10 @@ class _BagFeeder:
                 self.feed(msg)
         except BagError as exc:
             self.flush_imu()
-            if got == 0 and _is_mcap(self.path):
+            if got == 0 and can_salvage(self.path):
                 salvaged = 0
                 try:
-                    for msg in salvage_mcap(self.path):
+                    for msg in salvage(self.path):
                         salvaged += 1
                         self.feed(msg)
                 except BagError as exc2:
@@ -135,7 +135,7 @@ class _BagFeeder:
                     self.core.report_error(str(self.path), f"{exc2} ({salvaged} messages read before "
                                            "the damage were ingested)", code="bag_damaged")
                 else:
-                    self.core.report_error(str(self.path), f"{exc}; read record by record instead",
+                    self.core.report_error(str(self.path), f"{exc}; read from its storage files directly instead",
                                            level=WARN, code="bag_damaged")
             else:
                 self.core.report_error(str(self.path), f"{exc} ({got} messages read before the "
@@ -519,10 +519,70 @@ def _imu_slow(data: bytes, i: int) -> tuple[int, tuple[float, float, float]]:
     return int(m.header.stamp.sec) * 1_000_000_000 + int(m.header.stamp.nanosec), (la.x, la.y, la.z)
 
 
-def _is_mcap(path: Path) -> bool:
+def _has(path: Path, suffix: str) -> bool:
     if path.is_dir():
-        return any(p.suffix == ".mcap" for p in path.iterdir())
-    return path.suffix == ".mcap"
+        return any(p.suffix == suffix for p in path.iterdir())
+    return path.suffix == suffix
+
+
+def _is_mcap(path: Path) -> bool:
+    return _has(path, ".mcap")
+
+
+def can_salvage(path: str | Path) -> bool:
+    """Whether :func:`salvage` can read this bag's files without the bag's index/metadata."""
+    path = Path(path)
+    return path.exists() and (_has(path, ".mcap") or _has(path, ".db3"))
+
+
+def salvage(path: str | Path) -> Iterator[BagMessage]:
+    """Messages of a bag whose metadata or index is missing or damaged, read from its storage
+    files directly (MCAP record by record, sqlite3 row by row); raises :class:`BagError` naming
+    the file where the readable data ends."""
+    path = Path(path)
+    if _has(path, ".mcap"):
+        yield from salvage_mcap(path)
+    elif _has(path, ".db3"):
+        yield from salvage_sqlite3(path)
+    else:
+        raise BagError(f"{path}: neither MCAP nor sqlite3 files to read")
+
+
+_ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+
+
+def salvage_sqlite3(path: str | Path) -> Iterator[BagMessage]:
+    """Messages of rosbag2 sqlite3 files read row by row with the ``sqlite3`` module, in the
+    order they were written: for a bag whose ``metadata.yaml`` is missing (a recorder that was
+    killed) or whose database is damaged part-way. Per-message zstd compression is recognised by
+    its magic number. Raises :class:`BagError` naming the file where a damaged one stops."""
+    import sqlite3
+
+    path = Path(path)
+    files = sorted(path.glob("*.db3")) if path.is_dir() else [path]
+    for f in files:
+        try:
+            con = sqlite3.connect(f"file:{f}?mode=ro&immutable=1", uri=True)
+        except sqlite3.Error as exc:
+            raise BagError(f"{f}: cannot open sqlite3 bag file ({exc})") from exc
+        try:
+            topics = {int(i): (str(n), str(t)) for i, n, t in
+                      con.execute("SELECT id, name, type FROM topics")}
+            for topic_id, stamp, data in con.execute(
+                    "SELECT topic_id, timestamp, data FROM messages ORDER BY rowid"):
+                topic = topics.get(int(topic_id))
+                if topic is None:
+                    continue
+                raw = bytes(data)
+                if raw[:4] == _ZSTD_MAGIC:
+                    import zstandard
+
+                    raw = zstandard.ZstdDecompressor().decompress(raw)
+                yield BagMessage(topic[0], topic[1], int(stamp), raw)
+        except sqlite3.Error as exc:
+            raise BagError(f"{f}: damaged sqlite3 bag file ({exc})") from exc
+        finally:
+            con.close()
 
 
 def salvage_mcap(path: str | Path) -> Iterator[BagMessage]:

@@ -68,21 +68,21 @@ class Replayer(Node):
 
 
 def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], Iterator[BagMessage]]]:
-    """Topics of the bag and a reader of its messages. An MCAP bag whose end is missing (a
-    recorder that died) is read record by record: every complete chunk is replayed, then the
-    reader raises :class:`BagError` naming the file."""
+    """Topics of the bag and a reader of its messages. A bag whose index or metadata is missing
+    or damaged (a recorder that died) is read from its storage files directly (MCAP record by
+    record, sqlite3 row by row): everything readable is replayed, then the reader raises
+    :class:`BagError` naming the file."""
+    from shm_ros.io.recording import can_salvage, salvage
+
     try:
         return bag_topics(path), lambda wanted: read_messages(path, topics=wanted)
     except BagError as exc:
-        from shm_ros.io.recording import salvage_mcap
-
-        p = Path(path)
-        if not (p.suffix == ".mcap" or (p.is_dir() and any(p.glob("*.mcap")))):
+        if not can_salvage(path):
             raise
         first_error = str(exc)
     found: dict[str, str] = {}
     try:
-        for m in salvage_mcap(path):
+        for m in salvage(path):
             found.setdefault(m.topic, m.msgtype)
     except BagError:
         pass
@@ -91,7 +91,7 @@ def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], I
 
     def salvaged(wanted: list[str]) -> Iterator[BagMessage]:
         keep = set(wanted)
-        return (m for m in salvage_mcap(path) if m.topic in keep)
+        return (m for m in salvage(path) if m.topic in keep)
 
     return found, salvaged
 
