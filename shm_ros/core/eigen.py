@@ -55,13 +55,15 @@ AVAILABLE = None not in (_HSEQR, _LAHQR, _HSEIN, _ORMHR)
 _LAHQR_MAX = 150
 
 
-def _int(v: int) -> np.ndarray:
-    return np.array([v], dtype=np.int32)
+def _int(v: int) -> ctypes.c_int:
+    return ctypes.c_int(v)
 
 
 def _call(fn, *args) -> None:
-    """Call a LAPACK entry point; ``args`` (bytes or arrays) stay referenced during the call."""
-    fn(*[a if isinstance(a, bytes) else a.ctypes.data for a in args])
+    """Call a LAPACK entry point with ``args`` (bytes, ``c_int`` or arrays) by reference; they
+    stay referenced during the call."""
+    fn(*[a if isinstance(a, bytes) else
+         ctypes.addressof(a) if isinstance(a, ctypes.c_int) else a.ctypes.data for a in args])
 
 
 @dataclass
@@ -122,7 +124,7 @@ def _qr_eigenvalues(h: np.ndarray, small: bool) -> tuple[np.ndarray, np.ndarray,
         lwork = 11 * n
         _call(_HSEQR, b"E", b"N", _int(n), _int(1), _int(n), work_h, _int(n), wr, wi, dummy,
               _int(1), np.empty(lwork), _int(lwork), info)
-    return wr, wi, int(info[0])
+    return wr, wi, int(info.value)
 
 
 def _pairs_first_positive(w: np.ndarray) -> np.ndarray:
@@ -170,8 +172,8 @@ def eigenvectors(ev: Eigenvalues, which: np.ndarray) -> np.ndarray:
     info = _int(0)
     _call(_HSEIN, b"R", b"Q", b"N", select, _int(n), ev.hessenberg, _int(n), wr, wi, np.empty(1),
           _int(1), vr, _int(n), _int(mm), _int(0), np.empty((n + 2) * n), ifaill, ifailr, info)
-    if info[0] < 0:
-        raise ValueError(f"dhsein: argument {-info[0]} invalid")
+    if info.value < 0:
+        raise ValueError(f"dhsein: argument {-info.value} invalid")
     if np.any(ifailr != 0):
         # inverse iteration did not converge for some eigenvalue (tight clusters): redo densely
         first = np.concatenate([[0], np.cumsum(width)[:-1]])
@@ -186,8 +188,8 @@ def eigenvectors(ev: Eigenvalues, which: np.ndarray) -> np.ndarray:
     info = _int(0)
     _call(_ORMHR, b"L", b"N", _int(n), _int(mm), _int(1), _int(n), ev.reflectors, _int(n), ev.tau,
           vr, _int(n), np.empty(lwork), _int(lwork), info)
-    if info[0] != 0:
-        raise ValueError(f"dormhr: argument {-info[0]} invalid")
+    if info.value != 0:
+        raise ValueError(f"dormhr: argument {-info.value} invalid")
     first = np.concatenate([[0], np.cumsum(width)[:-1]])
     x = vr[:, first].astype(complex)
     pair = width == 2
