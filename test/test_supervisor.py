@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -102,8 +103,21 @@ def test_single_process_graph_stops_on_sigint(tmp_path, mode):
     }))
     proc = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(config)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    time.sleep(4.0)
-    assert proc.poll() is None
+    lines: list[str] = []
+
+    def read() -> None:
+        for line in proc.stdout:
+            lines.append(line)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    # both nodes constructed (each logs a line when it is up), not just some seconds elapsed
+    up = _wait_for(lambda: any("identify with" in x for x in lines) and any(
+        "ingest for sensors" in x for x in lines), timeout=90)
+    assert proc.poll() is None, "".join(lines)
+    assert up, "".join(lines)
     proc.send_signal(signal.SIGINT)
-    out, _ = proc.communicate(timeout=30)
+    proc.wait(timeout=30)
+    reader.join(timeout=10)
+    out = "".join(lines)
     assert proc.returncode == 0, out
