@@ -99,7 +99,8 @@ def test_two_A_and_mpc_remove_spurious_clusters_and_keep_truth():
     assert lost == 0, msg
 
 
-def test_jackknife_uncertainty_covers_the_truth():
+@pytest.mark.parametrize("method", ["ssi-cov", "ssi-data"])
+def test_jackknife_uncertainty_covers_the_truth(method):
     """The reported frequency/damping standard deviations are meaningful: pooled over modes 1-4
     and the windows, the truth lies within two reported standard deviations at least 80 % of the
     time (a calibrated Gaussian would give 95 %), and the deviations are not inflated either."""
@@ -107,7 +108,7 @@ def test_jackknife_uncertainty_covers_the_truth():
     for seed in SEEDS:
         y, fs, truth, names = so.ambient_record(seed, noise=0.05)
         res = identify_window_detailed(Window(f"syn{seed}", 0, fs, names, np.array(y)),
-                                       IdentifyConfig(uncertainty=True))
+                                       IdentifyConfig(method=method, uncertainty=True))
         modes = res.estimate.modes
         idx = so.match_modes(truth, np.array([m.frequency_hz for m in modes]))[:4]
         for k, j in enumerate(idx):
@@ -118,7 +119,7 @@ def test_jackknife_uncertainty_covers_the_truth():
             zf.append((m.frequency_hz - truth.frequency_hz[k]) / m.frequency_std_hz)
             zz.append((m.damping_ratio - truth.damping_ratio[k]) / m.damping_std)
     zf, zz = np.abs(zf), np.abs(zz)
-    msg = (f"|z|<=2: frequency {np.mean(zf <= 2):.2f}, damping {np.mean(zz <= 2):.2f}; "
+    msg = (f"{method}: |z|<=2: frequency {np.mean(zf <= 2):.2f}, damping {np.mean(zz <= 2):.2f}; "
            f"median |z|: {np.median(zf):.2f}, {np.median(zz):.2f}")
     print(msg)
     assert np.mean(zf <= 2) >= 0.8 and np.mean(zz <= 2) >= 0.8, msg

@@ -42,7 +42,7 @@ class IdentifyConfig:
     picking: PickingConfig = field(default_factory=PickingConfig)
     use_filters: bool = True  # two-A + MPC filters (False = plain stabilization diagram)
     exclude_input: bool = True  # output-only methods leave the window's input channel out
-    uncertainty: bool = True  # jackknife over data blocks (SSI-cov)
+    uncertainty: bool = True  # jackknife over data blocks (SSI-cov, SSI-data)
     uncertainty_blocks: int = 10
     spectrum: bool = False  # keep the mean output spectrum in the diagram (for plots)
 
@@ -171,11 +171,14 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
     picked = pick_modes(poles, flags, cfg.picking, use_filters=cfg.use_filters)
     std_f = np.full(len(picked), np.nan)
     std_z = np.full(len(picked), np.nan)
-    if cfg.uncertainty and picked and cfg.method == "ssi-cov":
+    if cfg.uncertainty and picked and cfg.method in ("ssi-cov", "ssi-data"):
+        nb, nmax = cfg.uncertainty_blocks, model.observability.shape[1]
         try:
-            std_f, std_z = _jackknife_cov(y, fs, refs, i, model.observability.shape[1], picked,
-                                          cfg.uncertainty_blocks)
-        except ValueError as exc:  # too little data per block
+            reps = (_cov_replicates(y, refs, i, nmax, nb) if cfg.method == "ssi-cov" else
+                    (m.observability for m in ssi.ssi_data_leave_one_out(
+                        y, fs, i, nmax, refs, cfg.weighting, nb)))
+            std_f, std_z = _jackknife(reps, nb, y.shape[1], fs, picked)
+        except (ValueError, np.linalg.LinAlgError) as exc:  # too little data per block
             notes.append(f"uncertainty skipped: {exc}")
     modes = [Mode(frequency_hz=p.frequency_hz, damping_ratio=p.damping_ratio,
                   mode_shape=real_mode_shape(p.mode_shape_complex), mpc=p.mpc,
@@ -191,28 +194,29 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
     return IdentificationResult(est, diagram, fs, out_names, notes)
 
 
-def _jackknife_cov(y: np.ndarray, fs: float, refs: np.ndarray, i: int, max_order: int,
-                   picked: list[PickedMode], n_blocks: int) -> tuple[np.ndarray, np.ndarray]:
-    """Leave-one-block-out jackknife standard deviations of frequency and damping.
-
-    The correlation Hankel matrix is the mean of per-block matrices; each replicate drops one
-    block, redoes the SVD and re-evaluates the mode at its representative order.
-    """
+def _cov_replicates(y: np.ndarray, refs: np.ndarray, i: int, max_order: int, n_blocks: int):
+    """SSI-cov jackknife replicates: the correlation Hankel matrix is the mean of per-block
+    matrices; each replicate drops one block and redoes the SVD (yields observability matrices)."""
     n = y.shape[0] // n_blocks
     if n_blocks < 3 or n < 8 * i:
         raise ValueError(f"{n_blocks} blocks of {n} samples are too short for {i} block rows")
-    l = y.shape[1]
     hs = np.stack([ssi.block_hankel_of_correlations(
         ssi.correlations(y[b * n:(b + 1) * n], refs, 2 * i), i) for b in range(n_blocks)])
     total = hs.sum(axis=0)
+    for b in range(n_blocks):
+        yield ssi.observability_from((total - hs[b]) / (n_blocks - 1), max_order)[0]
+
+
+def _jackknife(replicates, n_blocks: int, l: int, fs: float, picked: list[PickedMode]
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """Leave-one-block-out jackknife standard deviations of frequency and damping: each replicate
+    observability matrix is evaluated at every picked mode's representative order and the pole
+    nearest the mode (frequency and MAC) is taken."""
     fr = np.full((n_blocks, len(picked)), np.nan)
     zr = np.full((n_blocks, len(picked)), np.nan)
-    for b in range(n_blocks):
-        h = (total - hs[b]) / (n_blocks - 1)
-        u, s, _ = sla.svd(h, full_matrices=False, check_finite=False)
-        o = u[:, :max_order] * np.sqrt(s[:max_order])
+    for b, o in enumerate(replicates):
         for k, p in enumerate(picked):
-            nord = p.representative_order
+            nord = min(p.representative_order, o.shape[1])
             up, dn = o[:-l, :nord], o[l:, :nord]
             a = sla.lstsq(up, dn, check_finite=False)[0]
             mu, psi = sla.eig(a, check_finite=False)

@@ -48,6 +48,8 @@ __all__ = [
     "hankel_lq_streamed",
     "ssi_cov",
     "ssi_data",
+    "ssi_data_leave_one_out",
+    "observability_from",
     "ssi_io",
     "poles_all_orders",
     "printed_eq13_estimate",
@@ -217,7 +219,7 @@ def _check(y: np.ndarray, block_rows: int, max_order: int) -> None:
         raise ValueError("max_order must be >= 1")
 
 
-def _observability(mat: np.ndarray, max_order: int) -> tuple[np.ndarray, np.ndarray]:
+def observability_from(mat: np.ndarray, max_order: int) -> tuple[np.ndarray, np.ndarray]:
     """``O = U_n S_n^(1/2)`` from the leading ``n = max_order`` left singular vectors.
 
     When ``n`` is well below the rank bound, only the leading part is computed, from the
@@ -250,7 +252,7 @@ def ssi_cov(y: np.ndarray, fs: float, block_rows: int, max_order: int,
                          f"{refs.size * i} (references x block rows)")
     r = correlations(y, refs, 2 * i)
     h = block_hankel_of_correlations(r, i)
-    o, s = _observability(h, max_order)
+    o, s = observability_from(h, max_order)
     return SubspaceModel(o, s, y.shape[1], fs, "ssi-cov", i)
 
 
@@ -293,22 +295,60 @@ def ssi_data(y: np.ndarray, fs: float, block_rows: int, max_order: int,
     if max_order > refs.size * i:
         raise ValueError(f"max_order {max_order} exceeds references x block rows = {refs.size * i}")
     j = n - 2 * i + 1
+    rows, rp = _data_rows(l, refs, i)
+    lower = _lq_lower(y, rows, 2 * i, j, lq)
+    o, s = _weighted_observability(lower, rp, max_order, weighting)
+    return SubspaceModel(o, s, l, fs, "ssi-data", i)
+
+
+def _data_rows(l: int, refs: np.ndarray, i: int) -> tuple[np.ndarray, int]:
+    """Hankel rows of the reference past and the full future, and the number of past rows."""
     past = (np.arange(i)[:, None] * l + refs[None, :]).ravel()
     future = ((i + np.arange(i))[:, None] * l + np.arange(l)[None, :]).ravel()
-    lower = _lq_lower(y, np.concatenate([past, future]), 2 * i, j, lq)
-    rp = past.size
+    return np.concatenate([past, future]), past.size
+
+
+def _weighted_observability(lower: np.ndarray, rp: int, max_order: int, weighting: str):
+    """``O`` and singular values from the LQ factor ``L`` of ``[Y_p; Y_f]`` (see :func:`ssi_data`)."""
     l21 = lower[rp:, :rp]
     if weighting == "upc":
-        o, s = _observability(l21, max_order)
-    elif weighting == "pc":
-        o, s = _observability(l21 @ lower[:rp, :rp].T, max_order)
-    else:
-        l22 = lower[rp:, rp:]
-        c = sla.cholesky(l21 @ l21.T + l22 @ l22.T, lower=True, check_finite=False)
-        o, s = _observability(sla.solve_triangular(c, l21, lower=True, check_finite=False),
+        return observability_from(l21, max_order)
+    if weighting == "pc":
+        return observability_from(l21 @ lower[:rp, :rp].T, max_order)
+    l22 = lower[rp:, rp:]
+    c = sla.cholesky(l21 @ l21.T + l22 @ l22.T, lower=True, check_finite=False)
+    o, s = observability_from(sla.solve_triangular(c, l21, lower=True, check_finite=False),
                               max_order)
-        o = c @ o
-    return SubspaceModel(o, s, l, fs, "ssi-data", i)
+    return c @ o, s
+
+
+def ssi_data_leave_one_out(y: np.ndarray, fs: float, block_rows: int, max_order: int,
+                           refs: np.ndarray | None = None, weighting: str = "pc",
+                           n_blocks: int = 10):
+    """Jackknife replicates of SSI-data: for each of ``n_blocks`` contiguous blocks of Hankel
+    columns, the model from all other columns (yields :class:`SubspaceModel`).
+
+    The Gram matrix of the data Hankel matrix is a sum over its columns, so the Gram matrix of
+    each block is computed once (:func:`hankel_gram` of that stretch of data) and each replicate
+    is ``(total - block) / columns left``, then Cholesky and the same weighting as :func:`ssi_data`.
+    """
+    _check(y, block_rows, max_order)
+    n, l = y.shape
+    refs = np.arange(l) if refs is None else np.asarray(refs, dtype=int)
+    i = block_rows
+    j = n - 2 * i + 1
+    if n_blocks < 3 or j // n_blocks < 8 * i:
+        raise ValueError(f"{n_blocks} blocks of {j // max(n_blocks, 1)} columns are too short for "
+                         f"{i} block rows")
+    rows, rp = _data_rows(l, refs, i)
+    edges = np.linspace(0, j, n_blocks + 1).astype(int)
+    grams = [hankel_gram(y[a:b + 2 * i - 1], 2 * i, b - a)[np.ix_(rows, rows)]
+             for a, b in zip(edges[:-1], edges[1:])]
+    total = np.sum(grams, axis=0)
+    for (a, b), g in zip(zip(edges[:-1], edges[1:]), grams):
+        lower = sla.cholesky((total - g) / (j - (b - a)), lower=True, check_finite=False)
+        o, s = _weighted_observability(lower, rp, max_order, weighting)
+        yield SubspaceModel(o, s, l, fs, "ssi-data", i)
 
 
 def ssi_io(y: np.ndarray, u: np.ndarray, fs: float, block_rows: int, max_order: int,
@@ -340,7 +380,7 @@ def ssi_io(y: np.ndarray, u: np.ndarray, fs: float, block_rows: int, max_order: 
     yf = (blocks_f[:, None] * c + m + np.arange(l)[None, :]).ravel()
     lower = _lq_lower(z, np.concatenate([uf, up, yp, yf]), 2 * i, j, lq)
     a, b = uf.size, uf.size + up.size + yp.size
-    o, s = _observability(lower[b:, a:b], max_order)
+    o, s = observability_from(lower[b:, a:b], max_order)
     return SubspaceModel(o, s, l, fs, "ssi-io", i)
 
 
