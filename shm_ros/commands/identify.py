@@ -3,7 +3,8 @@
 Reads and windows the bag exactly as ``shm-ros ingest`` does, identifies every window with
 ``shm_ros.core.identify.identify_window`` and writes one record per window (contracts section 3):
 start, end, temperature, and the modes sorted by frequency with damping, MPC, real mode shapes
-labelled by sensor id, the spread across model orders and (SSI-cov, SSI-data) jackknife standard deviations.
+labelled by sensor id, the spread across model orders and (SSI-cov, SSI-data) jackknife standard
+deviations.
 ``--plots DIR`` saves one stabilization diagram per window. A window that cannot be identified is
 written with an ``error`` and no modes; the other windows are not affected.
 """
