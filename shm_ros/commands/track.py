@@ -1,0 +1,83 @@
+"""`shm-ros track MODES.json --out DIR`: mode identities across windows, temperature, novelty.
+
+Reads the modal estimates written by ``shm-ros identify`` (contracts section 3), tracks them with
+``shm_ros.core.tracking.track`` and writes ``DIR/tracked_modes.csv`` (contracts section 4, the
+input of ``shm-ros update --modes``), ``DIR/tracking.json`` (reference modes, the environmental
+model per mode, novelty threshold and alarms; with provenance) and ``DIR/tracking.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import sys
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.core.tracking import TrackingConfig
+
+    p = sub.add_parser("track", help="track modes across windows (identities, temperature, novelty)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("modes", help="modes JSON of `shm-ros identify`")
+    p.add_argument("--out", required=True, help="output directory")
+    for f in dataclasses.fields(TrackingConfig):
+        kind = {"int": int, "str": str}.get(str(f.type), float)
+        p.add_argument("--" + f.name.replace("_", "-"), dest=f"cfg_{f.name}", type=kind,
+                       default=None, help=f"(default {f.default})")
+    p.add_argument("--no-plot", action="store_true", help="skip tracking.png")
+    p.set_defaults(func=run)
+
+
+def _num(v: float) -> float | None:
+    return None if v is None or not math.isfinite(float(v)) else float(v)
+
+
+def run(args: argparse.Namespace) -> int:
+    from shm_ros.core.provenance import stamp_output
+    from shm_ros.core.tracking import TrackingConfig, track
+    from shm_ros.io.modes_json import read_modes_json
+    from shm_ros.io.tables import write_tracked_modes
+
+    try:
+        cfg = TrackingConfig(**{f.name: getattr(args, f"cfg_{f.name}")
+                                for f in dataclasses.fields(TrackingConfig)
+                                if getattr(args, f"cfg_{f.name}") is not None})
+        estimates = read_modes_json(args.modes)
+        res = track(estimates, cfg)
+    except (OSError, KeyError, ValueError, json.JSONDecodeError) as exc:
+        print(f"shm-ros track: {args.modes}: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_tracked_modes(out / "tracked_modes.csv", res.observations)
+    obs = res.observations
+    payload = {
+        "reference_modes": [{"mode": r.number, "frequency_hz": r.frequency_hz,
+                             "presence": r.presence,
+                             "mode_shape": {s: _num(v) for s, v in zip(obs.sensor_ids, r.shape)}}
+                            for r in res.reference],
+        "environment": [{k: (_num(v) if isinstance(v, float) else v)
+                         for k, v in dataclasses.asdict(e).items()} for e in res.environment],
+        "covariate": cfg.covariate,
+        "found_fraction": {str(n): float(v) for n, v in
+                           zip(obs.mode_numbers, (obs.frequencies_hz == obs.frequencies_hz).mean(0))},
+        "unassigned_modes": res.unassigned,
+        "novelty": {"threshold": _num(res.novelty_threshold), "training_windows": res.n_training,
+                    "alarms": int(res.novelty_alarm.sum()),
+                    "alarm_windows": [w for w, a in zip(res.window_ids, res.novelty_alarm) if a],
+                    "scores": [_num(v) for v in res.novelty_score]},
+        "notes": res.notes,
+    }
+    doc = stamp_output(payload, {"track": dataclasses.asdict(cfg), "modes": str(args.modes)})
+    (out / "tracking.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
+    if not args.no_plot:
+        from shm_ros.report.tracking import plot_tracking
+
+        plot_tracking(res, out / "tracking.png", cfg.covariate)
+    found = ", ".join(f"mode {n} {100 * v:.0f} %" for n, v in payload["found_fraction"].items())
+    print(f"{obs.n_windows} windows, {obs.n_modes} tracked modes ({found}); "
+          f"{int(res.novelty_alarm.sum())} novelty alarms -> {out}")
+    return 0

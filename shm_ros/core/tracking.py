@@ -1,0 +1,290 @@
+"""Mode identities across many windows, their environmental dependence, and novelty.
+
+``track(estimates, TrackingConfig())`` turns a sequence of per-window modal estimates (modes
+unnumbered, sorted by frequency, spurious ones possible, true ones sometimes missing) into the
+tracked-modes table of contracts section 4:
+
+1. **Reference set** from the first ``reference_windows`` windows: their modes are clustered on
+   ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)`` (average linkage, as the stabilization-diagram
+   picking); a cluster present in at least ``min_presence`` of those windows is a tracked mode,
+   numbered from 1 by ascending frequency, with the median frequency and a representative shape.
+2. **Assignment** window by window: the optimal one-to-one assignment
+   (``scipy.optimize.linear_sum_assignment``) of the window's modes to the tracked modes on
+   ``|df| / f_ref / freq_tol + (1 - MAC) / (1 - mac_min)``, with both terms gated at 1. The
+   reference frequency and shape then follow slow drift (temperature) by an exponential average
+   (``adapt``), so the frequency gate can stay narrow.
+3. **Environment**: per tracked mode, frequency against the covariate (``temperature_c``) by least
+   squares over the training part (the first ``training_fraction`` of the windows).
+4. **Novelty**: residuals from that environmental model, standardised by their training spread,
+   combined into ``mean(z_k^2)`` over the modes found; the alarm threshold is the
+   ``alarm_quantile`` of the training scores. A window whose modes moved in a way temperature does
+   not explain (damage, added mass, a support change) stands out.
+
+MAC is computed on the sensors both shapes have (windows may lose channels).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.cluster.hierarchy import fcluster, linkage
+from scipy.optimize import linear_sum_assignment
+
+from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.types import ModalEstimate
+
+__all__ = ["TrackingConfig", "ReferenceMode", "EnvironmentalFit", "TrackingResult", "track"]
+
+
+@dataclass
+class TrackingConfig:
+    reference_windows: int = 24  # windows that establish the tracked mode set
+    min_presence: float = 0.5  # a tracked mode is found in at least this fraction of them
+    cluster_cutoff: float = 0.05  # of |df|/f + (1 - MAC) when clustering the reference windows
+    freq_tol: float = 0.05  # assignment gate: |f - f_ref| / f_ref
+    mac_min: float = 0.8  # assignment gate: MAC with the reference shape
+    adapt: float = 0.1  # exponential average of the reference after each assignment (0 = fixed)
+    covariate: str = "temperature_c"  # environmental variable of the regression
+    training_fraction: float = 0.25  # first part of the windows: environmental model, threshold
+    alarm_quantile: float = 0.99  # novelty threshold = this quantile of the training scores
+
+    def __post_init__(self) -> None:
+        if self.reference_windows < 1:
+            raise ValueError(f"reference_windows must be >= 1, got {self.reference_windows}")
+        for name in ("min_presence", "training_fraction", "alarm_quantile"):
+            v = getattr(self, name)
+            if not 0 < v <= 1:
+                raise ValueError(f"{name} must be in (0, 1], got {v}")
+        if not 0 < self.freq_tol < 1 or not 0 <= self.mac_min < 1:
+            raise ValueError("freq_tol must be in (0, 1) and mac_min in [0, 1)")
+        if not 0 <= self.adapt < 1:
+            raise ValueError(f"adapt must be in [0, 1), got {self.adapt}")
+
+
+@dataclass
+class ReferenceMode:
+    number: int
+    frequency_hz: float  # median over the reference windows
+    shape: np.ndarray  # over TrackingResult.observations.sensor_ids (NaN = sensor never seen)
+    presence: float  # fraction of the reference windows in which it was found
+
+
+@dataclass
+class EnvironmentalFit:
+    mode: int
+    intercept_hz: float
+    slope_hz_per_unit: float  # per unit of the covariate (Hz per deg C for temperature)
+    slope_pct_per_unit: float
+    r2: float
+    residual_std_hz: float
+    n: int
+
+
+@dataclass
+class TrackingResult:
+    observations: ModalObservations  # the tracked-modes table (contracts section 4)
+    reference: list[ReferenceMode]
+    mac_to_reference: np.ndarray  # (n_windows, n_modes), NaN = not found
+    environment: list[EnvironmentalFit]
+    novelty_score: np.ndarray  # (n_windows,), NaN where no tracked mode was found
+    novelty_threshold: float
+    novelty_alarm: np.ndarray  # (n_windows,) bool
+    n_training: int
+    unassigned: int  # identified modes that matched no tracked mode (spurious or new)
+    # covariate outside the range seen in training: the environmental model extrapolates there,
+    # so an alarm may only mean that the training period was too short
+    outside_training: np.ndarray | None = None
+    window_ids: list[str] = field(default_factory=list)  # in time order, as the table's rows
+    notes: list[str] = field(default_factory=list)
+
+
+def _mac(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 2:
+        return 0.0
+    x, y = a[ok], b[ok]
+    den = float(x @ x) * float(y @ y)
+    return float((x @ y) ** 2 / den) if den > 0 else 0.0
+
+
+def _shapes_on(est: ModalEstimate, sensors: list[str]) -> np.ndarray:
+    """(n_modes, n_sensors) shapes of one window on the common sensor list (NaN where absent)."""
+    out = np.full((len(est.modes), len(sensors)), np.nan)
+    col = {s: j for j, s in enumerate(sensors)}
+    idx = [col[s] for s in est.sensor_ids]
+    for k, m in enumerate(est.modes):
+        out[k, idx] = np.asarray(m.mode_shape, dtype=float)
+    return out
+
+
+def _reference(estimates: list[ModalEstimate], sensors: list[str], cfg: TrackingConfig
+               ) -> list[ReferenceMode]:
+    f, shp, win = [], [], []
+    for w, est in enumerate(estimates):
+        s = _shapes_on(est, sensors)
+        for k, m in enumerate(est.modes):
+            if np.isfinite(m.frequency_hz) and m.frequency_hz > 0:
+                f.append(m.frequency_hz)
+                shp.append(s[k])
+                win.append(w)
+    if not f:
+        return []
+    f, shp, win = np.array(f), np.array(shp), np.array(win)
+    if f.size == 1:
+        labels = np.zeros(1, int)
+    else:
+        d = np.abs(f[:, None] - f[None, :]) / np.maximum(f[:, None], f[None, :])
+        mac = np.array([[_mac(a, b) for b in shp] for a in shp])
+        d = d + (1.0 - mac)
+        iu = np.triu_indices(f.size, 1)
+        labels = fcluster(linkage(np.clip(d[iu], 0, None), method="average"),
+                          t=cfg.cluster_cutoff, criterion="distance") - 1
+    refs = []
+    n_ref = len(estimates)
+    for lab in np.unique(labels):
+        members = np.flatnonzero(labels == lab)
+        presence = np.unique(win[members]).size / n_ref
+        if presence < cfg.min_presence:
+            continue
+        fm = float(np.median(f[members]))
+        rep = members[np.argmin(np.abs(f[members] - fm))]
+        refs.append((fm, shp[rep], presence))
+    refs.sort(key=lambda r: r[0])
+    return [ReferenceMode(k + 1, fm, s, p) for k, (fm, s, p) in enumerate(refs)]
+
+
+def _aligned(shape: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """``shape`` with the sign that agrees with ``ref`` on their common sensors."""
+    ok = np.isfinite(shape) & np.isfinite(ref)
+    return -shape if ok.any() and float(shape[ok] @ ref[ok]) < 0 else shape
+
+
+def track(estimates: list[ModalEstimate], config: TrackingConfig | None = None) -> TrackingResult:
+    """Tracked modes of ``estimates`` (in time order; see the module docstring)."""
+    cfg = config or TrackingConfig()
+    estimates = sorted(estimates, key=lambda e: e.start_ns)
+    if not estimates:
+        raise ValueError("track: no modal estimates")
+    sensors: list[str] = []
+    for est in estimates:
+        sensors += [s for s in est.sensor_ids if s not in sensors]
+    reference = _reference(estimates[:cfg.reference_windows], sensors, cfg)
+    notes: list[str] = []
+    if not reference:
+        raise ValueError(f"track: no mode is found in {cfg.min_presence:.0%} of the first "
+                         f"{min(cfg.reference_windows, len(estimates))} windows")
+    n_w, n_m, n_s = len(estimates), len(reference), len(sensors)
+    freq = np.full((n_w, n_m), np.nan)
+    damp = np.full((n_w, n_m), np.nan)
+    shapes = np.full((n_w, n_m, n_s), np.nan)
+    macs = np.full((n_w, n_m), np.nan)
+    ref_f = np.array([r.frequency_hz for r in reference])
+    ref_s = np.array([r.shape for r in reference])
+    unassigned = 0
+    for w, est in enumerate(estimates):
+        if not est.modes:
+            continue
+        f = np.array([m.frequency_hz for m in est.modes], dtype=float)
+        s = _shapes_on(est, sensors)
+        mac = np.array([[_mac(a, b) for b in ref_s] for a in s])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            df = np.abs(f[:, None] - ref_f[None, :]) / ref_f[None, :] / cfg.freq_tol
+        dm = (1.0 - mac) / (1.0 - cfg.mac_min)
+        gate = (df <= 1.0) & (dm <= 1.0)
+        cost = np.where(gate, df + dm, 1e6)
+        rows, cols = linear_sum_assignment(np.nan_to_num(cost, nan=1e6))
+        ok = gate[rows, cols]
+        rows, cols = rows[ok], cols[ok]
+        unassigned += len(est.modes) - rows.size
+        for i, k in zip(rows, cols):
+            freq[w, k] = f[i]
+            damp[w, k] = est.modes[i].damping_ratio
+            shapes[w, k] = _aligned(s[i], ref_s[k])
+            macs[w, k] = mac[i, k]
+            if cfg.adapt > 0:
+                ref_f[k] = (1 - cfg.adapt) * ref_f[k] + cfg.adapt * f[i]
+                new = np.where(np.isfinite(shapes[w, k]), shapes[w, k], ref_s[k])
+                ref_s[k] = np.where(np.isfinite(ref_s[k]),
+                                    (1 - cfg.adapt) * ref_s[k] + cfg.adapt * new, new)
+    covariates = _covariates(estimates)
+    times = np.array([e.start_ns / 1e9 for e in estimates])
+    obs = ModalObservations(times=times, mode_numbers=[r.number for r in reference],
+                            frequencies_hz=freq, shapes=shapes, sensor_ids=sensors, damping=damp,
+                            covariates=covariates, time_kind="iso")
+    n_train = max(3, int(np.ceil(cfg.training_fraction * n_w)))
+    x = covariates.get(cfg.covariate)
+    if x is None:
+        notes.append(f"no covariate {cfg.covariate!r}: the environmental model is a constant")
+    env, resid_z = _environment(freq, x, n_train, [r.number for r in reference])
+    score, threshold, alarm = _novelty(resid_z, n_train, cfg.alarm_quantile)
+    outside = np.zeros(n_w, bool)
+    if x is not None and np.isfinite(x[:n_train]).any():
+        lo, hi = np.nanmin(x[:n_train]), np.nanmax(x[:n_train])
+        margin = 0.05 * (hi - lo)
+        outside = np.isfinite(x) & ((x < lo - margin) | (x > hi + margin))
+        if np.any(alarm & outside):
+            notes.append(f"{int(np.sum(alarm & outside))} of {int(alarm.sum())} novelty alarms are "
+                         f"at {cfg.covariate} outside the training range [{lo:.3g}, {hi:.3g}]")
+    return TrackingResult(obs, reference, macs, env, score, threshold, alarm, min(n_train, n_w),
+                          unassigned, outside, [e.window_id for e in estimates], notes)
+
+
+def _covariates(estimates: list[ModalEstimate]) -> dict[str, np.ndarray]:
+    names: list[str] = []
+    if any(e.temperature_c is not None for e in estimates):
+        names.append("temperature_c")
+    for e in estimates:
+        names += [k for k in e.covariates if k not in names]
+    out = {}
+    for name in names:
+        vals = []
+        for e in estimates:
+            v = e.temperature_c if name == "temperature_c" else e.covariates.get(name)
+            vals.append(np.nan if v is None else float(v))
+        out[name] = np.array(vals)
+    return out
+
+
+def _environment(freq: np.ndarray, x: np.ndarray | None, n_train: int, numbers: list[int]):
+    """Per mode: least-squares line f = a + b x on the training windows; standardised residuals
+    of every window (NaN where the mode or the covariate is missing)."""
+    n_w, n_m = freq.shape
+    z = np.full((n_w, n_m), np.nan)
+    fits = []
+    for k in range(n_m):
+        f = freq[:, k]
+        xx = np.zeros(n_w) if x is None else x
+        use = np.isfinite(f) & np.isfinite(xx)
+        tr = use.copy()
+        tr[n_train:] = False
+        if tr.sum() < 3:
+            fits.append(EnvironmentalFit(numbers[k], np.nan, np.nan, np.nan, np.nan, np.nan,
+                                         int(tr.sum())))
+            continue
+        a = np.column_stack([np.ones(tr.sum()), xx[tr]])
+        coef = np.linalg.lstsq(a, f[tr], rcond=None)[0]
+        if x is None or np.ptp(xx[tr]) == 0:
+            coef = np.array([np.mean(f[tr]), 0.0])
+        pred = coef[0] + coef[1] * xx
+        res = f - pred
+        sd = float(np.std(res[tr], ddof=2 if x is not None else 1)) or 1e-12
+        ss = float(np.sum((f[tr] - f[tr].mean()) ** 2))
+        r2 = 1.0 - float(np.sum(res[tr] ** 2)) / ss if ss > 0 else 0.0
+        z[use, k] = res[use] / sd
+        fits.append(EnvironmentalFit(numbers[k], float(coef[0]), float(coef[1]),
+                                     float(100 * coef[1] / coef[0]), r2, sd, int(tr.sum())))
+    return fits, z
+
+
+def _novelty(z: np.ndarray, n_train: int, quantile: float):
+    found = np.isfinite(z)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        score = np.where(found.any(axis=1),
+                         np.nansum(np.where(found, z * z, 0.0), axis=1) / found.sum(axis=1), np.nan)
+    train = score[:n_train]
+    train = train[np.isfinite(train)]
+    threshold = float(np.quantile(train, quantile)) if train.size else np.inf
+    alarm = np.isfinite(score) & (score > threshold)
+    alarm[:n_train] = alarm[:n_train] & False  # the training period defines normal
+    return score, threshold, alarm
