@@ -144,3 +144,27 @@ def test_track_command_writes_table_summary_and_plot(tmp_path, capsys):
     assert (tmp_path / "t" / "tracking.png").stat().st_size > 10_000
     rc = main(["track", str(tmp_path / "missing.json"), "--out", str(tmp_path / "x")])
     assert rc == 2 and "missing.json" in capsys.readouterr().err
+
+
+def test_online_tracker_gives_the_batch_result():
+    """The node's incremental tracker: same identities, environmental model and alarms as the
+    batch tracker when its training period is the batch's training part."""
+    from shm_ros.core.tracking import Tracker
+
+    est, _, _ = _campaign(5, n=600, damage_at=0.7)
+    cfg = TrackingConfig()
+    batch = track(est, cfg)
+    online = Tracker(cfg, training_windows=batch.n_training)
+    rows = []
+    for k, e in enumerate(est):
+        got = online.add(e)
+        assert (len(got) == 0) == (k < cfg.reference_windows - 1)
+        rows += got
+    assert len(rows) == len(est) and [r.window_id for r in rows] == batch.window_ids
+    freq = np.array([r.frequencies_hz for r in rows])
+    assert np.array_equal(np.isnan(freq), np.isnan(batch.observations.frequencies_hz))
+    assert np.allclose(freq, batch.observations.frequencies_hz, equal_nan=True)
+    alarms = np.array([r.novelty_alarm for r in rows])
+    assert np.array_equal(alarms, batch.novelty_alarm)
+    assert rows[-1].novelty_threshold == pytest.approx(batch.novelty_threshold)
+    assert alarms[int(0.7 * len(est)):].mean() > 0.9

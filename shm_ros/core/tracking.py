@@ -34,7 +34,8 @@ from scipy.optimize import linear_sum_assignment
 from shm_ros.core.bayes.observations import ModalObservations
 from shm_ros.core.types import ModalEstimate
 
-__all__ = ["TrackingConfig", "ReferenceMode", "EnvironmentalFit", "TrackingResult", "track"]
+__all__ = ["TrackingConfig", "ReferenceMode", "EnvironmentalFit", "TrackingResult", "track",
+           "Tracker", "TrackedRow"]
 
 
 @dataclass
@@ -160,6 +161,41 @@ def _aligned(shape: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return -shape if ok.any() and float(shape[ok] @ ref[ok]) < 0 else shape
 
 
+def _assign(est: ModalEstimate, sensors: list[str], ref_f: np.ndarray, ref_s: np.ndarray,
+            cfg: TrackingConfig):
+    """One window's modes onto the tracked modes; updates ``ref_f``/``ref_s`` in place (drift).
+
+    Returns frequency, damping, shape and MAC rows (NaN where not found) and the number of the
+    window's modes left unassigned."""
+    n_m, n_s = ref_f.size, len(sensors)
+    freq, damp, macs = np.full(n_m, np.nan), np.full(n_m, np.nan), np.full(n_m, np.nan)
+    shapes = np.full((n_m, n_s), np.nan)
+    if not est.modes:
+        return freq, damp, shapes, macs, 0
+    f = np.array([m.frequency_hz for m in est.modes], dtype=float)
+    s = _shapes_on(est, sensors)
+    mac = np.array([[_mac(a, b) for b in ref_s] for a in s])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        df = np.abs(f[:, None] - ref_f[None, :]) / ref_f[None, :] / cfg.freq_tol
+    dm = (1.0 - mac) / (1.0 - cfg.mac_min)
+    gate = (df <= 1.0) & (dm <= 1.0)
+    cost = np.where(gate, df + dm, 1e6)
+    rows, cols = linear_sum_assignment(np.nan_to_num(cost, nan=1e6))
+    ok = gate[rows, cols]
+    rows, cols = rows[ok], cols[ok]
+    for i, k in zip(rows, cols):
+        freq[k] = f[i]
+        damp[k] = est.modes[i].damping_ratio
+        shapes[k] = _aligned(s[i], ref_s[k])
+        macs[k] = mac[i, k]
+        if cfg.adapt > 0:
+            ref_f[k] = (1 - cfg.adapt) * ref_f[k] + cfg.adapt * f[i]
+            new = np.where(np.isfinite(shapes[k]), shapes[k], ref_s[k])
+            ref_s[k] = np.where(np.isfinite(ref_s[k]), (1 - cfg.adapt) * ref_s[k] + cfg.adapt * new,
+                                new)
+    return freq, damp, shapes, macs, len(est.modes) - rows.size
+
+
 def track(estimates: list[ModalEstimate], config: TrackingConfig | None = None) -> TrackingResult:
     """Tracked modes of ``estimates`` (in time order; see the module docstring)."""
     cfg = config or TrackingConfig()
@@ -183,30 +219,8 @@ def track(estimates: list[ModalEstimate], config: TrackingConfig | None = None) 
     ref_s = np.array([r.shape for r in reference])
     unassigned = 0
     for w, est in enumerate(estimates):
-        if not est.modes:
-            continue
-        f = np.array([m.frequency_hz for m in est.modes], dtype=float)
-        s = _shapes_on(est, sensors)
-        mac = np.array([[_mac(a, b) for b in ref_s] for a in s])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            df = np.abs(f[:, None] - ref_f[None, :]) / ref_f[None, :] / cfg.freq_tol
-        dm = (1.0 - mac) / (1.0 - cfg.mac_min)
-        gate = (df <= 1.0) & (dm <= 1.0)
-        cost = np.where(gate, df + dm, 1e6)
-        rows, cols = linear_sum_assignment(np.nan_to_num(cost, nan=1e6))
-        ok = gate[rows, cols]
-        rows, cols = rows[ok], cols[ok]
-        unassigned += len(est.modes) - rows.size
-        for i, k in zip(rows, cols):
-            freq[w, k] = f[i]
-            damp[w, k] = est.modes[i].damping_ratio
-            shapes[w, k] = _aligned(s[i], ref_s[k])
-            macs[w, k] = mac[i, k]
-            if cfg.adapt > 0:
-                ref_f[k] = (1 - cfg.adapt) * ref_f[k] + cfg.adapt * f[i]
-                new = np.where(np.isfinite(shapes[w, k]), shapes[w, k], ref_s[k])
-                ref_s[k] = np.where(np.isfinite(ref_s[k]),
-                                    (1 - cfg.adapt) * ref_s[k] + cfg.adapt * new, new)
+        freq[w], damp[w], shapes[w], macs[w], n_left = _assign(est, sensors, ref_f, ref_s, cfg)
+        unassigned += n_left
     covariates = _covariates(estimates)
     times = np.array([e.start_ns / 1e9 for e in estimates])
     obs = ModalObservations(times=times, mode_numbers=[r.number for r in reference],
@@ -288,3 +302,103 @@ def _novelty(z: np.ndarray, n_train: int, quantile: float):
     alarm = np.isfinite(score) & (score > threshold)
     alarm[:n_train] = alarm[:n_train] & False  # the training period defines normal
     return score, threshold, alarm
+
+
+@dataclass
+class TrackedRow:
+    """One window of the online tracker (one ``TrackedModes`` message)."""
+
+    window_id: str
+    start_ns: int
+    mode_numbers: list[int]
+    frequencies_hz: np.ndarray
+    damping: np.ndarray
+    macs: np.ndarray
+    sensor_ids: list[str]
+    shapes: np.ndarray  # (n_modes, n_sensors)
+    covariates: dict[str, float]
+    novelty_score: float = float("nan")  # NaN until the training windows are in
+    novelty_threshold: float = float("nan")
+    novelty_alarm: bool = False
+
+
+class Tracker:
+    """Online tracking for a node: estimates arrive one at a time (in time order).
+
+    The first ``reference_windows`` estimates are buffered and establish the tracked modes (as in
+    :func:`track`); from then on each estimate gives one :class:`TrackedRow` at once (the buffered
+    ones first). The environmental model and the novelty threshold are fitted on the first
+    ``training_windows`` rows; later rows carry a novelty score and an alarm flag.
+    """
+
+    def __init__(self, config: TrackingConfig | None = None, training_windows: int = 144) -> None:
+        self.config = config or TrackingConfig()
+        if training_windows < 3:
+            raise ValueError(f"training_windows must be >= 3, got {training_windows}")
+        self.training_windows = training_windows
+        self.reference: list[ReferenceMode] = []
+        self.sensors: list[str] = []
+        self._buffer: list[ModalEstimate] = []
+        self._ref_f = np.zeros(0)
+        self._ref_s = np.zeros((0, 0))
+        self._train: list[TrackedRow] = []
+        self._fits: list[EnvironmentalFit] = []
+        self._threshold = float("nan")
+        self._has_covariate = False
+        self.unassigned = 0
+
+    @property
+    def ready(self) -> bool:
+        return bool(self.reference)
+
+    def add(self, est: ModalEstimate) -> list[TrackedRow]:
+        if not self.reference:
+            self._buffer.append(est)
+            if len(self._buffer) < self.config.reference_windows:
+                return []
+            for e in self._buffer:
+                self.sensors += [s for s in e.sensor_ids if s not in self.sensors]
+            self.reference = _reference(self._buffer, self.sensors, self.config)
+            if not self.reference:  # nothing recurs yet: slide the reference period on
+                self._buffer.pop(0)
+                self.sensors = []
+                return []
+            self._ref_f = np.array([r.frequency_hz for r in self.reference])
+            self._ref_s = np.array([r.shape for r in self.reference])
+            pending, self._buffer = self._buffer, []
+            return [self._row(e) for e in pending]
+        return [self._row(est)]
+
+    def _row(self, est: ModalEstimate) -> TrackedRow:
+        f, d, s, m, left = _assign(est, self.sensors, self._ref_f, self._ref_s, self.config)
+        self.unassigned += left
+        cov = {k: float(v[0]) for k, v in _covariates([est]).items()}
+        row = TrackedRow(est.window_id, est.start_ns, [r.number for r in self.reference], f, d, m,
+                         list(self.sensors), s, cov)
+        if len(self._train) < self.training_windows:
+            self._train.append(row)
+            if len(self._train) == self.training_windows:
+                self._fit()
+            return row
+        x = cov.get(self.config.covariate, 0.0 if not self._has_covariate else np.nan)
+        z = np.full(f.size, np.nan)
+        for k, fit in enumerate(self._fits):
+            if np.isfinite(fit.intercept_hz) and np.isfinite(f[k]) and np.isfinite(x):
+                z[k] = (f[k] - fit.intercept_hz - fit.slope_hz_per_unit * x) / fit.residual_std_hz
+        if np.isfinite(z).any():
+            row.novelty_score = float(np.nanmean(z * z))
+            row.novelty_alarm = bool(row.novelty_score > self._threshold)
+        row.novelty_threshold = self._threshold
+        return row
+
+    def _fit(self) -> None:
+        freq = np.array([r.frequencies_hz for r in self._train])
+        xs = [r.covariates.get(self.config.covariate) for r in self._train]
+        self._has_covariate = any(v is not None and np.isfinite(v) for v in xs)
+        x = np.array([np.nan if v is None else v for v in xs]) if self._has_covariate else None
+        self._fits, z = _environment(freq, x, len(self._train), [r.number for r in self.reference])
+        _, self._threshold, _ = _novelty(z, len(self._train), self.config.alarm_quantile)
+
+    @property
+    def environment(self) -> list[EnvironmentalFit]:
+        return list(self._fits)
