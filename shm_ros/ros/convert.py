@@ -135,6 +135,29 @@ def estimate_from_msg(msg: Any) -> ModalEstimate:
     )
 
 
+def tracked_row_to_msg(row: Any, frame_id: str = "") -> Any:
+    """:class:`shm_ros.core.tracking.TrackedRow` -> ``TrackedModes`` (NaN = mode not found)."""
+    from shm_interfaces.msg import TrackedModes
+
+    msg = TrackedModes()
+    msg.header.stamp = ns_to_time(row.start_ns)
+    msg.header.frame_id = frame_id
+    msg.window_id = row.window_id
+    msg.time = ns_to_time(row.start_ns)
+    msg.mode_numbers = [int(k) for k in row.mode_numbers]
+    msg.frequencies_hz = [float(v) for v in row.frequencies_hz]
+    msg.damping_ratios = [float(v) for v in row.damping]
+    msg.macs_to_reference = [float(v) for v in row.macs]
+    msg.sensor_ids = list(row.sensor_ids)
+    msg.mode_shapes = [float(v) for v in np.asarray(row.shapes, dtype=float).ravel()]
+    msg.covariate_names = list(row.covariates)
+    msg.covariate_values = [float(v) for v in row.covariates.values()]
+    msg.novelty_score = float(row.novelty_score)
+    msg.novelty_threshold = float(row.novelty_threshold)
+    msg.novelty_alarm = bool(row.novelty_alarm)
+    return msg
+
+
 def posterior_to_msg(record: dict[str, Any]) -> Any:
     """``Posterior.summary_record()`` (the message's fields by name) -> ``PosteriorSummary``."""
     from shm_interfaces.msg import ParameterEstimate, PosteriorSummary

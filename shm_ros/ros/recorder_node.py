@@ -15,7 +15,7 @@ from shm_ros.ros.qos import latched_qos, pipeline_qos, stream_qos
 DEFAULT_TOPICS = [topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES, topics.POSTERIOR,
                   topics.PREDICTION, topics.VERDICT, topics.DIAGNOSTICS]
 LATCHED = {topics.POSTERIOR, topics.VERDICT}
-STREAMS = {topics.WINDOWS, topics.MODAL_ESTIMATES}
+STREAMS = {topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES}
 
 
 class RecorderNode(Node):
