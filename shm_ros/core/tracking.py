@@ -38,6 +38,9 @@ __all__ = ["TrackingConfig", "ReferenceMode", "EnvironmentalFit", "TrackingResul
            "Tracker", "TrackedRow"]
 
 
+MIN_TRAINING = 10  # windows with a novelty score needed before alarms are raised
+
+
 @dataclass
 class TrackingConfig:
     reference_windows: int = 24  # windows that establish the tracked mode set
@@ -232,6 +235,9 @@ def track(estimates: list[ModalEstimate], config: TrackingConfig | None = None) 
         notes.append(f"no covariate {cfg.covariate!r}: the environmental model is a constant")
     env, resid_z = _environment(freq, x, n_train, [r.number for r in reference])
     score, threshold, alarm = _novelty(resid_z, n_train, cfg.alarm_quantile)
+    if not np.isfinite(threshold):
+        notes.append(f"fewer than {MIN_TRAINING} training windows with tracked modes: no novelty "
+                     "threshold, no alarms")
     outside = np.zeros(n_w, bool)
     if x is not None and np.isfinite(x[:n_train]).any():
         lo, hi = np.nanmin(x[:n_train]), np.nanmax(x[:n_train])
@@ -298,7 +304,8 @@ def _novelty(z: np.ndarray, n_train: int, quantile: float):
                          np.nansum(np.where(found, z * z, 0.0), axis=1) / found.sum(axis=1), np.nan)
     train = score[:n_train]
     train = train[np.isfinite(train)]
-    threshold = float(np.quantile(train, quantile)) if train.size else np.inf
+    # a quantile of a handful of scores is no threshold: below MIN_TRAINING no alarm is raised
+    threshold = float(np.quantile(train, quantile)) if train.size >= MIN_TRAINING else np.inf
     alarm = np.isfinite(score) & (score > threshold)
     alarm[:n_train] = alarm[:n_train] & False  # the training period defines normal
     return score, threshold, alarm
