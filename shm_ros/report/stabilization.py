@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from shm_ros.core.stabilization import Diagram  # noqa: E402
+from shm_ros.report.figures import save_figure  # noqa: E402
 
 __all__ = ["plot_stabilization"]
 
@@ -47,9 +48,4 @@ def plot_stabilization(diagram: Diagram, path: str | Path, title: str = "",
     ax.set_ylabel("model order")
     ax.set_title(title or "stabilization diagram")
     ax.legend(loc="lower right", fontsize=7, framealpha=0.9)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from shm_ros.core.tracking import TrackingResult  # noqa: E402
+from shm_ros.report.figures import save_figure  # noqa: E402
 
 
 def plot_tracking(res: TrackingResult, path: str | Path, covariate: str = "temperature_c") -> Path:
@@ -44,9 +45,4 @@ def plot_tracking(res: TrackingResult, path: str | Path, covariate: str = "tempe
                    label="training")
     ax.set_ylabel("mean squared z")
     ax.legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
