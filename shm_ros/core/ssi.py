@@ -86,7 +86,7 @@ class PoleSet:
     def __len__(self) -> int:
         return int(self.order.size)
 
-    def subset(self, mask: np.ndarray) -> "PoleSet":
+    def subset(self, mask: np.ndarray) -> PoleSet:
         return PoleSet(self.order[mask], self.frequency_hz[mask], self.damping_ratio[mask],
                        self.shape[mask], self.frequency_b_hz[mask], self.damping_b[mask],
                        self.mac_b[mask], self.orders)
@@ -98,28 +98,28 @@ class PoleSet:
 def correlations(y: np.ndarray, refs: np.ndarray, n_lags: int, segment: int = 4096) -> np.ndarray:
     """Unbiased output correlations ``R_k = E[y_{t+k} y_ref,t^T]`` for ``k = 0..n_lags-1``.
 
-    ``y`` is (N, l); returns (n_lags, l, r). Exact finite sums divided by ``N - k``, computed by
+    ``y`` is (N, n_out); returns (n_lags, n_out, r). Exact finite sums divided by ``N - k``, computed by
     FFT in segments: the sum over ``t`` is split into blocks of ``B`` samples; each block of the
     references (zero-padded) is correlated with the outputs of the same block plus ``n_lags``
     samples ahead, with an FFT of length ``P >= B + n_lags`` so that no lag wraps around. The
     cross spectra are summed over blocks before the inverse FFTs, which are then short
-    (``l * r`` transforms of length ``P`` instead of ``N``).
+    (``n_out * r`` transforms of length ``P`` instead of ``N``).
     """
-    n, l = y.shape
+    n, n_out = y.shape
     if n_lags >= n:
         raise ValueError(f"{n_lags} correlation lags need more than {n} samples")
     refs = np.asarray(refs, dtype=int)
     p = scipy.fft.next_fast_len(min(max(segment, 4 * n_lags), n) + n_lags, real=True)
     b = p - n_lags  # samples of t per block
     nb = -(-n // b)
-    ypad = np.zeros((nb * b + p, l))
+    ypad = np.zeros((nb * b + p, n_out))
     ypad[:n] = y
     # outputs y_{s .. s+P-1} of every block (a view), references r_{s .. s+B-1} zero-padded
-    ys = np.lib.stride_tricks.sliding_window_view(ypad, p, axis=0)[: nb * b : b]  # (nb, l, P)
-    fy = scipy.fft.rfft(ys, axis=-1)  # (nb, l, F)
+    ys = np.lib.stride_tricks.sliding_window_view(ypad, p, axis=0)[: nb * b : b]  # (nb, n_out, P)
+    fy = scipy.fft.rfft(ys, axis=-1)  # (nb, n_out, F)
     fr = scipy.fft.rfft(ypad[: nb * b, refs].reshape(nb, b, refs.size), n=p, axis=1)  # (nb, F, r)
-    # sum over blocks of conj(F_ref) F_y for every frequency: a batched (l x nb) @ (nb x r)
-    cross = np.matmul(fy.transpose(2, 1, 0), np.conj(fr).transpose(1, 0, 2))  # (F, l, r)
+    # sum over blocks of conj(F_ref) F_y for every frequency: a batched (n_out x nb) @ (nb x r)
+    cross = np.matmul(fy.transpose(2, 1, 0), np.conj(fr).transpose(1, 0, 2))  # (F, n_out, r)
     r = scipy.fft.irfft(cross, n=p, axis=0)[:n_lags]
     r /= (n - np.arange(n_lags))[:, None, None]
     return r
@@ -150,11 +150,11 @@ def hankel_gram(z: np.ndarray, n_blocks: int, n_cols: int) -> np.ndarray:
     gram[0] = g0
     for a in range(1, n_blocks):
         # block (a, b) = block (a-1, b-1) - z_{a-1} z_{b-1}^T + z_{a-1+n_cols} z_{b-1+n_cols}^T
-        b = np.arange(a, n_blocks)
-        prev = gram[a - 1, b - 1]
-        lo = np.einsum("i,bj->bij", z[a - 1], z[b - 1])
-        hi = np.einsum("i,bj->bij", z[a - 1 + n_cols], z[b - 1 + n_cols])
-        gram[a, b] = prev - lo + hi
+        cols = np.arange(a, n_blocks)
+        prev = gram[a - 1, cols - 1]
+        lo = np.einsum("i,bj->bij", z[a - 1], z[cols - 1])
+        hi = np.einsum("i,bj->bij", z[a - 1 + n_cols], z[cols - 1 + n_cols])
+        gram[a, cols] = prev - lo + hi
     # fill the lower triangle by symmetry
     for a in range(n_blocks):
         for b in range(a):
@@ -258,9 +258,9 @@ def ssi_cov(y: np.ndarray, fs: float, block_rows: int, max_order: int,
 
 def block_hankel_of_correlations(r: np.ndarray, i: int) -> np.ndarray:
     """``H(a, b) = R_{a+b+1}`` (a, b = 0..i-1): future outputs times past references."""
-    _, l, nr = r.shape
+    _, n_out, nr = r.shape
     idx = np.arange(i)[:, None] + np.arange(i)[None, :] + 1
-    return r[idx].transpose(0, 2, 1, 3).reshape(i * l, i * nr)
+    return r[idx].transpose(0, 2, 1, 3).reshape(i * n_out, i * nr)
 
 
 WEIGHTINGS = ("pc", "upc", "cva")
@@ -289,22 +289,22 @@ def ssi_data(y: np.ndarray, fs: float, block_rows: int, max_order: int,
     if weighting not in WEIGHTINGS:
         raise ValueError(f"ssi-data weighting must be one of {WEIGHTINGS}, got {weighting!r}")
     _check(y, block_rows, max_order)
-    n, l = y.shape
-    refs = np.arange(l) if refs is None else np.asarray(refs, dtype=int)
+    n, n_out = y.shape
+    refs = np.arange(n_out) if refs is None else np.asarray(refs, dtype=int)
     i = block_rows
     if max_order > refs.size * i:
         raise ValueError(f"max_order {max_order} exceeds references x block rows = {refs.size * i}")
     j = n - 2 * i + 1
-    rows, rp = _data_rows(l, refs, i)
+    rows, rp = _data_rows(n_out, refs, i)
     lower = _lq_lower(y, rows, 2 * i, j, lq)
     o, s = _weighted_observability(lower, rp, max_order, weighting)
-    return SubspaceModel(o, s, l, fs, "ssi-data", i)
+    return SubspaceModel(o, s, n_out, fs, "ssi-data", i)
 
 
-def _data_rows(l: int, refs: np.ndarray, i: int) -> tuple[np.ndarray, int]:
+def _data_rows(n_out: int, refs: np.ndarray, i: int) -> tuple[np.ndarray, int]:
     """Hankel rows of the reference past and the full future, and the number of past rows."""
-    past = (np.arange(i)[:, None] * l + refs[None, :]).ravel()
-    future = ((i + np.arange(i))[:, None] * l + np.arange(l)[None, :]).ravel()
+    past = (np.arange(i)[:, None] * n_out + refs[None, :]).ravel()
+    future = ((i + np.arange(i))[:, None] * n_out + np.arange(n_out)[None, :]).ravel()
     return np.concatenate([past, future]), past.size
 
 
@@ -333,22 +333,22 @@ def ssi_data_leave_one_out(y: np.ndarray, fs: float, block_rows: int, max_order:
     is ``(total - block) / columns left``, then Cholesky and the same weighting as :func:`ssi_data`.
     """
     _check(y, block_rows, max_order)
-    n, l = y.shape
-    refs = np.arange(l) if refs is None else np.asarray(refs, dtype=int)
+    n, n_out = y.shape
+    refs = np.arange(n_out) if refs is None else np.asarray(refs, dtype=int)
     i = block_rows
     j = n - 2 * i + 1
     if n_blocks < 3 or j // n_blocks < 8 * i:
         raise ValueError(f"{n_blocks} blocks of {j // max(n_blocks, 1)} columns are too short for "
                          f"{i} block rows")
-    rows, rp = _data_rows(l, refs, i)
+    rows, rp = _data_rows(n_out, refs, i)
     edges = np.linspace(0, j, n_blocks + 1).astype(int)
     grams = [hankel_gram(y[a:b + 2 * i - 1], 2 * i, b - a)[np.ix_(rows, rows)]
-             for a, b in zip(edges[:-1], edges[1:])]
+             for a, b in zip(edges[:-1], edges[1:], strict=True)]
     total = np.sum(grams, axis=0)
-    for (a, b), g in zip(zip(edges[:-1], edges[1:]), grams):
+    for (a, b), g in zip(zip(edges[:-1], edges[1:], strict=True), grams, strict=True):
         lower = sla.cholesky((total - g) / (j - (b - a)), lower=True, check_finite=False)
         o, s = _weighted_observability(lower, rp, max_order, weighting)
-        yield SubspaceModel(o, s, l, fs, "ssi-data", i)
+        yield SubspaceModel(o, s, n_out, fs, "ssi-data", i)
 
 
 def ssi_io(y: np.ndarray, u: np.ndarray, fs: float, block_rows: int, max_order: int,
@@ -364,48 +364,48 @@ def ssi_io(y: np.ndarray, u: np.ndarray, fs: float, block_rows: int, max_order: 
         u = u[:, None]
     if u.shape[0] != y.shape[0]:
         raise ValueError("input and outputs differ in length")
-    n, l = y.shape
+    n, n_out = y.shape
     m = u.shape[1]
     i = block_rows
-    if max_order > (m + l) * i:
+    if max_order > (m + n_out) * i:
         raise ValueError(f"max_order {max_order} exceeds (inputs + outputs) x block rows")
     z = np.hstack([u, y])
-    c = m + l
+    c = m + n_out
     j = n - 2 * i + 1
     blocks_p = np.arange(i)
     blocks_f = i + np.arange(i)
     uf = (blocks_f[:, None] * c + np.arange(m)[None, :]).ravel()
     up = (blocks_p[:, None] * c + np.arange(m)[None, :]).ravel()
-    yp = (blocks_p[:, None] * c + m + np.arange(l)[None, :]).ravel()
-    yf = (blocks_f[:, None] * c + m + np.arange(l)[None, :]).ravel()
+    yp = (blocks_p[:, None] * c + m + np.arange(n_out)[None, :]).ravel()
+    yf = (blocks_f[:, None] * c + m + np.arange(n_out)[None, :]).ravel()
     lower = _lq_lower(z, np.concatenate([uf, up, yp, yf]), 2 * i, j, lq)
     a, b = uf.size, uf.size + up.size + yp.size
     o, s = observability_from(lower[b:, a:b], max_order)
-    return SubspaceModel(o, s, l, fs, "ssi-io", i)
+    return SubspaceModel(o, s, n_out, fs, "ssi-io", i)
 
 
 # ----------------------------------------------------------------------------- poles
 
 
-def forward_backward_A(o: np.ndarray, l: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+def forward_backward_A(o: np.ndarray, n_out: int, n: int) -> tuple[np.ndarray, np.ndarray]:
     """The two estimates of ``A`` for one order ``n`` (reference implementation, plain lstsq)."""
-    up, dn = o[:-l, :n], o[l:, :n]
+    up, dn = o[:-n_out, :n], o[n_out:, :n]
     a_f = sla.lstsq(up, dn)[0]
     a_b = sla.solve(dn.T @ up, dn.T @ dn)
     return a_f, a_b
 
 
-def printed_eq13_estimate(o: np.ndarray, l: int, n: int) -> np.ndarray:
+def printed_eq13_estimate(o: np.ndarray, n_out: int, n: int) -> np.ndarray:
     """Eq. 13 of the building paper exactly as printed: ``(O_up^T O_dn)^-1 (O_up^T O_up)``.
 
     This is the inverse of the forward least-squares ``A``; kept only to demonstrate that.
     """
-    up, dn = o[:-l, :n], o[l:, :n]
+    up, dn = o[:-n_out, :n], o[n_out:, :n]
     return sla.solve(up.T @ dn, up.T @ up)
 
 
 def mac_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """MAC between rows of ``a`` (p, l) and rows of ``b`` (q, l), both complex unit-norm rows."""
+    """MAC between rows of ``a`` (p, n_out) and rows of ``b`` (q, n_out), both complex unit-norm rows."""
     num = np.abs(a.conj() @ b.T) ** 2
     den = np.outer(np.sum(np.abs(a) ** 2, 1), np.sum(np.abs(b) ** 2, 1))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -477,13 +477,13 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
     (:mod:`shm_ros.core.eigen`), which about halves the cost of a diagram.
     """
     o = model.observability
-    l = model.n_outputs
+    n_out = model.n_outputs
     fs = model.sample_rate_hz
     nmax = o.shape[1]
-    orders = np.arange(1, nmax + 1) if orders is None else np.asarray(orders, dtype=int)
-    orders = orders[(orders >= 1) & (orders <= nmax)]
-    up, dn = o[:-l], o[l:]
-    c = o[:l]
+    wanted = np.arange(1, nmax + 1) if orders is None else np.asarray(orders, dtype=int)
+    evaluated = wanted[(wanted >= 1) & (wanted <= nmax)]
+    up, dn = o[:-n_out], o[n_out:]
+    c = o[:n_out]
     # Basis in which the upper part of O is orthonormal (O' = O R1^-1, R1 upper triangular, so
     # O'[:, :n] spans the same space as O[:, :n]): there the forward A of order n is the leading
     # n x n block of the single matrix A' = Q1^T O_dn R1^-1, and its eigenvector y gives the mode
@@ -498,7 +498,7 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
         b_all, c_b = _leading_block_form(q2.T @ up, c, r2, nb)
     # pass 1: eigenvalues of both estimates at every order
     fwd: list[tuple] = []
-    for n in orders[orders <= nmax]:
+    for n in evaluated[evaluated <= nmax]:
         try:
             ev = eigen.eigenvalues(a_all[:n, :n], balance=False)
         except (np.linalg.LinAlgError, ValueError):
@@ -515,7 +515,7 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
         fwd.append((n, ev, keep, f, z, evb))
     if not fwd:
         e = np.zeros(0)
-        return PoleSet(e.astype(int), e, e, np.zeros((0, l), complex), e, e, e, orders)
+        return PoleSet(e.astype(int), e, e, np.zeros((0, n_out), complex), e, e, e, evaluated)
     # which poles need a shape: those with a neighbour at the previous or next order
     need = [np.ones(item[3].size, bool) for item in fwd]
     if shapes_for is not None:
@@ -530,8 +530,8 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
     # pass 2: shapes of the chosen poles and the two-A partners
     tf2, tz2, tm2 = match_scale
     cols: dict[str, list] = {k: [] for k in ("order", "f", "z", "phi", "fb", "zb", "macb")}
-    for (n, ev, keep, f, z, evb), sel in zip(fwd, need):
-        phi = np.full((f.size, l), np.nan, complex)
+    for (n, ev, keep, f, z, evb), sel in zip(fwd, need, strict=True):
+        phi = np.full((f.size, n_out), np.nan, complex)
         phi[sel] = _unit_shapes(c_f[:, :n], eigen.eigenvectors(ev, keep[sel]))
         fb = np.full(f.size, np.nan)
         zb = np.full(f.size, np.nan)
@@ -548,7 +548,7 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
                 fb, zb = f2[k], z2[k]
                 cand = np.flatnonzero(inside.any(axis=0))
                 if cand.size:
-                    phi2 = np.full((f2.size, l), np.nan, complex)
+                    phi2 = np.full((f2.size, n_out), np.nan, complex)
                     # the pole mu = 1/nu with imag(mu) > 0 belongs to conj(nu): conjugate shape
                     phi2[cand] = _unit_shapes(c_b[:, :n], eigen.eigenvectors(evb, keep2[cand])).conj()
                     rows = np.flatnonzero(inside.any(axis=1))
@@ -567,4 +567,4 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
         cols["macb"].append(macb)
     cat = {k: np.concatenate(v) for k, v in cols.items()}
     return PoleSet(cat["order"], cat["f"], cat["z"], cat["phi"], cat["fb"], cat["zb"],
-                   cat["macb"], orders)
+                   cat["macb"], evaluated)

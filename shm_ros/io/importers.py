@@ -225,7 +225,7 @@ class V2Channel:
 def parse_v2(text: str, source: str = "<v2>") -> list[V2Channel]:
     """Every channel section of a CSMIP V2 text (sections end with a ``/&`` line)."""
     lines = text.replace("\r\n", "\n").replace("\r", "\n").split("\n")
-    out: list[V2Channel] = []
+    out: list[dict[str, Any]] = []
     section_start = 0
     i = 0
     while i < len(lines):
@@ -331,7 +331,7 @@ def read_v2(path: str | Path, *, channels: dict[int, str] | None = None) -> list
             {"format": "csmip-v2", "station": cs[0].station,
              "channels": [{"name": nm, "number": c.channel, "orientation": c.orientation,
                            "location": c.location, "units_in_file": c.units_in_file, "file": c.source}
-                          for nm, c in zip(names, cs)]}))
+                          for nm, c in zip(names, cs, strict=True)]}))
     return out
 
 

@@ -8,7 +8,7 @@ files, so bags written here read in ``ros2 bag`` and vice versa.
 from __future__ import annotations
 
 import os
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -56,8 +56,8 @@ def message_definitions() -> dict[str, str]:
     }
 
 
-@lru_cache(maxsize=None)
-def typestore() -> "Typestore":
+@cache
+def typestore() -> Typestore:
     """The typestore of the current distribution with the project's messages registered."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 

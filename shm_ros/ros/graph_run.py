@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from shm_ros.core.types import ModalEstimate, Window
 from shm_ros.ros.replay import ReplayResult
@@ -37,7 +38,7 @@ def read_pipeline_bag(path: Path) -> tuple[list[Window], list[ModalEstimate], li
     windows, estimates, diags = [], [], []
     for m in read_messages(path):
         cls = topics.message_class(m.msgtype)
-        msg = deserialize_message(m.data, cls)
+        msg: Any = deserialize_message(m.data, cls)
         if m.topic == topics.WINDOWS:
             windows.append(window_from_msg(msg))
         elif m.topic == topics.MODAL_ESTIMATES:
