@@ -15,6 +15,7 @@ COMMANDS = [
     "identify",
     "track",
     "update",
+    "batch",
     "predict",
     "explain",
 ]
