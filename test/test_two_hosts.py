@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from ros_helpers.graph import recorded_windows, stop
 
 ACQ_IP, ANA_IP = "10.77.0.1", "10.77.0.2"

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -39,7 +40,7 @@ def settings_from(args: argparse.Namespace):
 
     from shm_ros.batch.jobs import BatchSettings
 
-    doc = {}
+    doc: dict[str, Any] = {}
     if args.config:
         with open(args.config) as fh:
             doc = yaml.safe_load(fh) or {}
