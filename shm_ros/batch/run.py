@@ -18,6 +18,7 @@ from typing import Any
 from shm_ros.batch.archive import ArchiveBag
 from shm_ros.batch.engines import Engine
 from shm_ros.batch.jobs import BagResult, BatchSettings, StructureResult, identify_bag, process_structure
+from shm_ros.core.progress import Progress
 
 
 def run_batch(bags: Sequence[ArchiveBag], settings: BatchSettings, engine: Engine, out: str | Path,
@@ -40,15 +41,8 @@ def run_batch(bags: Sequence[ArchiveBag], settings: BatchSettings, engine: Engin
 
 
 def _progress(what: str, log: Callable[[str], None]) -> Callable[[int, int], None]:
-    t0 = time.monotonic()
-
-    def report(done: int, total: int) -> None:
-        elapsed = time.monotonic() - t0
-        eta = elapsed / done * (total - done)
-        bar = "#" * int(30 * done / total)
-        log(f"{what} [{bar:<30}] {done}/{total}  {elapsed:.0f} s, ETA {eta:.0f} s")
-
-    return report
+    bar = Progress(what, every_s=0.0)
+    return lambda done, total: log(bar.line(done, total, time.monotonic() - bar.t0))
 
 
 def _folder(name: str) -> str:

@@ -1,0 +1,23 @@
+"""Progress lines of long work: bar, count, elapsed time and ETA; rate-limited."""
+
+from __future__ import annotations
+
+import io
+
+from shm_ros.core.progress import Progress
+
+
+def test_line_has_count_and_eta_from_the_rate_so_far():
+    p = Progress("windows", width=10)
+    assert p.line(0, 4, 0.0) == "windows [          ] 0/4  0 s, ETA -"
+    assert p.line(1, 4, 10.0) == "windows [##        ] 1/4  10 s, ETA 30 s"
+    assert p.line(4, 4, 40.0) == "windows [##########] 4/4  40 s, done"
+
+
+def test_updates_are_rate_limited_but_first_and_last_always_print():
+    out = io.StringIO()
+    p = Progress("x", stream=out, every_s=3600.0)
+    for k in range(1, 101):
+        p(k, 100)
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 2 and lines[0].startswith("x [") and " 1/100 " in lines[0] and "100/100" in lines[1]
