@@ -1,6 +1,17 @@
+"""Packaging of shm_ros: a pip-installable Python package and an ament_python ROS 2 package.
+
+Console scripts: ``shm-ros`` (the command line) and ``shm-ros-<node>`` for every node module
+``shm_ros/ros/<node>_node.py``. pip puts them on the environment's ``bin/``; in a colcon workspace
+``setup.cfg`` puts them in ``lib/shm_ros``, where ``ros2 run`` looks; next to them the short names
+of ``executables/`` (``ros2 run shm_ros ingest``) start the same console scripts.
+Runtime dependencies are listed twice on purpose: here for pip, in ``package.xml`` as rosdep keys
+(``test/test_packaging.py`` checks that both cover every import).
+"""
+
 from setuptools import find_packages, setup
 
 package_name = "shm_ros"
+NODES = ("ingest", "identify", "track", "update", "recorder")
 
 setup(
     name=package_name,
@@ -10,10 +21,11 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", ["config/pipeline.yaml"]),
+        ("lib/" + package_name, [f"executables/{n}" for n in NODES]),
     ],
-    package_data={"shm_ros": ["report/templates/*", "py.typed"]},
+    package_data={"shm_ros": ["py.typed"]},
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "PyYAML", "rosbags", "mcap", "zstandard", "emcee",
+    install_requires=["numpy", "scipy", "PyYAML", "rosbags", "mcap", "zstandard", "lz4", "emcee",
                       "dynesty", "arviz", "matplotlib", "threadpoolctl", "obspy"],
     zip_safe=True,
     maintainer="shm_ros maintainers",
@@ -21,13 +33,9 @@ setup(
     description="Structural health monitoring on ROS 2: recordings to a calibrated, uncertainty-aware "
     "structural model that says what physics it is missing.",
     license="Apache-2.0",
+    extras_require={"test": ["pytest"]},
     entry_points={
-        "console_scripts": [
-            "shm-ros = shm_ros.cli:main",
-            "shm-ros-ingest = shm_ros.ros.ingest_node:main",
-            "shm-ros-identify = shm_ros.ros.identify_node:main",
-            "shm-ros-update = shm_ros.ros.update_node:main",
-            "shm-ros-recorder = shm_ros.ros.recorder_node:main",
-        ],
+        "console_scripts": ["shm-ros = shm_ros.cli:main"]
+        + [f"shm-ros-{n} = shm_ros.ros.{n}_node:main" for n in NODES],
     },
 )

@@ -79,7 +79,7 @@ def synth_modal(truth_model, theta: np.ndarray, sensor_ids: list[str], n_windows
     S = truth_model.sensor_matrix(sensor_ids)
     phi = (S @ sol.shapes).T  # (modes, sensors)
     k = np.argmax(np.abs(phi), axis=1)
-    phi = phi / phi[np.arange(n_modes), k][:, None]  # largest component +1 (contracts section 3)
+    phi = phi / phi[np.arange(n_modes), k][:, None]  # largest component +1 (docs/interfaces.md §3)
     fn = np.asarray(freq_noise, dtype=float)[:n_modes]
     f = sol.frequencies_hz[None] * (1.0 + fn[None] * rng.standard_normal((n_windows, n_modes)))
     shapes = phi[None] + shape_noise * rng.standard_normal((n_windows, n_modes, len(sensor_ids)))

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared"
+# Real recordings the tests read, with their provenance and licence (test/data/*/README.md).
+TEST_DATA = ROOT / "test" / "data"
 
 # Each test run talks DDS only to itself: a domain of its own (from the process id) and localhost
 # discovery. Subprocesses inherit both.
@@ -29,7 +30,6 @@ def full_size() -> bool:
 
 
 @pytest.fixture
-def shared_dir() -> Path:
-    if not SHARED.is_dir():
-        pytest.fail(f"shared data folder missing: {SHARED}")
-    return SHARED
+def test_data() -> Path:
+    """The repository's own test-data folder, test/data/."""
+    return TEST_DATA

@@ -1,4 +1,4 @@
-"""Priors of contracts section 2: densities, quantiles, parametrisations, bad specifications."""
+"""Priors of docs/interfaces.md §2: densities, quantiles, parametrisations, bad specifications."""
 
 from __future__ import annotations
 

@@ -13,7 +13,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-COPY = ["package.xml", "setup.py", "resource", "config", "shm_ros", "msg_defs", "README.md", "LICENSE"]
+COPY = ["package.xml", "setup.py", "setup.cfg", "executables", "resource", "config", "shm_ros", "msg_defs",
+        "README.md", "LICENSE"]
 
 
 def test_colcon_builds_both_packages_and_the_messages_import(tmp_path):
@@ -35,6 +36,8 @@ def test_colcon_builds_both_packages_and_the_messages_import(tmp_path):
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
     assert "Finished <<< shm_interfaces" in build.stdout
     assert "Finished <<< shm_ros" in build.stdout
+    lib = ws / "install" / "shm_ros" / "lib" / "shm_ros"  # where `ros2 run shm_ros <node>` looks
+    assert {"ingest", "shm-ros-ingest", "track", "shm-ros-track"} <= {p.name for p in lib.iterdir()}
 
     check = (
         "import shm_interfaces.msg as m, rclpy\n"

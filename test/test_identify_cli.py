@@ -1,4 +1,4 @@
-"""`shm-ros identify`: bag -> modes.json (contracts section 3) and stabilization plots."""
+"""`shm-ros identify`: bag -> modes.json (docs/interfaces.md §3) and stabilization plots."""
 
 from __future__ import annotations
 

@@ -209,9 +209,10 @@ def test_identify_window_on_a_simple_record_and_config_errors():
         IdentifyConfig.from_dict({"stability": {"freq_tol": 0.01, "bogus": 1}})
 
 
-def test_example_configuration_loads(shared_dir):
-    import yaml
+def test_example_configuration_loads():
     from pathlib import Path
+
+    import yaml
 
     path = Path(__file__).resolve().parents[1] / "examples" / "identify.yaml"
     cfg = IdentifyConfig.from_dict(yaml.safe_load(path.read_text()))

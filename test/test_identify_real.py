@@ -1,15 +1,16 @@
 """Real data: the pyOMA laboratory steel frame (setups 2-5, channels 0-4, references 3 and 4).
 
 Every frequency of the independent peer's stable poles must be found within 1 % in every setup,
-by automatic picking (no hand selection). Channels 0-2 are laser velocities, 3-4 accelerations;
-the record is decimated from 256 Hz to 64 Hz by the identification's own pre-processing."""
+by automatic picking (no hand selection). Channels 0-2 are laser velocities, 3-4 accelerations
+(test/data/pyoma_steel_frame/README.md); the record is decimated from 256 Hz to 64 Hz by the
+identification's own pre-processing."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import synthetic_oma as so
+
 from shm_ros.core.identify import IdentifyConfig, identify_window
 from shm_ros.core.preprocess import PreprocessConfig
 from shm_ros.core.types import Window
@@ -30,9 +31,8 @@ def _one_blas_thread():
 
 @pytest.mark.parametrize("method", sorted(CONFIGS))
 @pytest.mark.parametrize("setup", [2, 3, 4, 5])
-def test_steel_frame_peer_frequencies_found(shared_dir, setup, method):
-    path = shared_dir / "data" / "pyoma_steel_frame" / f"measurement_{setup}" / f"measurement_{setup}.npy"
-    data = np.load(path)[:, :5]
+def test_steel_frame_peer_frequencies_found(test_data, setup, method):
+    data = np.load(test_data / "pyoma_steel_frame" / f"measurement_{setup}.npy").astype(np.float64)
     w = Window(f"setup{setup}", 0, 256.0, NAMES, data)
     cfg = IdentifyConfig(method=method, reference_channels=["ref_x", "ref_y"], uncertainty=False,
                          preprocess=PreprocessConfig(target_rate_hz=64.0), **CONFIGS[method])

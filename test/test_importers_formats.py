@@ -1,4 +1,4 @@
-"""Importers: CSV, NPY, CSMIP V2 (a real record) and MiniSEED -> contract bag -> the same samples."""
+"""Importers: CSV, NPY, CSMIP V2 (a real record) and MiniSEED -> a bag (docs/interfaces.md §1) -> the same samples."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from shm_ros.core.windows import ChannelMap, iso_utc
 from shm_ros.io.importers import ImportFileError, parse_v2, read_csv, read_npy, read_v2, write_bag
 from shm_ros.io.recording import ingest_bag, load_window
 
-V2_ZIP = Path(__file__).resolve().parents[2] / "shared" / "data" / "csmip_v2_sample" / \
-    "Inglewood_17May2009_CE13795P.zip"
+# the repository's own copy, provenance and licence in its README.md
+V2_ZIP = Path(__file__).resolve().parent / "data" / "csmip_v2_sample" / "Inglewood_17May2009_CE13795P.zip"
 T0 = 1_714_521_600_000_000_000
 
 
@@ -158,7 +158,7 @@ def test_miniseed_with_a_gap(tmp_path):
     scale = 1e-6
     k = [(w.start_ns - T0) // 10_000_000 for w in ws]
     assert k[:3] == [0, 1000, 2000]
-    for w, kk in zip(ws, k):
+    for w, kk in zip(ws, k, strict=True):
         idx = kk + np.arange(w.n_samples)
         assert np.array_equal(w.samples[:, 0], counts[idx] * scale)
     assert not any(w.start_ns < T0 + 26_000_000_000 < w.end_ns for w in ws)  # nothing spans the gap

@@ -120,7 +120,7 @@ def test_continuous_girder_matches_exact_solution(spans, per_span_sections):
             ref = exact_pinned_beam_frequencies(spans, EIs, mAs, n_modes, 1.3 * f[-1])
         err = np.abs(f / ref - 1)
         if eps == 10:
-            assert np.all(err < 0.005), (eps, err)  # contract acceptance: within 0.5 % at the nominal mesh
+            assert np.all(err < 0.005), (eps, err)  # acceptance: within 0.5 % at the nominal mesh
         if prev_err is not None:
             assert err.max() < prev_err.max()
         prev_err = err

@@ -1,4 +1,4 @@
-"""Bags of `shm-ros simulate`: contract topics and stamps, bursts, faults, determinism, CLI."""
+"""Bags of `shm-ros simulate`: topics and stamps of docs/interfaces.md §1, bursts, faults, determinism, CLI."""
 
 from __future__ import annotations
 
@@ -80,7 +80,7 @@ def test_accel_block_bag_follows_the_contract(tmp_path):
         assert w["start_ns"] == start
         assert len(w["frequencies_hz"]) == 6 and set(w["mode_shapes"]) == set(spec.sensor_ids)
     assert spec.name == sc.structure["name"] and spec.girder.elements_per_span == 10
-    for w in truth["windows"]:  # real shapes scaled to a largest component of +1 (contracts section 3)
+    for w in truth["windows"]:  # real shapes scaled to a largest component of +1 (docs/interfaces.md §3)
         shapes = np.array([w["mode_shapes"][s] for s in spec.sensor_ids])
         assert np.allclose(np.max(shapes, axis=0), 1.0) and np.all(np.max(np.abs(shapes), axis=0) <= 1.0)
     import csv
@@ -183,7 +183,7 @@ def test_earthquake_windows_carry_a_measured_base_input(tmp_path):
 @pytest.mark.parametrize("fmt", ["block", "imu"])
 def test_ingest_cuts_exactly_one_window_per_burst(tmp_path, fmt):
     """The project's own ingest reads the simulated bag: one window per burst, samples as recorded,
-    temperature = mean of the temperature samples inside the window (contracts section 1)."""
+    temperature = mean of the temperature samples inside the window (docs/interfaces.md §1)."""
     from shm_ros.io.recording import ingest_bag
 
     sc = named_scenario("girder", n_windows=3, window_s=150.0, seed=4, output=fmt, unrelated_topics=True)

@@ -1,4 +1,4 @@
-"""Structure files (contracts section 2): loading, defaults, parameter paths, errors naming file+field."""
+"""Structure files (docs/interfaces.md §2): loading, defaults, parameter paths, errors naming file+field."""
 
 from __future__ import annotations
 
@@ -271,8 +271,8 @@ parameters:
 
 
 def test_contract_example_loads(tmp_path):
-    """The contracts' own girder example (YAML 1.1 reads 3.4e10 as text; it is still a number), with
-    the unused shear_building section ignored."""
+    """A girder in the documented form (docs/interfaces.md §2; YAML 1.1 reads 3.4e10 as text, it is
+    still a number), with the unused shear_building section ignored."""
     p = tmp_path / "contract.yaml"
     p.write_text(CONTRACT_EXAMPLE)
     spec = load_structure(p)

@@ -1,4 +1,4 @@
-"""`shm-ros update` end to end (contracts section 6) and the bridge paper's study as a command."""
+"""`shm-ros update` end to end (docs/interfaces.md §6) and the bridge paper's study as a command."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tracked-modes table (contracts section 4): round trip and bad input."""
+"""Tracked-modes table (docs/interfaces.md §4): round trip and bad input."""
 
 from __future__ import annotations
 
