@@ -43,6 +43,7 @@ DEPENDENCIES: dict[str, tuple[str, str | None]] = {
     "arviz": ("python3-arviz-pip", "arviz"),
     "threadpoolctl": ("python3-threadpoolctl-pip", "threadpoolctl"),
     "obspy": ("python3-obspy-pip", "obspy"),
+    "dask": ("python3-dask-distributed-pip", "dask"),
     "rclpy": ("rclpy", None),
     "std_msgs": ("std_msgs", None),
     "sensor_msgs": ("sensor_msgs", None),
