@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shm_ros.core.types import SampleFlag
 from shm_ros.core.ingest import ChannelMap, ChannelSource, IngestConfig, IngestCore, sta_lta
+from shm_ros.core.types import SampleFlag
 
 T0 = 1_714_521_600_000_000_000  # 2024-05-01T00:00:00Z
 FS = 200.0
@@ -387,7 +387,7 @@ def test_streaming_per_sample_equals_offline_arrays():
     assert len(got) >= 2  # windows come out while streaming, not only at the end
     got += live.flush()
     assert [w.start_ns for w in got] == [w.start_ns for w in ref]
-    for a, b in zip(got, ref):
+    for a, b in zip(got, ref, strict=True):
         assert np.array_equal(a.samples, b.samples)
 
 
@@ -437,7 +437,7 @@ def test_streaming_cuts_once_every_channel_settled_and_waits_for_a_lagging_one()
     got = _stream(late, chans, stamps, values, delays, 14.6)
     got += _stream(late, chans, stamps, values, delays, 100.0) + late.flush()
     assert [w.start_ns for w in got] == [w.start_ns for w in ref]
-    for a, b in zip(got, ref):
+    for a, b in zip(got, ref, strict=True):
         assert np.array_equal(a.samples, b.samples)
     # channel c silent after 12 s: window [10, 20) waits for the median rule, not for settle_s
     silent = IngestCore(ChannelMap.simple(chans), IngestConfig(**cfg))
@@ -490,11 +490,18 @@ def test_tick_closes_a_burst_that_has_ended_without_new_data():
     assert core.pop_diagnostics() == []  # popped once
 
 
-def test_random_garbage_never_raises():
-    rng = np.random.default_rng(77)
+def _accounted(core: IngestCore) -> bool:
+    """Every channel sample handed in is in a window or counted with the reason it is not."""
+    st = core.stats
+    return st.samples_in == st.samples_windowed + sum(st.samples_not_windowed.values())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_garbage_never_raises_and_loses_nothing(seed):
+    rng = np.random.default_rng(77 + seed)
     core = IngestCore(ChannelMap.simple(["a", "b"]), IngestConfig(window_s=2.0, max_latency_s=0.5))
     t = T0
-    for i in range(3000):
+    for _ in range(3000):
         t += int(rng.choice([P, P, P, 0, -P, 3 * P, int(2e9), -int(5e9)]))
         r = rng.random()
         if r < 0.6:
@@ -502,7 +509,8 @@ def test_random_garbage_never_raises():
             core.add_accel_sample(str(rng.choice(["a", "b", "zz"])), t, 0.0, 0.0, float(v))
         elif r < 0.8:
             shape = [(5, 2), (0, 2), (3,), (2, 2, 2), (4, 1)][rng.integers(5)]
-            core.add_block(t, float(rng.choice([200.0, 0.0, np.nan, 100.0])), ["a", "b"][: shape[-1] if len(shape) > 1 else 2],
+            names = ["a", "b"][: shape[-1] if len(shape) > 1 else 2]
+            core.add_block(t, float(rng.choice([200.0, 0.0, np.nan, 100.0])), names,
                            rng.standard_normal(shape), units=str(rng.choice(["m/s^2", "g", "??"])))
         elif r < 0.9:
             core.add_temperature("t", t, float(rng.choice([12.0, np.nan])))
@@ -510,7 +518,120 @@ def test_random_garbage_never_raises():
             core.tick(t)
         core.pop_windows()
     core.flush()
-    assert core.diagnostic_counts  # everything odd was reported
+    c = codes(core)
+    assert {"rejected", "unknown_topic", "late_sample", "nan"} <= c
+    assert core.stats.samples_in > 0 and _accounted(core)
+
+
+W5 = 1000  # rows of a 5 s window
+VALUE_FAULTS = ("nan", "spike", "clipped", "dead_channel")
+STAMP_FAULTS = ("duplicate_stamp", "out_of_order", "unsnappable", "gap")
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_injected_faults_are_reported_for_their_channel_and_time(seed):
+    """A live core fed three channels (a per sample, b in arrays, c in AccelBlocks) with one fault
+    per 5 s window, chosen at random: each fault gives its diagnostic code, for its channel and its
+    time; every accepted sample is in a window at its stamp or counted with the reason it is not."""
+    rng = np.random.default_rng(900 + seed)
+    n_win = 14
+    n = n_win * W5
+    chans = ["a", "b", "c"]
+    truth = {c: 0.01 * rng.standard_normal(n) for c in chans}
+    # arrival lists per channel: (arrival key, stamp, value); the key orders the feed
+    feed = {c: [(float(i), int(T0 + i * P), 0.0) for i in range(n)] for c in chans}
+    faults = []  # (code, channel, stamp of the fault or None, window index)
+    kinds = list(VALUE_FAULTS + STAMP_FAULTS)
+    rng.shuffle(kinds)
+    for win, kind in zip(range(1, n_win - 1), kinds * 2, strict=False):
+        ch = str(rng.choice(chans if kind in VALUE_FAULTS else ["a", "b"]))
+        i = win * W5 + int(rng.integers(600, 900))  # late in the window: the piece before a gap is kept
+        x = truth[ch]
+        if kind == "nan":
+            x[i] = np.nan
+        elif kind == "spike":
+            x[i] += 1.0
+        elif kind == "clipped":
+            x[i:i + 10] = 2.0
+        elif kind == "dead_channel":
+            x[win * W5:(win + 1) * W5] = 0.3
+        elif kind == "duplicate_stamp":
+            feed[ch].append((i + 0.5, int(T0 + i * P), 123.0))
+        elif kind == "out_of_order":
+            feed[ch][i], feed[ch][i + 1] = (i + 1.0, *feed[ch][i][1:]), (float(i), *feed[ch][i + 1][1:])
+        elif kind == "unsnappable":
+            feed[ch][i] = (float(i), int(T0 + i * P + 0.7 * P), 0.0)
+        elif kind == "gap":
+            for j in range(i, i + 20):
+                feed[ch][j] = (float(j), -1, 0.0)  # not sent
+        faults.append((kind, ch, int(feed[ch][i][1]) if kind == "unsnappable" else int(T0 + i * P), win))
+    core = IngestCore(ChannelMap.simple(chans), IngestConfig(window_s=5.0, max_latency_s=0.5, max_repeats=100))
+    streams = {}
+    for c in chans:
+        rows = sorted(r for r in feed[c] if r[1] >= 0)
+        t = np.array([r[1] for r in rows], np.int64)
+        idx = (t - T0) // P  # the sample of that stamp (an unsnappable one is 0.7 period late)
+        v = np.array([r[2] if r[2] else truth[c][k] for r, k in zip(rows, idx.tolist(), strict=True)])
+        streams[c] = (np.array([r[0] for r in rows]), t, v)
+    windows = []
+    for j in range(0, n, 40):  # 0.2 s of arrivals at a time
+        for c in chans:
+            key, t, v = streams[c]
+            sel = (key >= j) & (key < j + 40)
+            if c == "a":
+                for tt, vv in zip(t[sel].tolist(), v[sel].tolist(), strict=True):
+                    core.add_accel_sample("a", tt, 0.0, 0.0, vv)
+            elif c == "b":
+                core.add_accel("b", t[sel], np.column_stack((np.zeros(sel.sum()), np.zeros(sel.sum()), v[sel])))
+            else:
+                core.add_block(int(t[sel][0]), FS, ["c"], v[sel][:, None])
+        windows += core.pop_windows()
+    late = int(T0 + 50 * P)
+    core.add_accel_sample("a", late, 0.0, 0.0, 1.0)  # a clock jump back into an emitted window
+    core.add_block(T0, FS, ["c", "d"], np.zeros((4, 3)))  # malformed
+    core.add_accel_sample("zz", T0 + n * P, 0.0, 0.0, 9.8)  # a topic of no sensor
+    windows += core.flush()
+
+    def about(d, ch):
+        return f"(sensor {ch})" in d.source or d.source.startswith(f"accel/{ch}.")
+
+    def window_at(t):
+        return next(w for w in windows if w.start_ns <= t < w.end_ns)
+
+    flag_of = {"nan": SampleFlag.NAN, "spike": SampleFlag.SPIKE, "clipped": SampleFlag.CLIPPED,
+               "duplicate_stamp": SampleFlag.DUPLICATE_STAMP, "out_of_order": SampleFlag.OUT_OF_ORDER}
+    for kind, ch, t, win in faults:
+        found = [d for d in core.diagnostics if d.code == kind and about(d, ch)]
+        assert found, (kind, ch)
+        w0 = T0 + win * W5 * P
+        if kind in ("duplicate_stamp", "unsnappable", "gap"):
+            assert t in [d.stamp_ns for d in found], (kind, ch)  # the stamp of the fault itself
+        elif kind != "out_of_order":  # window faults are stamped with the start of their window
+            assert any(w0 <= d.stamp_ns <= t < w0 + W5 * P for d in found), (kind, ch)
+        c = chans.index(ch)
+        if kind == "dead_channel":
+            assert window_at(w0).channel_status[c] == "dead"
+        elif kind in flag_of:
+            w = window_at(t)
+            row = (t - w.start_ns) // P
+            assert w.flags is not None and w.flags[row, c] & flag_of[kind], (kind, ch)
+        else:  # the grid point of an unsnappable stamp or of a gap is empty: the window splits there
+            assert not any(w.start_ns <= t < w.end_ns for w in windows), (kind, ch)
+        # no other channel is blamed for a fault that only one has
+        others = [d for d in core.diagnostics if d.code == kind and d.stamp_ns is not None
+                  and w0 <= d.stamp_ns < w0 + W5 * P and not about(d, ch)]
+        assert not others, (kind, ch, others)
+    assert any(d.code == "late_sample" and d.stamp_ns == late and about(d, "a") for d in core.diagnostics)
+    assert any(d.code == "rejected" and d.source == "accel_block" for d in core.diagnostics)
+    assert any(d.code == "unknown_topic" and d.source == "accel/zz" for d in core.diagnostics)
+    # accepted data: nothing lost, nothing moved
+    assert _accounted(core)
+    assert core.stats.samples_not_windowed["late"] == 1
+    for w in windows:
+        k = (w.stamps_ns() - T0) // P
+        for c, ch in enumerate(chans):
+            missing = np.zeros(w.n_samples, bool) if w.flags is None else (w.flags[:, c] & SampleFlag.MISSING) != 0
+            assert np.array_equal(w.samples[~missing, c], truth[ch][k[~missing]], equal_nan=True)
 
 
 @pytest.mark.parametrize("ppm", [-1000.0, 300.0, 1500.0])
@@ -524,7 +645,7 @@ def test_grid_follows_a_drifting_clock(ppm):
     chans = ["a", "b", "c"]
     core = offline(chans, window_s=60.0)
     xs = {}
-    for i, c in enumerate(chans):
+    for c in chans:
         t = base + rng.integers(-int(0.15 * P), int(0.15 * P), n)
         t[0] = base[0]
         xs[c] = rng.standard_normal(n)
@@ -630,7 +751,7 @@ def test_streaming_with_delayed_topics_equals_offline(seed):
     ref = off.flush()
     assert [w.start_ns for w in got] == [w.start_ns for w in ref]
     assert [w.n_samples for w in got] == [w.n_samples for w in ref]
-    for a, b in zip(got, ref):
+    for a, b in zip(got, ref, strict=True):
         assert np.array_equal(a.samples, b.samples, equal_nan=True)
     starts = [(w.start_ns - T0) / 1e9 for w in ref]
     assert any(abs(s - 19.5) < 0.01 for s in starts)  # the second burst is counted from its start

@@ -29,7 +29,7 @@ from shm_ros.core.ingest.core import IngestCore
 from shm_ros.core.ingest.events import detect_event, sta_lta
 from shm_ros.core.ingest.grid import estimate_rate
 from shm_ros.core.ingest.results import DroppedSpan, IngestStats, windows_summary
-from shm_ros.core.ingest.units import G, UNIT_FACTORS, unit_factor
+from shm_ros.core.ingest.units import UNIT_FACTORS, G, unit_factor
 
 __all__ = [
     "AXES", "G", "UNIT_FACTORS", "ChannelMap", "ChannelSource", "Diagnostic", "DroppedSpan", "EventDetector",

@@ -42,7 +42,7 @@ class ChannelBuffer:
 
     def consolidate(self) -> None:
         if self.chunks:
-            ts, vs, fs, ss = zip(*self.chunks)
+            ts, vs, fs, ss = zip(*self.chunks, strict=True)
             self.t = np.concatenate((self.t, *ts))
             self.v = np.concatenate((self.v, *vs))
             self.f = np.concatenate((self.f, *fs))

@@ -116,18 +116,18 @@ def split_span(span: Span, grid: Grid, window_len: int, rate: float, why: str | 
     filled, flags = span.filled, span.flags
     cover = filled.mean(axis=0)
     dropped = (cover < config.min_coverage) | span.mismatch
-    for c in np.flatnonzero(dropped):
+    for c in np.flatnonzero(dropped).tolist():
         why_dropped = "wrong rate" if span.mismatch[c] else f"only {cover[c]:.0%} of the samples present"
         log.add(Level.WARN, "channel_dropped", src(c),
                 f"{why_dropped}: channel dropped for [{ns_to_iso(grid.time(k0))}, {ns_to_iso(grid.time(k0 + n))})",
                 grid.time(k0))
         flags[~filled[:, c], c] |= np.uint8(SampleFlag.MISSING)
     active = ~dropped
-    row_ok = filled[:, active].all(axis=1) if active.any() else np.zeros(n, bool)
+    row_ok = np.asarray(filled[:, active].all(axis=1), bool) if active.any() else np.zeros(n, bool)
     gap_rows = ~row_ok
     if gap_rows.any():
         if active.any():
-            for c in np.flatnonzero(active):
+            for c in np.flatnonzero(active).tolist():
                 miss = ~filled[:, c]
                 if miss.any():
                     first_miss = int(np.flatnonzero(miss)[0])
