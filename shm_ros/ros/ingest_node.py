@@ -205,7 +205,7 @@ class IngestNode(Node):
                         continue
                     stamps = np.concatenate([g[0] for g in good])
                     xyz = np.concatenate([g[1] for g in good])
-                self.core.add_accel(sensor_id, stamps, xyz, source=f"accel/{sensor_id}.linear_acceleration")
+                self.core.add_accel(sensor_id, stamps, xyz, field="linear_acceleration")
                 t = int(stamps.max())
                 self.last_stamp_ns = max(self.last_stamp_ns or t, t)
             except Exception as exc:  # one bad batch must never take the node down
@@ -225,7 +225,8 @@ class IngestNode(Node):
             self.last_stamp_ns = max(self.last_stamp_ns or end, end)
 
     def _on_temperature(self, msg, sensor_id: str, topic: str) -> None:
-        self.core.add_temperature(sensor_id, time_to_ns(msg.header.stamp), msg.temperature)
+        self.core.add_temperature(sensor_id, time_to_ns(msg.header.stamp), msg.temperature,
+                                  source=f"temperature/{sensor_id}.temperature")
 
     # -- outputs -------------------------------------------------------------------------------
     def _emit(self, windows: list | None = None) -> None:

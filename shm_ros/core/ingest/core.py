@@ -58,7 +58,7 @@ class IngestCore:
         self._buf = [ChannelBuffer(s) for s in self.channels]
         self._accel_routes = channel_map.imu_routes()
         self._block_routes = channel_map.block_routes()
-        self._labels: dict[str, str] = {}  # topic id -> source label given by the adapter
+        self._labels: dict[str, tuple[str, str | None]] = {}  # topic id -> (source, field) from the adapter
         self._pending: dict[str, tuple[list, list, list, list]] = {}  # per-sample input per topic
         self._pending_n = 0
         self._busy = False  # inside a drain or a cut: no nested processing
@@ -110,14 +110,16 @@ class IngestCore:
 
     # ------------------------------------------------------------------ feeding
 
-    def add_accel(self, topic_id: str, stamps_ns: np.ndarray, xyz: np.ndarray, source: str | None = None) -> None:
+    def add_accel(self, topic_id: str, stamps_ns: np.ndarray, xyz: np.ndarray, source: str | None = None,
+                  field: str | None = None) -> None:
         """Samples of one accelerometer topic: ``stamps_ns`` (n,), ``xyz`` (n, 3) in m/s^2 (gravity
-        included). ``source`` names the topic in diagnostics (default ``accel/<topic_id>``; the
-        channel's axis is appended)."""
-        label = self._label(topic_id, source)
+        included). Diagnostics name the topic ``source`` (default ``accel/<topic_id>``), the
+        ``field`` that holds the three axes when the adapter gives one, and the axis:
+        ``<source>.<field>.<axis>``. Both are remembered per topic."""
+        label = self._label(topic_id, source, field)
         routes = self._accel_routes.get(topic_id)
         if routes is None:
-            self._log.add(Level.WARN, "unknown_topic", label,
+            self._log.add(Level.WARN, "unknown_topic", self._topic(topic_id),
                           "accelerometer topic not in the structure's sensors: ignored", once=True)
             return
         try:
@@ -126,11 +128,11 @@ class IngestCore:
             if a.shape != (t.size, 3):
                 raise ValueError(f"xyz has shape {a.shape}, expected ({t.size}, 3)")
         except (TypeError, ValueError, OverflowError) as exc:
-            self._reject(label, f"malformed accelerometer samples: {exc}")
+            self._reject(self._topic(topic_id), f"malformed accelerometer samples: {exc}")
             return
         if t.size == 0:
             return
-        self._probe_rate(topic_id, t, label)
+        self._probe_rate(topic_id, t)
         if topic_id not in self._gravity_checked and t.size >= 64:
             self._check_gravity(topic_id, a, label)
         seq = self._next_seq(t.size)
@@ -143,15 +145,16 @@ class IngestCore:
     add_imu_array = add_accel
 
     def add_accel_sample(self, topic_id: str, stamp_ns: int, ax: float, ay: float, az: float,
-                         source: str | None = None) -> None:
+                         source: str | None = None, field: str | None = None) -> None:
         """One sample of an accelerometer topic (m/s^2); consolidated into arrays in batches."""
         pend = self._pending.get(topic_id)
         if pend is None:
             if topic_id not in self._accel_routes:
-                self._log.add(Level.WARN, "unknown_topic", self._label(topic_id, source),
+                self._label(topic_id, source, field)
+                self._log.add(Level.WARN, "unknown_topic", self._topic(topic_id),
                               "accelerometer topic not in the structure's sensors: ignored", stamp_ns, once=True)
                 return
-            self._label(topic_id, source)
+            self._label(topic_id, source, field)
             pend = self._pending[topic_id] = ([], [], [], [])
         pend[0].append(stamp_ns)
         pend[1].append(ax)
@@ -215,9 +218,10 @@ class IngestCore:
                 self._append(col, t, v, seq, f"{topic}.samples[{name}]")
         self._after_add()
 
-    def add_temperature(self, sensor_id: str, stamp_ns: int, value_c: float) -> None:
-        """One temperature sample (degrees C); a window's temperature is the mean of those inside it."""
-        source = f"temperature/{sensor_id}"
+    def add_temperature(self, sensor_id: str, stamp_ns: int, value_c: float, source: str | None = None) -> None:
+        """One temperature sample (degrees C); a window's temperature is the mean of those inside it.
+        ``source`` names it in diagnostics (default ``temperature/<sensor_id>``)."""
+        source = source or f"temperature/{sensor_id}"
         try:
             t, v = int(stamp_ns), float(value_c)
         except (TypeError, ValueError, OverflowError) as exc:
@@ -300,11 +304,16 @@ class IngestCore:
 
     # ------------------------------------------------------------------ internals: feeding
 
-    def _label(self, topic_id: str, source: str | None) -> str:
-        if source is not None:
-            self._labels[topic_id] = source
-            return source
-        return self._labels.get(topic_id, f"accel/{topic_id}")
+    def _label(self, topic_id: str, source: str | None = None, field: str | None = None) -> str:
+        """``<source>[.<field>]`` of a topic (what its axes are appended to); remembers the names."""
+        if source is not None or field is not None:
+            old = self._labels.get(topic_id, (f"accel/{topic_id}", None))
+            self._labels[topic_id] = (source or old[0], field or old[1])
+        topic, fld = self._labels.get(topic_id, (f"accel/{topic_id}", None))
+        return topic if fld is None else f"{topic}.{fld}"
+
+    def _topic(self, topic_id: str) -> str:
+        return self._labels.get(topic_id, (f"accel/{topic_id}", None))[0]
 
     def _src(self, c: int) -> str:
         """Diagnostic source of output channel ``c``: the input that fed it, or what it reads."""
@@ -314,7 +323,7 @@ class IngestCore:
         s = self.map.sources[c]
         out = []
         if s.imu_topic is not None:
-            out.append(f"{self._labels.get(s.imu_topic, f'accel/{s.imu_topic}')}.{s.axis}")
+            out.append(f"{self._label(s.imu_topic)}.{s.axis}")
         if s.block_channel is not None:
             out.append(f"accel_block.samples[{s.block_channel}]")
         return " | ".join(out) + f" (sensor {s.sensor_id})"
@@ -344,7 +353,6 @@ class IngestCore:
     def _feed_pending(self, topic_id: str, ts: list, xs: list, ys: list, zs: list) -> None:
         if not ts:
             return
-        label = self._label(topic_id, None)
         try:
             t = np.asarray(ts, dtype=np.int64)
         except (TypeError, ValueError, OverflowError):
@@ -355,14 +363,14 @@ class IngestCore:
                     int(s)
                     good.append(i)
                 except (TypeError, ValueError, OverflowError):
-                    self._reject(f"{label} (stamp)", f"bad stamp {s!r}")
+                    self._reject(f"{self._topic(topic_id)} (stamp)", f"bad stamp {s!r}")
             t = np.asarray([ts[i] for i in good], dtype=np.int64)
             xs, ys, zs = ([v[i] for i in good] for v in (xs, ys, zs))
         try:
             xyz = np.column_stack((np.asarray(xs, np.float64), np.asarray(ys, np.float64),
                                    np.asarray(zs, np.float64)))
         except (TypeError, ValueError) as exc:
-            self._reject(label, f"non-numeric values: {exc}")
+            self._reject(self._topic(topic_id), f"non-numeric values: {exc}")
             return
         self.add_accel(topic_id, t, xyz)
 
@@ -380,7 +388,7 @@ class IngestCore:
                           f"|a| of the three axes = {mag:.4g} m/s^2 is implausible for a structure "
                           "(expected about 9.81 with gravity): values NOT rescaled")
 
-    def _probe_rate(self, topic_id: str, t: np.ndarray, label: str) -> None:
+    def _probe_rate(self, topic_id: str, t: np.ndarray) -> None:
         if self._rate is not None:
             return
         probe = self._rate_probe.setdefault(topic_id, [])
@@ -389,7 +397,7 @@ class IngestCore:
             rate = estimate_rate(np.asarray(probe, np.int64))
             if rate is not None:
                 self._rate = rate
-                self._log.add(Level.OK, "sample_rate", f"{label} (stamps)",
+                self._log.add(Level.OK, "sample_rate", f"{self._topic(topic_id)} (stamps)",
                               f"grid rate {rate:g} Hz (fitted to the stamps)", int(t[0]))
 
     def _append(self, col: int, t: np.ndarray, v: np.ndarray, seq: np.ndarray, source: str) -> None:
