@@ -56,7 +56,7 @@ def write_bag(path: Path, layout: str, storage: str, seconds: float, channels: i
 
 def run(seconds: float = 120.0, window: float = 60.0, channels: int = 16, fs: float = 200.0,
         repeat: int = 3, storages: tuple[str, ...] = ("mcap", "sqlite3")) -> dict:
-    from shm_ros.core.windows import ChannelMap
+    from shm_ros.core.ingest import ChannelMap
     from shm_ros.io.recording import ingest_bag
 
     cmap = ChannelMap.simple([f"s{c}" for c in range(channels)])

@@ -12,7 +12,8 @@ import pytest
 
 from shm_ros.cli import main
 from shm_ros.core.types import SampleFlag
-from shm_ros.core.windows import ChannelMap, iso_utc
+from shm_ros.core.ingest import ChannelMap
+from shm_ros.core.timeutil import ns_to_iso as iso_utc
 from shm_ros.io.importers import ImportFileError, parse_v2, read_csv, read_npy, read_v2, write_bag
 from shm_ros.io.recording import ingest_bag, load_window
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from shm_ros.core.types import SampleFlag
-from shm_ros.core.windows import ChannelMap, ChannelSource
+from shm_ros.core.ingest import ChannelMap, ChannelSource
 from shm_ros.io.bags import IMU, BagWriter, read_messages
 from shm_ros.io.recording import decode_imu_batch, ingest_bag, windows_from_bag
 from shm_ros.io.typestore import typestore

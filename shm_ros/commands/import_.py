@@ -37,7 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from shm_ros.core.windows import iso_utc
+    from shm_ros.core.timeutil import ns_to_iso as iso_utc
     from shm_ros.io.importers import ImportFileError, read_any, write_bag
 
     channels = [c.strip() for c in args.channels.split(",")] if args.channels else None

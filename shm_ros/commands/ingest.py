@@ -17,7 +17,7 @@ from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from shm_ros.core.windows import PARAMETER_HELP, IngestConfig
+    from shm_ros.core.ingest import IngestConfig
 
     p = sub.add_parser("ingest", help="check, align and window a recording (bag -> windows)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -30,15 +30,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     for f in dataclasses.fields(IngestConfig):
         if f.name in ("window_s", "max_latency_s", "settle_s", "check_interval_s"):
             continue  # --window; offline reading decides finality itself
-        kind = {"int": int, "str": str}.get(str(f.type), float)
+        kind = {"int": int, "str": str, "EventDetector": str}.get(str(f.type), float)
         p.add_argument("--" + f.name.replace("_", "-"), dest=f"cfg_{f.name}", type=kind, default=None,
-                       help=f"{PARAMETER_HELP[f.name]} (default {f.default})")
+                       help=f"{f.metadata['help']} (default {f.default})")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from shm_ros.core.provenance import stamp_output
-    from shm_ros.core.windows import IngestConfig, windows_summary
+    from shm_ros.core.ingest import IngestConfig, windows_summary
     from shm_ros.io.recording import ingest_bag, save_window, window_filename
     from shm_ros.io.structure import load_structure
 

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from shm_ros.core.windows import unit_factor
+from shm_ros.core.ingest.units import unit_factor
 
 FORMATS = ("csv", "npy", "v2", "miniseed")
 

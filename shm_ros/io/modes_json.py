@@ -14,7 +14,7 @@ from shm_ros.core.types import ModalEstimate, Mode, Window
 
 
 def iso(t_ns: int) -> str:
-    from shm_ros.core.windows import iso_utc
+    from shm_ros.core.timeutil import ns_to_iso as iso_utc
 
     return iso_utc(t_ns)
 

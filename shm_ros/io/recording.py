@@ -1,6 +1,6 @@
 """A recorded bag -> the streaming ingest core -> windows (the offline path of ``ingest``).
 
-The same :class:`~shm_ros.core.windows.IngestCore` runs here and in the live node: this module only
+The same :class:`~shm_ros.core.ingest.IngestCore` runs here and in the live node: this module only
 reads and decodes messages. ``sensor_msgs/Imu`` messages are decoded in batches straight from their
 CDR bytes (see :func:`decode_imu_batch`), which is what makes per-sample Imu bags fast to ingest.
 
@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from shm_ros.core.types import Window
-from shm_ros.core.windows import (
-    OK, WARN, ChannelMap, Diagnostic, DroppedSpan, IngestConfig, IngestCore, IngestStats,
+from shm_ros.core.ingest import (
+    ChannelMap, Diagnostic, DroppedSpan, IngestConfig, IngestCore, IngestStats, Level,
 )
 from shm_ros.io.bags import IMU, BagError, BagMessage, read_messages, topic_kind
 from shm_ros.io.typestore import typestore
@@ -114,7 +114,7 @@ class _BagFeeder:
         if self.ignored:
             self.core.report_error(str(self.path), "ignored topics (not accelerometer/temperature "
                                    "contract topics): " + ", ".join(sorted(self.ignored)),
-                                   level=OK, code="ignored_topics")
+                                   level=Level.OK, code="ignored_topics")
 
     def _run_rosbags(self) -> None:
         got = 0
@@ -136,7 +136,7 @@ class _BagFeeder:
                                            "the damage were ingested)", code="bag_damaged")
                 else:
                     self.core.report_error(str(self.path), f"{exc}; read from its storage files directly instead",
-                                           level=WARN, code="bag_damaged")
+                                           level=Level.WARN, code="bag_damaged")
             else:
                 self.core.report_error(str(self.path), f"{exc} ({got} messages read before the "
                                        "damage were ingested)", code="bag_damaged")

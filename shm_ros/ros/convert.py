@@ -11,19 +11,21 @@ from typing import Any
 
 import numpy as np
 
+from shm_ros.core.timeutil import join_ns, split_ns
 from shm_ros.core.types import ModalEstimate, Mode, Window
-
-NS = 1_000_000_000
 
 
 def time_to_ns(t: Any) -> int:
-    return int(t.sec) * NS + int(t.nanosec)
+    """``builtin_interfaces/Time`` (a ``header.stamp``) -> ns since the epoch."""
+    return join_ns(t.sec, t.nanosec)
 
 
 def ns_to_time(t_ns: int, cls: type | None = None) -> Any:
     if cls is None:
-        from builtin_interfaces.msg import Time as cls
-    sec, nsec = divmod(int(t_ns), NS)
+        from builtin_interfaces.msg import Time
+
+        cls = Time
+    sec, nsec = split_ns(t_ns)
     return cls(sec=sec, nanosec=nsec)
 
 

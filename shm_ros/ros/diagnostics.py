@@ -6,8 +6,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-LEVELS = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN, "error": DiagnosticStatus.ERROR,
-          "stale": DiagnosticStatus.STALE}
+from shm_ros.core.diagnostics import Level
 
 
 class Diagnostics:
@@ -21,10 +20,11 @@ class Diagnostics:
         self._hardware_id = hardware_id
         self._pending: list[DiagnosticStatus] = []
 
-    def report(self, level: str, message: str, name: str = "", **values: Any) -> None:
+    def report(self, level: Level | str, message: str, name: str = "", **values: Any) -> None:
         """Queue one status; ``name`` says what it is about (a topic, a field, a stage)."""
+        level = Level.parse(level)  # "ok" | "warn" | "error" | "stale" or a Level
         status = DiagnosticStatus(
-            level=LEVELS[level], name=f"{self._node.get_name()}: {name}" if name else self._node.get_name(),
+            level=bytes([level]), name=f"{self._node.get_name()}: {name}" if name else self._node.get_name(),
             message=message[:500], hardware_id=self._hardware_id,
             values=[KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
         )
@@ -32,9 +32,9 @@ class Diagnostics:
         # rclpy refuses a call site that logs at changing severities ("Logger severity cannot be
         # changed between calls"): one call per severity.
         text = f"{name}: {message}" if name else message
-        if level == "warn":
+        if level == Level.WARN:
             self._node.get_logger().warning(text)
-        elif level != "ok":
+        elif level != Level.OK:
             self._node.get_logger().error(text)
 
     def publish(self) -> None:

@@ -3,8 +3,14 @@
 Subscribes (sensor-data QoS, deep history) to ``<prefix>/accel/<id>`` (sensor_msgs/Imu),
 ``<prefix>/accel_block`` (shm_interfaces/AccelBlock) and ``<prefix>/temperature/<id>``
 (sensor_msgs/Temperature) as they appear in the graph (ROS has no wildcard subscriptions, so the
-graph is polled); all science is in :class:`shm_ros.core.windows.IngestCore`.
+graph is polled); all science is in :class:`shm_ros.core.ingest.IngestCore`, which this node
+feeds with arrays (stamps in ns, accelerations per axis) decoded from the messages.
 Publishes ``/shm/windows``, ``/diagnostics`` and ``/shm/ingest/received`` (flow control for replay).
+
+Sensors and topics that do not fit together are reported up front (a WARN diagnostic and a
+warning on the terminal): an accelerometer topic that feeds no structure sensor as soon as it is
+discovered, a structure sensor that no topic feeds once ``discovery_timeout_s`` has passed (topics
+of a live graph appear over time), each with the closest names.
 """
 
 from __future__ import annotations
@@ -17,17 +23,16 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import String, UInt64
 
-from shm_ros.core.windows import ChannelMap, IngestConfig, IngestCore
+from shm_ros.core.diagnostics import Diagnostic, Level
+from shm_ros.core.ingest import ChannelMap, EventDetector, IngestConfig, IngestCore, channel_mismatches
 from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
 from shm_ros.io.recording import decode_imu_batch
 from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.qos import (WINDOW_HISTORY, latched_qos, pipeline_qos, recording_qos,
-                             stream_qos)
+from shm_ros.ros.qos import WINDOW_HISTORY, latched_qos, pipeline_qos, recording_qos, stream_qos
 
-LEVEL = {0: "ok", 1: "warn", 2: "error"}
 IMU_BATCH = 512  # Imu messages decoded together (also every 0.05 s)
 
 
@@ -35,41 +40,48 @@ class IngestNode(Node):
     def __init__(self, name: str = "ingest", parameters: dict[str, Any] | None = None) -> None:
         super().__init__(name, parameter_overrides=overrides(parameters))
         p = self.declare_parameter
+        d = IngestConfig()  # the defaults (and their reasons) are the core's
         p("structure", "")
-        p("window_s", 600.0)
-        p("sample_rate_hz", 0.0)  # 0 = from the data
-        p("burst_pause_s", 1.0)
-        # A window is cut once every channel's newest stamp is settle_s past its end (DDS keeps
-        # each topic in order but does not order messages across topics); a silent or lagging
-        # channel is waited for until the median channel is max_latency_s past the end (stamp time:
-        # a fast replay delivers seconds of it per wall tick).
-        p("settle_s", 2.0)
-        p("max_latency_s", 120.0)
-        p("event_detector", "sta_lta")
-        p("pga_threshold_m_s2", 0.5)
+        p("window_s", d.window_s)
+        p("sample_rate_hz", d.sample_rate_hz or 0.0)  # 0 = from the data
+        p("burst_pause_s", d.burst_pause_s)
+        p("settle_s", -1.0 if d.settle_s is None else d.settle_s)  # negative = only max_latency_s
+        p("max_latency_s", d.max_latency_s)
+        p("event_detector", str(d.event_detector))
+        p("pga_threshold_m_s2", d.pga_threshold_m_s2)
         p("reliable_input", False)
         p("idle_flush_s", 5.0)
         p("discovery_period_s", 0.5)
+        # a structure sensor that no topic feeds this long after start is reported
+        p("discovery_timeout_s", 10.0)
         p("frame_id", "")
         value = lambda n: self.get_parameter(n).value  # noqa: E731
+        settle = float(value("settle_s"))
         self.core = IngestCore(self._channel_map(value("structure")), IngestConfig(
             window_s=float(value("window_s")),
             sample_rate_hz=float(value("sample_rate_hz")) or None,
             burst_pause_s=float(value("burst_pause_s")),
             max_latency_s=float(value("max_latency_s")),
-            settle_s=float(value("settle_s")),
-            event_detector=str(value("event_detector")),
+            settle_s=None if settle < 0 else settle,
+            event_detector=EventDetector(str(value("event_detector"))),
             pga_threshold_m_s2=float(value("pga_threshold_m_s2")),
         ))
         self.frame_id = str(value("frame_id"))
         self.idle_flush_s = float(value("idle_flush_s"))
         self.reliable = bool(value("reliable_input"))
         self.diag = Diagnostics(self, "ingest")
-        self.window_pub = self.create_publisher(
+        self.window_pub: Any = self.create_publisher(
             topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, stream_qos(WINDOW_HISTORY))
         self.ack_pub = self.create_publisher(UInt64, topics.INGEST_RECEIVED, pipeline_qos())
         self.create_subscription(String, topics.REPLAY_DONE, self._on_replay_done, latched_qos())
         self.subscribed: set[str] = set()
+        self.accel_topics: set[str] = set()
+        self.temperature_topics: set[str] = set()
+        self.block_topics: set[str] = set()
+        self.block_channels: set[str] = set()
+        self.discovery_timeout_s = float(value("discovery_timeout_s"))
+        self.started = time.monotonic()
+        self.sensors_checked = False
         self._imu_raw: dict[str, tuple[str, list[bytes]]] = {}
         self._imu_raw_n = 0
         self.received = 0
@@ -117,6 +129,24 @@ class IngestNode(Node):
                                              qos)
                 self.subscribed.add(topic)
                 self.get_logger().info(f"subscribed to {topic} ({msgtype})")
+                if kind[0] == "imu":
+                    self.accel_topics.add(topic)
+                    self._report_mismatches([topic], "unknown_topic")
+                elif kind[0] == "temperature":
+                    self.temperature_topics.add(topic)
+                elif kind[0] == "block":
+                    self.block_topics.add(topic)
+        # block channel names are known from the first block only: wait for it when there is a block topic
+        blocks_known = bool(self.block_channels) or not self.block_topics
+        if not self.sensors_checked and blocks_known and time.monotonic() - self.started >= self.discovery_timeout_s:
+            self.sensors_checked = True
+            self._report_mismatches(sorted(self.accel_topics), "sensor_unmatched")
+
+    def _report_mismatches(self, accel_topics: list[str], code: str) -> None:
+        """Report what ``channel_mismatches`` finds of one kind, on the terminal and /diagnostics."""
+        found = channel_mismatches(self.core.map, accel_topics, sorted(self.temperature_topics),
+                                   sorted(self.block_channels))
+        self._publish_diagnostics([d for d in found if d.code == code])
 
     def _guard(self, topic: str, callback, sensor_id: str, ack_every: int = 50):
         def handle(msg) -> None:
@@ -175,7 +205,7 @@ class IngestNode(Node):
                         continue
                     stamps = np.concatenate([g[0] for g in good])
                     xyz = np.concatenate([g[1] for g in good])
-                self.core.add_imu_array(sensor_id, stamps, xyz)
+                self.core.add_accel(sensor_id, stamps, xyz, field="linear_acceleration")
                 t = int(stamps.max())
                 self.last_stamp_ns = max(self.last_stamp_ns or t, t)
             except Exception as exc:  # one bad batch must never take the node down
@@ -187,6 +217,7 @@ class IngestNode(Node):
 
     def _on_block(self, msg, _sensor_id: str, topic: str) -> None:
         t = time_to_ns(msg.header.stamp)
+        self.block_channels.update(msg.channel_names)
         samples = np.frombuffer(msg.samples, dtype=np.float64) if len(msg.samples) else np.zeros(0)
         self.core.add_block(t, msg.sample_rate_hz, list(msg.channel_names), samples, msg.units, topic)
         if msg.sample_rate_hz > 0 and len(msg.channel_names):
@@ -194,7 +225,8 @@ class IngestNode(Node):
             self.last_stamp_ns = max(self.last_stamp_ns or end, end)
 
     def _on_temperature(self, msg, sensor_id: str, topic: str) -> None:
-        self.core.add_temperature(sensor_id, time_to_ns(msg.header.stamp), msg.temperature)
+        self.core.add_temperature(sensor_id, time_to_ns(msg.header.stamp), msg.temperature,
+                                  source=f"temperature/{sensor_id}.temperature")
 
     # -- outputs -------------------------------------------------------------------------------
     def _emit(self, windows: list | None = None) -> None:
@@ -203,8 +235,11 @@ class IngestNode(Node):
             self.windows_out += 1
             self.get_logger().info(f"window {window.window_id}: {window.n_samples} samples x "
                                    f"{len(window.channel_names)} channels")
-        for d in self.core.pop_diagnostics():
-            self.diag.report(LEVEL.get(d.level, "error"), d.message, d.source, code=d.code, count=d.count)
+        self._publish_diagnostics(self.core.pop_diagnostics())
+
+    def _publish_diagnostics(self, diagnostics: list[Diagnostic]) -> None:
+        for d in diagnostics:
+            self.diag.report(Level(d.level), d.message, d.source, code=d.code, count=d.count)
         self.diag.publish()
 
     def _on_ack_timer(self) -> None:
