@@ -14,7 +14,8 @@ from shm_ros.cli import main
 from shm_ros.core.types import SampleFlag
 from shm_ros.core.windows import ChannelMap, iso_utc
 from shm_ros.io.importers import ImportFileError, parse_v2, read_csv, read_npy, read_v2, write_bag
-from shm_ros.io.recording import ingest_bag, load_window
+from shm_ros.io.recording import ingest_bag
+from shm_ros.io.window_files import load_window
 
 V2_ZIP = Path(__file__).resolve().parents[2] / "shared" / "data" / "csmip_v2_sample" / \
     "Inglewood_17May2009_CE13795P.zip"

@@ -19,7 +19,7 @@ from std_msgs.msg import String, UInt64
 
 from shm_ros.core.windows import ChannelMap, IngestConfig, IngestCore
 from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
-from shm_ros.io.recording import decode_imu_batch
+from shm_ros.io.imu_cdr import decode_imu_batch
 from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
