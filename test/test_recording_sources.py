@@ -213,3 +213,22 @@ def test_imu_decoder_reads_both_byte_orders_and_reports_bad_messages():
     assert np.array_equal(out.stamps_ns, want_t) and np.array_equal(out.xyz, np.asarray(want_xyz))
     with pytest.raises(ValueError, match="message 2"):
         decode_imu_batch(bad)
+
+
+def test_a_damaged_chunk_in_a_complete_mcap_ends_the_read_with_an_error(tmp_path):
+    _, reference = _bag(tmp_path, "mcap", False, seconds=40.0)
+    source = open_source(tmp_path / "bag")
+    assert isinstance(source, McapChunkSource)
+    f = source.files[0]
+    second = sorted(f.chunk_indexes, key=lambda ci: ci.chunk_start_offset)[1]
+    assert second.compression == ""
+    with open(f.path, "r+b") as fh:  # garble the first record header inside the second chunk
+        fh.seek(second.chunk_start_offset + 9 + 8 + 8 + 8 + 4 + 4 + 8)
+        fh.write(b"\xff" * 9)
+    got = []
+    with pytest.raises(BagError, match="chunk at byte") as err:
+        for m in open_source(tmp_path / "bag").messages():
+            got.append(m)
+    assert str(f.path) in str(err.value)
+    full = _by_topic(reference)
+    assert got and all(msgs == full[t][:len(msgs)] for t, msgs in _by_topic(got).items())

@@ -9,6 +9,7 @@ held and released, in receive order, once no later chunk can hold an earlier mes
 from __future__ import annotations
 
 import struct
+import zlib
 from collections.abc import Collection, Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -102,7 +103,12 @@ class McapChunkSource:
                 record = fh.read(int(ci.chunk_length))
                 channels = f.channels if wanted is None else \
                     {c: tm for c, tm in f.channels.items() if tm[0] in wanted}
-                for run in decode_chunk(record, channels, f"{f.path} (chunk at byte {offset})"):
+                try:
+                    runs = decode_chunk(record, channels, f"{f.path} (chunk at byte {offset})")
+                except BagError:  # what earlier chunks held is yielded before the error
+                    yield Batch.of(_release(held, None), None)
+                    raise
+                for run in runs:
                     held.setdefault(run.topic, []).append(run)
                 nxt = plan[i + 1][0] if i + 1 < len(plan) else None
                 yield Batch.of(_release(held, nxt), nxt)
@@ -200,7 +206,7 @@ def _chunk_records(record: bytes, where: str) -> bytes:
         if op != _OP_CHUNK:
             raise BagError(f"{where}: not a chunk record (opcode {op})")
         pos = 9 + 8 + 8
-        (size,) = struct.unpack_from("<Q", record, pos)
+        size, crc = struct.unpack_from("<QI", record, pos)
         pos += 8 + 4
         (clen,) = struct.unpack_from("<I", record, pos)
         compression = record[pos + 4:pos + 4 + clen].decode()
@@ -221,4 +227,6 @@ def _chunk_records(record: bytes, where: str) -> bytes:
         raise BagError(f"{where}: damaged chunk ({type(exc).__name__}: {exc})") from exc
     if len(out) != size:
         raise BagError(f"{where}: chunk holds {len(out)} bytes, its header says {size}")
+    if crc and zlib.crc32(out) != crc:  # 0: the writer did not compute one
+        raise BagError(f"{where}: damaged chunk (CRC mismatch)")
     return out
