@@ -15,7 +15,8 @@ from shm_ros.core.types import SampleFlag
 from shm_ros.core.ingest import ChannelMap
 from shm_ros.core.timeutil import ns_to_iso as iso_utc
 from shm_ros.io.importers import ImportFileError, parse_v2, read_csv, read_npy, read_v2, write_bag
-from shm_ros.io.recording import ingest_bag, load_window
+from shm_ros.io.recording import ingest_bag
+from shm_ros.io.window_files import load_window
 
 # the repository's own copy, provenance and licence in its README.md
 V2_ZIP = Path(__file__).resolve().parent / "data" / "csmip_v2_sample" / "Inglewood_17May2009_CE13795P.zip"

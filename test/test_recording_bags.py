@@ -11,7 +11,8 @@ import pytest
 from shm_ros.core.types import SampleFlag
 from shm_ros.core.ingest import ChannelMap, ChannelSource
 from shm_ros.io.bags import IMU, BagWriter, read_messages
-from shm_ros.io.recording import decode_imu_batch, ingest_bag, windows_from_bag
+from shm_ros.io.imu_cdr import decode_imu_batch
+from shm_ros.io.recording import ingest_bag, windows_from_bag
 from shm_ros.io.typestore import typestore
 
 T0 = 1_714_521_600_000_000_000
@@ -158,7 +159,7 @@ def test_truncated_mcap_keeps_windows_before_the_damage(tmp_path):
     f = _truncate(tmp_path / "cut", 0.6)
     res = ingest_bag(tmp_path / "cut", _cmap(), window_s=5.0)
     assert 2 <= len(res.windows) < len(full)
-    for a, b in zip(res.windows, full):
+    for a, b in zip(res.windows, full, strict=False):
         assert a.start_ns == b.start_ns and np.array_equal(a.samples, b.samples)
     errs = [d for d in res.diagnostics if d.code == "bag_damaged"]
     assert errs and str(f) in errs[0].message
@@ -187,11 +188,12 @@ def test_sqlite_bag_without_metadata_is_read_row_by_row(tmp_path, compress):
     (tmp_path / "bag" / "metadata.yaml").unlink()
     res = ingest_bag(tmp_path / "bag", _cmap(), window_s=5.0)
     assert len(res.windows) == len(full) >= 2
-    for a, b in zip(res.windows, full):
+    for a, b in zip(res.windows, full, strict=False):
         assert a.start_ns == b.start_ns and np.array_equal(a.samples, b.samples)
     warn = [d for d in res.diagnostics if d.code == "bag_damaged"]
     assert warn and warn[0].level == 1 and "metadata" in warn[0].message
-    found, reader = _open_bag(tmp_path / "bag")
+    found, reader, note = _open_bag(tmp_path / "bag")
+    assert "metadata" in note
     assert "/bridge/accel/s1" in found and found["/bridge/accel/s1"] == IMU
     got = [(m.topic, m.receive_ns, m.data) for m in reader(list(found))]
     assert sorted(got) == sorted(reference)
@@ -208,7 +210,7 @@ def test_garbled_sqlite_bag_keeps_the_rows_before_the_damage(tmp_path):
         fh.write(np.random.default_rng(0).bytes(20000))
     res = ingest_bag(tmp_path / "bad", _cmap(), window_s=5.0)
     assert 1 <= len(res.windows) < len(full)
-    for a, b in zip(res.windows[:-1], full):  # the last one may end at the damage
+    for a, b in zip(res.windows[:-1], full, strict=False):  # the last one may end at the damage
         assert a.start_ns == b.start_ns and np.array_equal(a.samples, b.samples)
     errs = [d for d in res.diagnostics if d.code == "bag_damaged" and d.level == 2]
     assert errs and str(f) in errs[0].message and "damaged sqlite3" in errs[0].message

@@ -3,7 +3,7 @@
 Writes ``DIR/windows.json`` (one record per window: start, end, rate, channels, channel status,
 temperature, event flag, PGA, flagged-sample counts, notes; plus every diagnostic, the dropped
 stretches and counters; ``schema_version`` and ``provenance``) and ``DIR/windows/wNNNNN_<start>.npz``
-(the raw samples and flags of each window; ``shm_ros.io.recording.load_window`` reads one back).
+(the raw samples and flags of each window; ``shm_ros.io.window_files.load_window`` reads one back).
 Every ingest setting is a flag (``--snap-tolerance``, ``--event-detector``, ...).
 """
 
@@ -37,10 +37,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from shm_ros.core.provenance import stamp_output
     from shm_ros.core.ingest import IngestConfig, windows_summary
-    from shm_ros.io.recording import ingest_bag, save_window, window_filename
+    from shm_ros.core.provenance import stamp_output
+    from shm_ros.io.recording import ingest_bag
     from shm_ros.io.structure import load_structure
+    from shm_ros.io.window_files import save_window, window_filename
 
     try:
         spec = load_structure(args.structure)
@@ -60,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_samples:
         wdir = out / "windows"
         wdir.mkdir(exist_ok=True)
-        for i, (w, rec) in enumerate(zip(res.windows, records)):
+        for i, (w, rec) in enumerate(zip(res.windows, records, strict=True)):
             name = window_filename(i, w)
             save_window(wdir / name, w)
             rec["file"] = f"windows/{name}"

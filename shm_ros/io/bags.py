@@ -1,6 +1,6 @@
 """rosbag2 bags (MCAP or sqlite3) in and out, without a ROS installation, through ``rosbags``.
 
-Topics follow contracts section 1: ``<prefix>/accel/<sensor_id>`` (``sensor_msgs/msg/Imu``, one
+Topics follow docs/interfaces.md §1: ``<prefix>/accel/<sensor_id>`` (``sensor_msgs/msg/Imu``, one
 sample per message), ``<prefix>/accel_block`` (``shm_interfaces/msg/AccelBlock``) and
 ``<prefix>/temperature/<sensor_id>`` (``sensor_msgs/msg/Temperature``).
 """
@@ -112,7 +112,7 @@ class BagWriter:
         receive_ns = stamps_ns if receive_ns is None else receive_ns
         conn = self.connection(topic, IMU)
         ser = self._ts.serialize_cdr
-        for t, rt, (ax, ay, az) in zip(stamps_ns.tolist(), receive_ns.tolist(), accel_xyz.tolist()):
+        for t, rt, (ax, ay, az) in zip(stamps_ns.tolist(), receive_ns.tolist(), accel_xyz.tolist(), strict=True):
             msg = Imu(
                 header=self.header(t), orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
                 orientation_covariance=cov_unknown, angular_velocity=V3(x=0.0, y=0.0, z=0.0),
@@ -127,7 +127,7 @@ class BagWriter:
         ``streams`` maps topic -> (stamps_ns (n,), accel_xyz (n, 3)).
         """
         topics_, stamps, rows = [], [], []
-        for k, (topic, (t, xyz)) in enumerate(streams.items()):
+        for k, (topic, (t, _xyz)) in enumerate(streams.items()):
             topics_.append(topic)
             stamps.append(np.asarray(t, dtype=np.int64))
             rows.append(np.full(len(t), k))
@@ -135,7 +135,7 @@ class BagWriter:
         which = np.concatenate(rows)
         pos = np.concatenate([np.arange(len(t)) for t in stamps])
         order = np.argsort(t_all, kind="stable")
-        for k, topic in enumerate(topics_):
+        for topic in topics_:
             self.connection(topic, IMU)
         # One message at a time in global stamp order (runs of one topic are written together).
         breaks = np.flatnonzero(np.diff(which[order])) + 1
@@ -175,34 +175,23 @@ def topic_kind(topic: str, msgtype: str) -> tuple[str, str] | None:
 
 
 def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
-    """Raw messages of a bag in receive-time order (CDR bytes; ``decode()`` when needed).
+    """Raw messages of a bag in receive-time order, as ``rosbags`` reads them (CDR bytes;
+    ``decode()`` when needed).
 
     Unknown message types are skipped; a truncated or unreadable bag raises :class:`BagError`
-    naming the bag, after every message read so far has been yielded.
+    naming the bag, after every message read so far has been yielded. (To read any bag,
+    damaged ones included, the fastest way, see :func:`shm_ros.io.sources.open_source`.)
     """
-    from rosbags.highlevel import AnyReader  # handles sqlite3 and MCAP, compressed or not
+    from shm_ros.io.sources.rosbags_reader import RosbagsSource
 
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
-    wanted = None if topics is None else set(topics)
-    try:
-        with AnyReader([path], default_typestore=typestore()) as reader:
-            conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
-            for conn, t_ns, raw in reader.messages(connections=conns):
-                yield BagMessage(conn.topic, conn.msgtype, int(t_ns), bytes(raw))
-    except BagError:
-        raise
-    except Exception as exc:  # rosbags raises several error types for damaged bags
-        raise BagError(f"{path}: cannot read bag: {exc}") from exc
+    return RosbagsSource(path).messages(None if topics is None else set(topics))
 
 
 def bag_topics(path: str | Path) -> dict[str, str]:
-    """``{topic: msgtype}`` of a bag."""
-    from rosbags.highlevel import AnyReader
+    """``{topic: msgtype}`` of a bag, as ``rosbags`` reads it."""
+    from shm_ros.io.sources.rosbags_reader import RosbagsSource
 
-    try:
-        with AnyReader([Path(path)], default_typestore=typestore()) as reader:
-            return {c.topic: c.msgtype for c in reader.connections}
-    except Exception as exc:
-        raise BagError(f"{path}: cannot read bag: {exc}") from exc
+    return RosbagsSource(Path(path)).topics()

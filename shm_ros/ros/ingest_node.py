@@ -26,7 +26,7 @@ from std_msgs.msg import String, UInt64
 from shm_ros.core.diagnostics import Diagnostic, Level
 from shm_ros.core.ingest import ChannelMap, EventDetector, IngestConfig, IngestCore, channel_mismatches
 from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
-from shm_ros.io.recording import decode_imu_batch
+from shm_ros.io.imu_cdr import decode_imu_batch
 from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
@@ -166,7 +166,7 @@ class IngestNode(Node):
 
     def _imu_raw_handler(self, topic: str, sensor_id: str):
         """Per-sample Imu: the CDR bytes are kept and decoded in batches with numpy
-        (``decode_imu_batch``), then fed with ``add_imu_array``; building a Python message
+        (``decode_imu_batch``), then fed with ``add_accel``; building a Python message
         object per sample (three covariance arrays) cost more than everything else here."""
         pending = self._imu_raw.setdefault(topic, (sensor_id, []))[1]
 

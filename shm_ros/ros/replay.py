@@ -18,10 +18,12 @@ from pathlib import Path
 
 import rclpy
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String, UInt64
 
-from shm_ros.io.bags import BagError, BagMessage, bag_topics, read_messages, topic_kind
+from shm_ros.io.bags import BagError, BagMessage, topic_kind
+from shm_ros.io.sources import open_source
 from shm_ros.ros import topics
 from shm_ros.ros.qos import latched_qos, pipeline_qos
 
@@ -49,13 +51,13 @@ class Replayer(Node):
         self.ack_seen = False
         self.create_subscription(UInt64, topics.INGEST_RECEIVED, self._on_ack, pipeline_qos())
         self.done_pub = self.create_publisher(String, topics.REPLAY_DONE, latched_qos())
-        self.pubs: dict[str, object] = {}
+        self.pubs: dict[str, Publisher] = {}
 
     def _on_ack(self, msg: UInt64) -> None:
         self.ack_seen = True
         self.acknowledged = max(self.acknowledged, int(msg.data))
 
-    def publisher(self, topic: str, msgtype: str):
+    def publisher(self, topic: str, msgtype: str) -> Publisher:
         pub = self.pubs.get(topic)
         if pub is None:
             cls = topics.message_class(msgtype)
@@ -67,33 +69,17 @@ class Replayer(Node):
         return pub
 
 
-def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], Iterator[BagMessage]]]:
-    """Topics of the bag and a reader of its messages. A bag whose index or metadata is missing
-    or damaged (a recorder that died) is read from its storage files directly (MCAP record by
-    record, sqlite3 row by row): everything readable is replayed, then the reader raises
-    :class:`BagError` naming the file."""
-    from shm_ros.io.recording import can_salvage, salvage
-
-    try:
-        return bag_topics(path), lambda wanted: read_messages(path, topics=wanted)
-    except BagError as exc:
-        if not can_salvage(path):
-            raise
-        first_error = str(exc)
-    found: dict[str, str] = {}
-    try:
-        for m in salvage(path):
-            found.setdefault(m.topic, m.msgtype)
-    except BagError:
-        pass
-    if not found:
-        raise BagError(f"{first_error}; no complete message could be read")
-
-    def salvaged(wanted: list[str]) -> Iterator[BagMessage]:
-        keep = set(wanted)
-        return (m for m in salvage(path) if m.topic in keep)
-
-    return found, salvaged
+def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], Iterator[BagMessage]], str]:
+    """Topics of the bag, a reader of its messages and, for a bag read another way than normal
+    (no metadata, damaged files), why. The back end is chosen from what the bag is (see
+    :func:`~shm_ros.io.sources.open_source`): a bag whose index or metadata is missing or damaged
+    (a recorder that died) is read from its storage files directly, and its reader raises
+    :class:`BagError` naming the file once everything readable has been replayed."""
+    source = open_source(path)
+    found = source.topics()
+    if not found and source.note:
+        raise BagError(f"{source.note}; no topic could be read")
+    return found, source.messages, source.note
 
 
 def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
@@ -112,7 +98,9 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     try:
         # Publishers first (ingest discovers recording topics by polling the graph), then wait for
         # every recording topic to have a subscriber and for the ingest node's acknowledgements.
-        bag_topic_types, reader = _open_bag(path)
+        bag_topic_types, reader, note = _open_bag(path)
+        if note:
+            node.get_logger().warning(note)
         for topic, msgtype in bag_topic_types.items():
             if recording_only and topic_kind(topic, msgtype) is None:
                 result.skipped_topics[topic] = msgtype
@@ -133,7 +121,8 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         if rate <= 0 and not flow:
             node.get_logger().warning("no ingest acknowledgements: replaying without flow control")
         t0_wall = time.monotonic()
-        t0_bag = last_bag = None
+        t0_bag: int | None = None
+        last_bag = 0
         start_ack = node.acknowledged
         last_report = t0_wall
         sizes: deque[int] = deque()  # bytes of the messages not yet acknowledged

@@ -141,9 +141,6 @@ class IngestCore:
             self._append(col, t, np.ascontiguousarray(v), seq, f"{label}.{'xyz'[axis]}")
         self._after_add()
 
-    #: the bag reader's name for :meth:`add_accel`
-    add_imu_array = add_accel
-
     def add_accel_sample(self, topic_id: str, stamp_ns: int, ax: float, ay: float, az: float,
                          source: str | None = None, field: str | None = None) -> None:
         """One sample of an accelerometer topic (m/s^2); consolidated into arrays in batches."""
