@@ -52,3 +52,40 @@ def test_levels_and_config_choices():
     with pytest.raises(ValueError, match="event_detector"):
         IngestConfig(event_detector="sometimes")
     assert IngestConfig(event_detector="pga").event_detector == "pga"
+
+
+def test_offline_ingest_and_identify_name_a_misspelt_topic_up_front(tmp_path):
+    """A bag whose topic is misspelt against the structure file: the mismatch is reported before
+    the first window (ingest result and the command's terminal output), with the close name."""
+    import subprocess
+    import sys
+
+    import numpy as np
+
+    from shm_ros.io.bags import BagWriter
+    from shm_ros.io.recording import ingest_bag
+
+    structure = tmp_path / "s.yaml"
+    structure.write_text("""
+name: frame
+kind: shear_building
+shear_building:
+  floors: [{mass: 1.0e+5, stiffness: 2.0e+8}, {mass: 1.0e+5, stiffness: 2.0e+8}]
+sensors:
+  - {id: deck_n1, at: {floor: 1}, direction: x}
+  - {id: deck_s1, at: {floor: 2}, direction: x}
+""")
+    t0, fs, n = 1_714_521_600_000_000_000, 100.0, 3000
+    stamps = t0 + np.round(np.arange(n) * 1e9 / fs).astype(np.int64)
+    xyz = np.random.default_rng(1).standard_normal((n, 3)) * 0.01
+    with BagWriter(tmp_path / "bag") as w:
+        w.imu_streams({"/shm/accel/deck_n1": (stamps, xyz), "/shm/accel/dekc_s1": (stamps, xyz)})
+    res = ingest_bag(tmp_path / "bag", str(structure), window_s=20.0)
+    codes = sorted(d.code for d in res.mismatches)
+    assert codes == ["sensor_unmatched", "unknown_topic"]
+    assert any("deck_s1" in d.message and "/shm/accel/dekc_s1" in d.message for d in res.mismatches)
+    assert res.diagnostics[:2] == res.mismatches  # before anything the data gave
+    run = subprocess.run([sys.executable, "-m", "shm_ros.cli", "identify", str(tmp_path / "bag"), "--structure",
+                          str(structure), "--out", str(tmp_path / "modes.json"), "--window", "20"],
+                         capture_output=True, text=True, timeout=300)
+    assert "dekc_s1" in run.stderr and "deck_s1" in run.stderr, run.stderr

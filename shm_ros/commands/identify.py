@@ -115,6 +115,8 @@ def run(args: argparse.Namespace) -> int:
               "in the structure file", file=sys.stderr)
         return 2
     res = ingest_bag(args.bag, spec, window_s=args.window)
+    for d in res.mismatches:  # a misspelt topic or sensor id: say so before anything else
+        print(f"shm-ros identify: {args.bag}: warning: {d.message}", file=sys.stderr)
     for d in res.diagnostics:
         if d.level >= 2:
             print(str(d), file=sys.stderr)

@@ -55,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"shm-ros ingest: {exc}", file=sys.stderr)
         return 2
     res = ingest_bag(args.bag, spec, window_s=args.window, config=config)
+    for d in res.mismatches:  # a misspelt topic or sensor id: say so before anything else
+        print(f"shm-ros ingest: {args.bag}: warning: {d.message}", file=sys.stderr)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     records = windows_summary(res.windows)

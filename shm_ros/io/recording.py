@@ -26,6 +26,7 @@ from shm_ros.core.ingest import (
     IngestCore,
     IngestStats,
     Level,
+    channel_mismatches,
 )
 from shm_ros.core.types import Window
 from shm_ros.io.bags import BagError, topic_kind
@@ -44,6 +45,9 @@ class IngestResult:
     ignored_topics: list[str] = field(default_factory=list)
     messages: int = 0
     diagnostic_counts: dict = field(default_factory=dict)  # (code, source) -> occurrences
+    # structure sensors that no topic feeds and accelerometer topics/channels that feed no sensor,
+    # with the closest names (also among ``diagnostics``): for the terminal, up front
+    mismatches: list[Diagnostic] = field(default_factory=list)
 
 
 def channel_map_of(structure_or_map: Any) -> ChannelMap:
@@ -81,7 +85,8 @@ def ingest_bag(path: str | Path, structure_or_channel_map: Any, window_s: float 
     feeder.run()
     windows = core.flush()
     return IngestResult(windows, core.diagnostics, core.stats, core.dropped, core.sample_rate_hz,
-                        sorted(feeder.ignored), feeder.n_messages, dict(core.diagnostic_counts))
+                        sorted(feeder.ignored), feeder.n_messages, dict(core.diagnostic_counts),
+                        feeder.mismatches)
 
 
 class _BagFeeder:
@@ -95,6 +100,9 @@ class _BagFeeder:
         self.kinds: dict[str, tuple[str, str] | None] = {}
         self.n_messages = 0
         self.ts = typestore()
+        self.mismatches: list[Diagnostic] = []
+        self._block_channels: set[str] = set()
+        self._channels_checked = False
 
     def run(self) -> None:
         source = str(self.path)
@@ -105,9 +113,17 @@ class _BagFeeder:
             return
         if bag.note:
             self.core.report_error(source, bag.note, level=Level.WARN, code="bag_damaged")
+        kinds = {t: topic_kind(t, ty) for t, ty in bag.topics().items()}
+        accel = sorted(t for t, k in kinds.items() if k and k[0] == "imu")
+        temps = sorted(t for t, k in kinds.items() if k and k[0] == "temperature")
+        has_blocks = any(k and k[0] == "block" for k in kinds.values())
+        if not has_blocks:  # up front; with DAQ blocks, once the first blocks named their channels
+            self._check_channels(accel, temps)
         try:
             for batch in bag.batches():
                 self.feed(batch)
+                if not self._channels_checked:
+                    self._check_channels(accel, temps)
         except BagError as exc:  # the back end met the end of the readable data
             self.core.report_error(source, f"{exc} ({self.n_messages} messages read before the damage "
                                    "were ingested)", code="bag_damaged")
@@ -130,6 +146,12 @@ class _BagFeeder:
                     self._feed_decoded(run.topic, run.msgtype, what, sid, run.data(i))
         if batch.complete_before_ns is not None:
             self.core.advance(batch.complete_before_ns - self.margin_ns)
+
+    def _check_channels(self, accel: list[str], temps: list[str]) -> None:
+        self._channels_checked = True
+        self.mismatches = channel_mismatches(self.core.map, accel, temps, sorted(self._block_channels))
+        for d in self.mismatches:
+            self.core.report_error(d.source, d.message, level=d.level, code=d.code)
 
     def _kind(self, topic: str, msgtype: str) -> tuple[str, str] | None:
         if topic not in self.kinds:
@@ -159,6 +181,7 @@ class _BagFeeder:
             if m.sample_rate_hz > 0:
                 dur = int(len(m.samples) / max(1, len(m.channel_names)) / m.sample_rate_hz * 1e9)
                 self.margin_ns = max(self.margin_ns, dur + 1_000_000_000)
+            self._block_channels.update(m.channel_names)
             self.core.add_block(t_ns, m.sample_rate_hz, list(m.channel_names), np.asarray(m.samples),
                                 m.units, topic=topic.lstrip("/"))
         elif what == "temperature":
