@@ -113,11 +113,14 @@ class _BagFeeder:
             return
         if bag.note:
             self.core.report_error(source, bag.note, level=Level.WARN, code="bag_damaged")
-        kinds = {t: topic_kind(t, ty) for t, ty in bag.topics().items()}
+        try:
+            kinds = {t: topic_kind(t, ty) for t, ty in bag.topics().items()}
+        except BagError:  # the topic list itself is damaged: reading the messages will say how
+            kinds, self._channels_checked = {}, True
         accel = sorted(t for t, k in kinds.items() if k and k[0] == "imu")
         temps = sorted(t for t, k in kinds.items() if k and k[0] == "temperature")
         has_blocks = any(k and k[0] == "block" for k in kinds.values())
-        if not has_blocks:  # up front; with DAQ blocks, once the first blocks named their channels
+        if not has_blocks and not self._channels_checked:  # up front; with DAQ blocks, once the first blocks named their channels
             self._check_channels(accel, temps)
         try:
             for batch in bag.batches():
