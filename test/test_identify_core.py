@@ -10,8 +10,9 @@ import scipy.signal as sig
 
 from shm_ros.core import ssi
 from shm_ros.core.identify import IdentifyConfig, identify_window
+from shm_ros.core.modal import real_shape as real_mode_shape
 from shm_ros.core.preprocess import PreprocessConfig, preprocess
-from shm_ros.core.stabilization import mpc, real_mode_shape
+from shm_ros.core.stabilization import mpc
 from shm_ros.core.types import Window
 
 
@@ -210,8 +211,9 @@ def test_identify_window_on_a_simple_record_and_config_errors():
 
 
 def test_example_configuration_loads(shared_dir):
-    import yaml
     from pathlib import Path
+
+    import yaml
 
     path = Path(__file__).resolve().parents[1] / "examples" / "identify.yaml"
     cfg = IdentifyConfig.from_dict(yaml.safe_load(path.read_text()))

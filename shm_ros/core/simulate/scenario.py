@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from shm_ros.core.simulate.sensors import FaultSpec
+from shm_ros.core.simulate.truth_kinds import TRUTH_KINDS
 
 GIRDER_STRUCTURE: dict[str, Any] = {
     "name": "three-span-girder",
@@ -201,8 +202,9 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<scenario>") -> Scen
         if not isinstance(data["structure"], dict):
             raise ValueError(f"{source}: structure: expected a mapping (a structure file's content)")
         kind = structure_from_dict(copy.deepcopy(data["structure"]), source=f"{source} (structure)").kind
-        if kind not in ("girder", "shear_building"):
-            raise ValueError(f"{source}: structure: kind {kind!r} cannot be simulated (girder or shear_building)")
+        if kind not in TRUTH_KINDS:
+            raise ValueError(f"{source}: structure: kind {kind!r} cannot be simulated "
+                             f"({' or '.join(TRUTH_KINDS.names())})")
     try:
         sc = named_scenario(name, n_floors=n_floors, **data)
     except ValueError as exc:
