@@ -2,8 +2,9 @@
 
 * no import cycle between modules of ``shm_ros`` (module-level and function-level imports);
 * ``shm_ros.core`` imports neither ROS (rclpy, message packages) nor ``shm_ros.io/ros/report/commands``;
-* a new structure kind is one new file: a kind written to a temporary file is found, builds its
-  model through ``build_model`` and is accepted by the structure-file loader.
+* a new structure kind is one new file: a kind written to a temporary file (loaded explicitly, or
+  named by ``SHM_ROS_KINDS``) is found, builds its model through ``build_model`` and is accepted by
+  the structure-file loader.
 
 Import graph: nodes are modules (a package is its ``__init__``). ``import a.b.c`` and
 ``from a.b import c`` (``c`` a submodule) are edges to ``a.b.c``; ``from a.b import name`` (``name``
@@ -306,3 +307,19 @@ def _reader():
     from shm_ros.core.structure import FieldReader
 
     return FieldReader("<test>")
+
+
+def test_a_kind_file_named_in_the_environment_is_found(tmp_path):
+    """``SHM_ROS_KINDS`` lets a user add a kind without editing or packaging anything."""
+    import os
+    import subprocess
+    import sys
+
+    (tmp_path / "kinds").mkdir()
+    (tmp_path / "kinds" / "dummy_kind.py").write_text(DUMMY_KIND, encoding="utf-8")
+    env = dict(os.environ, SHM_ROS_KINDS=str(tmp_path / "kinds"), PYTHONPATH=str(ROOT))
+    code = ("from shm_ros.core.models.registry import kind_names, model_kind; "
+            "print(kind_names(), model_kind('dummy').title)")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "'dummy'" in out.stdout and "two-mass spring chain" in out.stdout

@@ -19,11 +19,11 @@ from typing import Any
 
 import numpy as np
 
-from shm_ros.core.simulate import excitation as ex
+import shm_ros.core.simulate.excitation as ex
 from shm_ros.core.simulate.effects import Conditions, Effect, EffectError, make_effect
+from shm_ros.core.simulate.linear import ModalSystem
 from shm_ros.core.simulate.scenario import Scenario, named_scenario
 from shm_ros.core.simulate.sensors import Recording, SensorModel, apply_faults
-from shm_ros.core.simulate.linear import ModalSystem
 from shm_ros.core.simulate.truth import ModalTruth, TruthModel, WindowRun, build_truth
 from shm_ros.core.simulate.truth_kinds import TRUTH_KINDS
 from shm_ros.core.types import Window

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
+import shm_ros.core.simulate.excitation as ex
 from shm_ros.core.modal import real_shape
 from shm_ros.core.models import build_model
-from shm_ros.core.simulate import excitation as ex
 from shm_ros.core.simulate.effects import Conditions, Effect
 from shm_ros.core.simulate.linear import ModalSystem, from_real_modes
 from shm_ros.core.simulate.truth import FLAT_PRIOR, ModalTruth, TruthModel, TruthOptions, WindowRun

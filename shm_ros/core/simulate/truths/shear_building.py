@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
+import shm_ros.core.simulate.excitation as ex
 from shm_ros.core.modal import real_shape
 from shm_ros.core.models import build_model
 from shm_ros.core.models.damping import rayleigh_coefficients
-from shm_ros.core.simulate import excitation as ex
 from shm_ros.core.simulate.effects import Conditions, Effect, EffectError
 from shm_ros.core.simulate.linear import ModalSystem, from_state_space
 from shm_ros.core.simulate.newmark import simulate_building_nonlinear
