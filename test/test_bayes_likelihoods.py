@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from bayes_synth import building_dict, girder_dict, spec_and_model, synth_modal
 from scipy import integrate
 
-from bayes_synth import building_dict, girder_dict, spec_and_model, synth_modal
 from shm_ros.core.bayes.forward import FullModalPredictor, ReducedModalPredictor, build_predictor
-from shm_ros.core.bayes.likelihoods import (FitnessLikelihood, GaussianModalLikelihood, InverseGamma,
-                                            ig_marginal_loglik)
+from shm_ros.core.bayes.likelihoods import FitnessLikelihood, GaussianModalLikelihood, InverseGamma, ig_marginal_loglik
 from shm_ros.core.bayes.observations import ModalObservations
-from shm_ros.core.bayes.pairing import mac, pair_modes, pair_modes_optimal
+from shm_ros.core.bayes.pairing import pair_modes, pair_modes_optimal
+from shm_ros.core.modal import mac
 
 TRUTH = np.array([0.93, 1.06, 0.97])
 SENSORS = ["f2", "f4", "f6", "f8"]

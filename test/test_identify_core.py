@@ -10,8 +10,9 @@ import scipy.signal as sig
 
 from shm_ros.core import ssi
 from shm_ros.core.identify import IdentifyConfig, identify_window
+from shm_ros.core.modal import real_shape as real_mode_shape
 from shm_ros.core.preprocess import PreprocessConfig, preprocess
-from shm_ros.core.stabilization import mpc, real_mode_shape
+from shm_ros.core.stabilization import mpc
 from shm_ros.core.types import Window
 
 

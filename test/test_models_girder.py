@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize import brentq
 
 from shm_ros.core.models import build_model
-from shm_ros.core.models.girder import deck_observation
+from shm_ros.core.models.beam import deck_observation
 from shm_ros.core.structure import structure_from_dict
 
 E, I, A, RHO = 3.4e10, 2.1, 5.2, 2500.0

@@ -7,9 +7,10 @@ import pytest
 from scipy.linalg import eig
 from scipy.signal import cont2discrete, dlsim
 
+from shm_ros.core.modal import real_shape
 from shm_ros.core.simulate import EffectRequest, named_scenario, simulate_campaign
 from shm_ros.core.simulate.campaign import rng_for
-from shm_ros.core.simulate.linear import from_real_modes, from_state_space, real_shape
+from shm_ros.core.simulate.linear import from_real_modes, from_state_space
 
 
 def _reference(A, B, C, D, u, dt):

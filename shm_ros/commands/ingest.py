@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 from pathlib import Path
 
@@ -39,6 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from shm_ros.core.ingest import IngestConfig, windows_summary
     from shm_ros.core.provenance import stamp_output
+    from shm_ros.io import jsonio
     from shm_ros.io.recording import ingest_bag
     from shm_ros.io.structure import load_structure
     from shm_ros.io.window_files import save_window, window_filename
@@ -82,8 +82,7 @@ def run(args: argparse.Namespace) -> int:
                   "messages_rejected": res.stats.messages_rejected, "messages": res.messages},
     }
     cfg = {"window_s": args.window, **overrides, "structure": str(args.structure), "bag": str(args.bag)}
-    (out / "windows.json").write_text(json.dumps(stamp_output(payload, cfg), indent=1, allow_nan=False,
-                                                 default=_json_default))
+    jsonio.dump(stamp_output(payload, cfg), out / "windows.json")
     if not args.quiet:
         for d in res.diagnostics:
             if d.level >= 1:
@@ -94,10 +93,3 @@ def run(args: argparse.Namespace) -> int:
           f"windowed, {n_warn} warnings, {n_err} errors -> {out / 'windows.json'}")
     return 1 if (n_err and not res.windows) else 0
 
-
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")

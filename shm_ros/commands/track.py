@@ -38,6 +38,7 @@ def _num(v: float) -> float | None:
 def run(args: argparse.Namespace) -> int:
     from shm_ros.core.provenance import stamp_output
     from shm_ros.core.tracking import TrackingConfig, track
+    from shm_ros.io import jsonio
     from shm_ros.io.modes_json import read_modes_json
     from shm_ros.io.tables import write_tracked_modes
 
@@ -72,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         "notes": res.notes,
     }
     doc = stamp_output(payload, {"track": dataclasses.asdict(cfg), "modes": str(args.modes)})
-    (out / "tracking.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
+    jsonio.dump(doc, out / "tracking.json")
     if not args.no_plot:
         from shm_ros.report.tracking import plot_tracking
 

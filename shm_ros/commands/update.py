@@ -12,7 +12,6 @@ prior x fitness-weight sweep instead and writes ``DIR/study.json`` and ``DIR/stu
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -150,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
     from shm_ros.core.models import build_model
     from shm_ros.core.provenance import stamp_output
     from shm_ros.core.structure import StructureError
+    from shm_ros.io import jsonio
     from shm_ros.io.structure import load_structure
     from shm_ros.io.tables import TableError
 
@@ -178,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
     cfg_dict = {k: v for k, v in vars(config).items()}
     cfg_dict.update({"structure": args.structure, "modes": args.modes, "bag": args.bag})
     payload = stamp_output(post.to_dict(), cfg_dict, args.seed)
-    (out / "posterior.json").write_text(json.dumps(_jsonable(payload), indent=2))
+    jsonio.dump(payload, out / "posterior.json", indent=2)
     np.savez_compressed(out / "samples.npz", samples=post.samples, log_prob=post.log_prob,
                         chains=post.chains, chain_names=np.array(post.chain_names),
                         parameter_names=np.array(post.parameter_names))
@@ -203,6 +203,7 @@ def _run_study(args, spec, model, obs, config, out: Path) -> int:
     from shm_ros.core.bayes.priors import priors_from_specs
     from shm_ros.core.bayes.study import bridge_study, format_table
     from shm_ros.core.provenance import stamp_output
+    from shm_ros.io import jsonio
 
     rows = bridge_study(model, obs, priors_from_specs(spec.parameters), config)
     table = format_table(rows, obs.mode_numbers)
@@ -212,24 +213,7 @@ def _run_study(args, spec, model, obs, config, out: Path) -> int:
         "mac": "per mode: mean over windows of MAC(observed shape, model shape at the sensors)"},
         "modes": list(obs.mode_numbers), "rows": [r.to_dict() for r in rows]},
         {k: v for k, v in vars(config).items()}, args.seed)
-    (out / "study.json").write_text(json.dumps(_jsonable(payload), indent=2))
+    jsonio.dump(payload, out / "study.json", indent=2)
     (out / "study.txt").write_text(table + "\n")
     print(table)
     return 0
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        v = float(x)
-        return v if np.isfinite(v) else None
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    return x

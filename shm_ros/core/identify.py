@@ -15,6 +15,7 @@ import scipy.linalg as sla
 import scipy.signal as sig
 
 from shm_ros.core import ssi
+from shm_ros.core.modal import mac_matrix
 from shm_ros.core.preprocess import PreprocessConfig, Prepared, preprocess
 from shm_ros.core.stabilization import (Diagram, PickedMode, PickingConfig, StabilityConfig,
                                         classify, pick_modes, real_mode_shape)
@@ -228,7 +229,7 @@ def _jackknife(replicates, n_blocks: int, l: int, fs: float, picked: list[Picked
             z = -lam.real / np.abs(lam)
             phi = o[:l, :nord] @ psi[:, sel]
             phi /= np.linalg.norm(phi, axis=0)
-            mac = ssi.mac_matrix(p.mode_shape_complex[None], phi.T)[0]
+            mac = mac_matrix(p.mode_shape_complex[None], phi.T)[0]
             score = np.abs(f - p.frequency_hz) / p.frequency_hz + (1 - mac)
             j = int(np.argmin(score))
             if score[j] < 0.1:

@@ -39,6 +39,7 @@ import scipy.fft
 import scipy.linalg as sla
 
 from shm_ros.core import eigen
+from shm_ros.core.modal import mac_matrix
 
 __all__ = [
     "SubspaceModel",
@@ -402,14 +403,6 @@ def printed_eq13_estimate(o: np.ndarray, n_out: int, n: int) -> np.ndarray:
     """
     up, dn = o[:-n_out, :n], o[n_out:, :n]
     return sla.solve(up.T @ dn, up.T @ up)
-
-
-def mac_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """MAC between rows of ``a`` (p, n_out) and rows of ``b`` (q, n_out), both complex unit-norm rows."""
-    num = np.abs(a.conj() @ b.T) ** 2
-    den = np.outer(np.sum(np.abs(a) ** 2, 1), np.sum(np.abs(b) ** 2, 1))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den > 0, num / den, 0.0)
 
 
 def _poles(ev: eigen.Eigenvalues, fs: float, inverse: bool = False):

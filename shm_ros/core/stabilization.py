@@ -23,7 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
 
-from shm_ros.core.ssi import PoleSet, mac_matrix
+from shm_ros.core.modal import mac_matrix
+from shm_ros.core.modal import real_shape as real_mode_shape
+from shm_ros.core.ssi import PoleSet
 
 __all__ = ["StabilityConfig", "PickingConfig", "PoleFlags", "PickedMode", "mpc", "classify",
            "pick_modes", "real_mode_shape"]
@@ -89,17 +91,6 @@ def mpc(shapes: np.ndarray) -> np.ndarray:
     tot = sxx + syy
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(tot > 0, ((sxx - syy) ** 2 + 4 * sxy ** 2) / tot ** 2, 0.0)
-
-
-def real_mode_shape(shape: np.ndarray) -> np.ndarray:
-    """Rotate a complex shape to its best real phase; scale so the largest |component| is +1."""
-    shape = np.asarray(shape, dtype=complex)
-    theta = 0.5 * np.angle(np.sum(shape ** 2))
-    real = (shape * np.exp(-1j * theta)).real
-    k = int(np.argmax(np.abs(real)))
-    if real[k] == 0:
-        return real
-    return real / real[k]
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> np.ndarray:

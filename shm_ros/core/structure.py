@@ -1,4 +1,4 @@
-"""Typed form of a structure file (contracts section 2) and its parameter paths.
+"""Typed form of a structure file (docs/interfaces.md section 2) and its parameter paths.
 
 A structure file names the structure, its sensors and the nominal model that updating starts from.
 :func:`structure_from_dict` validates the plain mapping read from YAML and returns a
@@ -22,18 +22,11 @@ from typing import Any
 
 import numpy as np
 
-KINDS = ("girder", "shear_building", "matrices")
+from shm_ros.core.bayes.priors import PARAMETER_PRIORS, PRIOR_FIELDS, Prior
+from shm_ros.core.models.registry import MODEL_KINDS, ModelKind, kind_names, model_kind
+
 DIRECTIONS = ("vertical", "x", "y")
 DEFAULT_AXIS = {"vertical": "z", "x": "x", "y": "y"}
-PRIOR_PARAMS = {
-    "normal": ("mean", "std"),
-    "lognormal": ("mean", "std"),
-    "weibull": ("scale", "shape"),
-    "uniform": ("low", "high"),
-}
-SECTION_FIELDS = ("E", "I", "A", "rho")
-BEARING_FIELDS = ("x", "k_vertical", "k_rotation")
-FLOOR_FIELDS = ("mass", "stiffness")
 
 Location = tuple[str | int, ...]
 
@@ -54,98 +47,6 @@ class StructureError(ValueError):
 
 
 @dataclass
-class SectionSpec:
-    """Cross-section and material of a beam span (SI: Pa, m^4, m^2, kg/m^3)."""
-
-    E: float
-    I: float  # noqa: E741 - the usual name of the second moment of area
-    A: float
-    rho: float
-
-    @property
-    def EI(self) -> float:
-        return self.E * self.I
-
-    @property
-    def mass_per_length(self) -> float:
-        return self.rho * self.A
-
-
-@dataclass
-class BearingSpec:
-    """A support at ``x`` (m from the left end): vertical (N/m) and rotational (N m/rad) springs."""
-
-    x: float
-    k_vertical: float
-    k_rotation: float = 0.0
-
-
-@dataclass
-class GirderSpec:
-    """2-D Euler-Bernoulli girder on bearings. ``sections`` has one entry per span.
-
-    ``section_per_span`` records whether the file gave a list (one per span) or one section for all
-    (then ``sections`` holds the same values repeated, and a path ``girder.section.E`` acts on all).
-    """
-
-    spans: list[float]
-    elements_per_span: int
-    sections: list[SectionSpec]
-    bearings: list[BearingSpec]
-    section_per_span: bool = False
-
-    @property
-    def length(self) -> float:
-        return float(sum(self.spans))
-
-    def span_ends(self) -> np.ndarray:
-        """x of the span boundaries, (n_spans + 1,), starting at 0."""
-        return np.concatenate([[0.0], np.cumsum(self.spans)])
-
-
-@dataclass
-class FloorSpec:
-    """One floor of a shear building: its lumped mass (kg) and the stiffness of the story below (N/m)."""
-
-    mass: float
-    stiffness: float
-
-
-@dataclass
-class ShearBuildingSpec:
-    """Floors bottom-up (floor 1 first); floor 0 is the ground and is not listed."""
-
-    floors: list[FloorSpec]
-
-    @property
-    def n_floors(self) -> int:
-        return len(self.floors)
-
-
-@dataclass
-class MatricesSpec:
-    """User matrices: ``K = stiffness + sum factor_i * K_i``, ``M = mass + sum factor_j * M_j``.
-
-    ``file`` is as written in the structure file (relative to it); ``arrays`` holds the loaded
-    ``.npz`` contents (filled by ``shm_ros.io.structure.load_structure``). ``terms`` /
-    ``mass_terms`` map array names to nominal factors (default 1.0 for every ``K<name>`` array other
-    than the constant part). ``dofs`` optionally labels the DOFs.
-    """
-
-    file: str
-    mass: str = "M"
-    stiffness: str = "K0"
-    terms: dict[str, float] = field(default_factory=dict)
-    mass_terms: dict[str, float] = field(default_factory=dict)
-    dofs: list[str] | None = None
-    arrays: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-
-    @property
-    def n_dof(self) -> int:
-        return int(self.arrays[self.mass].shape[0]) if self.mass in self.arrays else 0
-
-
-@dataclass
 class DampingSpec:
     """``rayleigh``: ratios of the first two modes fix C = a0 M + a1 K; ``modal``: ratio per mode
     (the last one repeats for higher modes)."""
@@ -156,7 +57,7 @@ class DampingSpec:
 
 @dataclass
 class SourceSpec:
-    """Where a sensor's samples come from; defaults already resolved (contracts section 2).
+    """Where a sensor's samples come from; defaults already resolved (docs/interfaces.md section 2).
 
     ``topic``: last element of the ``.../accel/<topic>`` Imu topic (None: not read from an Imu topic);
     ``axis``: x | y | z of ``linear_acceleration``; ``channel``: AccelBlock channel name (None: not
@@ -198,20 +99,8 @@ class PriorSpec:
     params: dict[str, float]
 
     def frozen(self):
-        """The prior as a frozen ``scipy.stats`` distribution."""
-        from scipy import stats
-
-        p = self.params
-        if self.dist == "normal":
-            return stats.norm(loc=p["mean"], scale=p["std"])
-        if self.dist == "lognormal":
-            s2 = math.log1p((p["std"] / p["mean"]) ** 2)
-            return stats.lognorm(s=math.sqrt(s2), scale=p["mean"] * math.exp(-0.5 * s2))
-        if self.dist == "weibull":
-            return stats.weibull_min(c=p["shape"], scale=p["scale"])
-        if self.dist == "uniform":
-            return stats.uniform(loc=p["low"], scale=p["high"] - p["low"])
-        raise ValueError(f"unknown prior {self.dist!r}")
+        """The prior as a frozen ``scipy.stats`` distribution (:class:`shm_ros.core.bayes.priors.Prior`)."""
+        return Prior.make(self.dist, self.params).dist
 
 
 @dataclass
@@ -226,13 +115,17 @@ class ParameterSpec:
 
 @dataclass
 class StructureSpec:
-    """A validated structure file. ``raw`` is the mapping as read; ``source`` names the file."""
+    """A validated structure file. ``raw`` is the mapping as read; ``source`` names the file.
+
+    ``section`` is the parsed section of the structure's kind (e.g. the girder's spans, sections and
+    bearings); ``spec.<kind name>`` reads it too (``spec.girder``), and is None for the other
+    registered kinds. ``arrays`` holds the contents of a file the section names (the ``.npz`` of
+    ``kind: matrices``).
+    """
 
     name: str
     kind: str
-    girder: GirderSpec | None
-    shear_building: ShearBuildingSpec | None
-    matrices: MatricesSpec | None
+    section: Any
     damping: DampingSpec
     sensors: list[SensorSpec]
     input_sensor: str | None
@@ -240,6 +133,17 @@ class StructureSpec:
     raw: dict = field(default_factory=dict, repr=False)
     source: str = "<structure>"
     description: str | None = None
+    arrays: dict[str, np.ndarray] | None = field(default=None, repr=False)
+
+    def __getattr__(self, name: str) -> Any:
+        # only called for names that are not attributes: ``spec.girder`` and the like
+        if name.startswith("_") or "kind" not in self.__dict__ or name not in MODEL_KINDS:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return self.__dict__["section"] if self.__dict__["kind"] == name else None
+
+    @property
+    def model_kind(self) -> ModelKind:
+        return model_kind(self.kind)
 
     # -- look-ups ------------------------------------------------------------------------------
     def sensor(self, sensor_id: str) -> SensorSpec:
@@ -273,48 +177,9 @@ class StructureSpec:
         out: dict[str, Any] = {"name": self.name, "kind": self.kind}
         if self.description is not None:
             out["description"] = self.description
-        if self.girder is not None:
-            g = self.girder
-            secs = [_section_dict(s) for s in g.sections]
-            out["girder"] = {
-                "spans": [float(v) for v in g.spans],
-                "elements_per_span": int(g.elements_per_span),
-                # one mapping for all spans unless the file had a list or the spans now differ
-                "section": secs if g.section_per_span or any(x != secs[0] for x in secs) else secs[0],
-                "bearings": [
-                    {"x": float(b.x), "k_vertical": float(b.k_vertical), "k_rotation": float(b.k_rotation)}
-                    for b in g.bearings
-                ],
-            }
-        if self.shear_building is not None:
-            out["shear_building"] = {
-                "floors": [
-                    {"mass": float(f.mass), "stiffness": float(f.stiffness)} for f in self.shear_building.floors
-                ]
-            }
-        if self.matrices is not None:
-            m = self.matrices
-            md: dict[str, Any] = {"file": m.file, "mass": m.mass, "stiffness": m.stiffness}
-            md["terms"] = {k: float(v) for k, v in m.terms.items()}
-            if m.mass_terms:
-                md["mass_terms"] = {k: float(v) for k, v in m.mass_terms.items()}
-            if m.dofs is not None:
-                md["dofs"] = list(m.dofs)
-            out["matrices"] = md
+        out[self.kind] = self.model_kind.section_to_dict(self.section)
         out["damping"] = {"kind": self.damping.kind, "ratios": [float(r) for r in self.damping.ratios]}
-        sensors = []
-        for s in self.sensors:
-            sd: dict[str, Any] = {"id": s.id, "at": dict(s.at), "direction": s.direction}
-            src: dict[str, Any] = {}
-            if s.source.topic is not None:
-                src["topic"] = s.source.topic
-            if s.source.channel is not None:
-                src["channel"] = s.source.channel
-            src["axis"] = s.source.axis
-            src["sign"] = float(s.source.sign)
-            sd["source"] = src
-            sensors.append(sd)
-        out["sensors"] = sensors
+        out["sensors"] = [_sensor_dict(s) for s in self.sensors]
         if self.input_sensor is not None:
             out["input"] = {"sensor": self.input_sensor}
         out["parameters"] = [
@@ -336,12 +201,18 @@ class StructureSpec:
             for loc in resolve_path(data, path, source=self.source):
                 parent = _get(data, loc[:-1])
                 parent[loc[-1]] = float(parent[loc[-1]]) * float(f)
-        arrays = self.matrices.arrays if self.matrices is not None else None
-        return structure_from_dict(data, source=self.source, matrices_arrays=arrays)
+        return structure_from_dict(data, source=self.source, matrices_arrays=self.arrays)
 
 
-def _section_dict(s: SectionSpec) -> dict[str, float]:
-    return {"E": float(s.E), "I": float(s.I), "A": float(s.A), "rho": float(s.rho)}
+def _sensor_dict(s: SensorSpec) -> dict[str, Any]:
+    src: dict[str, Any] = {}
+    if s.source.topic is not None:
+        src["topic"] = s.source.topic
+    if s.source.channel is not None:
+        src["channel"] = s.source.channel
+    src["axis"] = s.source.axis
+    src["sign"] = float(s.source.sign)
+    return {"id": s.id, "at": dict(s.at), "direction": s.direction, "source": src}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -440,16 +311,7 @@ def updatable(kind: str, loc: Location) -> bool:
     """Whether a resolved location is a model quantity that a factor may scale for this kind."""
     if loc[:2] == ("damping", "ratios") and len(loc) == 3:
         return True
-    if kind == "girder":
-        if loc[:2] == ("girder", "section"):
-            return loc[-1] in SECTION_FIELDS and len(loc) in (3, 4)
-        if loc[:2] == ("girder", "bearings") and len(loc) == 4:
-            return loc[-1] in ("k_vertical", "k_rotation")
-    if kind == "shear_building":
-        return loc[:2] == ("shear_building", "floors") and len(loc) == 4 and loc[-1] in FLOOR_FIELDS
-    if kind == "matrices":
-        return loc[:2] in (("matrices", "terms"), ("matrices", "mass_terms")) and len(loc) == 3
-    return False
+    return loc[:1] == (kind,) and model_kind(kind).updatable(loc)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -457,7 +319,9 @@ def updatable(kind: str, loc: Location) -> bool:
 # ----------------------------------------------------------------------------------------------
 
 
-class _Ctx:
+class FieldReader:
+    """Checks values of one structure file; every error names the file and the field path."""
+
     def __init__(self, source: str):
         self.source = source
 
@@ -513,34 +377,32 @@ class _Ctx:
                 raise self.err("missing required field", f"{fld}.{k}" if fld else k)
 
 
-_TOP = (
-    "name", "kind", "description", "girder", "shear_building", "matrices", "damping", "sensors", "input", "parameters",
-)
+_COMMON = ("name", "kind", "description", "damping", "sensors", "input", "parameters")
 
 
 def structure_from_dict(
     data: Mapping, source: str = "<structure>", matrices_arrays: Mapping[str, np.ndarray] | None = None
 ) -> StructureSpec:
-    """Validate a structure-file mapping. ``matrices_arrays``: the ``.npz`` contents for ``kind: matrices``."""
-    c = _Ctx(source)
+    """Validate a structure-file mapping. ``matrices_arrays``: the contents of the file the kind's
+    section names (the ``.npz`` of ``kind: matrices``)."""
+    c = FieldReader(source)
     data = c.mapping(data, "")
-    c.keys(data, _TOP, ("name", "kind", "sensors"), "")
+    kinds = kind_names()
+    c.keys(data, (*_COMMON, *kinds), ("name", "kind", "sensors"), "")
     name = c.string(data["name"], "name")
     kind = data["kind"]
-    if kind not in KINDS:
-        raise c.err(f"unknown kind {kind!r} (expected one of: {', '.join(KINDS)})", "kind")
+    if kind not in kinds:
+        raise c.err(f"unknown kind {kind!r} (expected one of: {', '.join(kinds)})", "kind")
     if kind not in data:
         raise c.err(f"kind is {kind!r} but the section {kind!r} is missing", kind)
     # Sections of the other kinds may be present (a file may carry both a girder and a building
-    # description, contracts section 2); only the one named by ``kind`` is read, the rest stays in
-    # ``raw``.
-
-    girder = _girder(c, data["girder"]) if kind == "girder" else None
-    building = _building(c, data["shear_building"]) if kind == "shear_building" else None
-    matrices = _matrices(c, data["matrices"], matrices_arrays) if kind == "matrices" else None
+    # description, docs/interfaces.md section 2); only the one named by ``kind`` is read, the rest
+    # stays in ``raw``.
+    mk = model_kind(kind)
+    section = mk.parse_section(c, data[kind], matrices_arrays)
 
     damping = _damping(c, data.get("damping", {"kind": "rayleigh", "ratios": [0.02, 0.02]}))
-    sensors = _sensors(c, data["sensors"], kind, girder, building, matrices)
+    sensors = _sensors(c, data["sensors"], mk, section)
     input_sensor = None
     if "input" in data and data["input"] is not None:
         inp = c.mapping(data["input"], "input")
@@ -553,9 +415,7 @@ def structure_from_dict(
     spec = StructureSpec(
         name=name,
         kind=kind,
-        girder=girder,
-        shear_building=building,
-        matrices=matrices,
+        section=section,
         damping=damping,
         sensors=sensors,
         input_sensor=input_sensor,
@@ -563,143 +423,13 @@ def structure_from_dict(
         raw=copy.deepcopy(dict(data)),
         source=source,
         description=None if description is None else str(description),
+        arrays=None if matrices_arrays is None else dict(matrices_arrays),
     )
     spec.parameters = _parameters(c, data.get("parameters") or [], spec)
     return spec
 
 
-def _section(c: _Ctx, v: Any, fld: str) -> SectionSpec:
-    m = c.mapping(v, fld)
-    c.keys(m, SECTION_FIELDS, SECTION_FIELDS, fld)
-    return SectionSpec(**{k: c.number(m[k], f"{fld}.{k}", positive=True) for k in SECTION_FIELDS})
-
-
-def _girder(c: _Ctx, v: Any) -> GirderSpec:
-    g = c.mapping(v, "girder")
-    c.keys(g, ("spans", "elements_per_span", "section", "bearings"), ("spans", "section", "bearings"), "girder")
-    spans = [
-        c.number(s, f"girder.spans[{i}]", positive=True) for i, s in enumerate(c.seq(g["spans"], "girder.spans"))
-    ]
-    if not spans:
-        raise c.err("needs at least one span", "girder.spans")
-    eps = c.integer(g.get("elements_per_span", 10), "girder.elements_per_span", minimum=1)
-    sec = g["section"]
-    if isinstance(sec, list):
-        if len(sec) != len(spans):
-            raise c.err(f"has {len(sec)} entries but there are {len(spans)} spans", "girder.section")
-        sections = [_section(c, s, f"girder.section[{i}]") for i, s in enumerate(sec)]
-        per_span = True
-    else:
-        one = _section(c, sec, "girder.section")
-        sections = [copy.copy(one) for _ in spans]
-        per_span = False
-    length = sum(spans)
-    bearings = []
-    for i, b in enumerate(c.seq(g["bearings"], "girder.bearings")):
-        fld = f"girder.bearings[{i}]"
-        b = c.mapping(b, fld)
-        c.keys(b, BEARING_FIELDS, ("x", "k_vertical"), fld)
-        x = c.number(b["x"], f"{fld}.x")
-        if not -1e-9 * length <= x <= length * (1 + 1e-9):
-            raise c.err(f"x = {x} is outside the girder [0, {length}]", f"{fld}.x")
-        bearings.append(
-            BearingSpec(
-                x=min(max(x, 0.0), length),
-                k_vertical=c.number(b["k_vertical"], f"{fld}.k_vertical", nonneg=True),
-                k_rotation=c.number(b.get("k_rotation", 0.0), f"{fld}.k_rotation", nonneg=True),
-            )
-        )
-    if sum(1 for b in bearings if b.k_vertical > 0) < 1 or (
-        sum(1 for b in bearings if b.k_vertical > 0) < 2 and not any(b.k_rotation > 0 for b in bearings)
-    ):
-        raise c.err(
-            "the girder needs at least two vertical bearings (or one with rotational stiffness)", "girder.bearings"
-        )
-    return GirderSpec(
-        spans=spans, elements_per_span=eps, sections=sections, bearings=bearings, section_per_span=per_span
-    )
-
-
-def _building(c: _Ctx, v: Any) -> ShearBuildingSpec:
-    b = c.mapping(v, "shear_building")
-    c.keys(b, ("floors",), ("floors",), "shear_building")
-    floors = []
-    for i, f in enumerate(c.seq(b["floors"], "shear_building.floors")):
-        fld = f"shear_building.floors[{i}]"
-        f = c.mapping(f, fld)
-        c.keys(f, FLOOR_FIELDS, FLOOR_FIELDS, fld)
-        floors.append(
-            FloorSpec(
-                mass=c.number(f["mass"], f"{fld}.mass", positive=True),
-                stiffness=c.number(f["stiffness"], f"{fld}.stiffness", positive=True),
-            )
-        )
-    if not floors:
-        raise c.err("needs at least one floor", "shear_building.floors")
-    return ShearBuildingSpec(floors=floors)
-
-
-def _matrices(c: _Ctx, v: Any, arrays: Mapping[str, np.ndarray] | None) -> MatricesSpec:
-    m = c.mapping(v, "matrices")
-    c.keys(m, ("file", "mass", "stiffness", "terms", "mass_terms", "dofs"), ("file",), "matrices")
-    spec = MatricesSpec(
-        file=c.string(m["file"], "matrices.file"),
-        mass=c.string(m.get("mass", "M"), "matrices.mass"),
-        stiffness=c.string(m.get("stiffness", "K0"), "matrices.stiffness"),
-    )
-    arrays = {k: np.asarray(a, dtype=float) for k, a in (arrays or {}).items()}
-    if not arrays:
-        raise c.err(
-            f"no matrices loaded from {spec.file!r} (load the file with shm_ros.io.structure)", "matrices.file"
-        )
-    where = f"{spec.file}"
-    for key in (spec.mass, spec.stiffness):
-        if key not in arrays:
-            fld = "matrices.mass" if key == spec.mass else "matrices.stiffness"
-            raise c.err(f"array {key!r} not found in {where} (has {sorted(arrays)})", fld)
-    n = arrays[spec.mass].shape[0] if arrays[spec.mass].ndim == 2 else -1
-    if "terms" in m:
-        spec.terms = {
-            str(k): c.number(f, f"matrices.terms.{k}") for k, f in c.mapping(m["terms"], "matrices.terms").items()
-        }
-    else:
-        spec.terms = {k: 1.0 for k in sorted(arrays) if k.startswith("K") and k != spec.stiffness}
-    if "mass_terms" in m:
-        spec.mass_terms = {
-            str(k): c.number(f, f"matrices.mass_terms.{k}")
-            for k, f in c.mapping(m["mass_terms"], "matrices.mass_terms").items()
-        }
-    for key in [spec.mass, spec.stiffness, *spec.terms, *spec.mass_terms]:
-        fld = "matrices.mass" if key == spec.mass else "matrices.stiffness" if key == spec.stiffness else (
-            f"matrices.terms.{key}" if key in spec.terms else f"matrices.mass_terms.{key}"
-        )
-        if key not in arrays:
-            raise c.err(f"array {key!r} not found in {where} (has {sorted(arrays)})", fld)
-        a = arrays[key]
-        if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] != n:
-            raise c.err(f"array {key!r} in {where} must be square {n}x{n}, got shape {a.shape}", fld)
-        if not np.all(np.isfinite(a)):
-            raise c.err(f"array {key!r} in {where} has non-finite entries", fld)
-        if not np.allclose(a, a.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(a).max()))):
-            raise c.err(f"array {key!r} in {where} is not symmetric", fld)
-    try:
-        np.linalg.cholesky(arrays[spec.mass])
-    except np.linalg.LinAlgError:
-        raise c.err(
-            f"mass matrix {spec.mass!r} in {where} is not positive definite (massless DOFs must be condensed "
-            "out before export)",
-            "matrices.mass",
-        ) from None
-    if "dofs" in m:
-        dofs = [str(d) for d in c.seq(m["dofs"], "matrices.dofs")]
-        if len(dofs) != n:
-            raise c.err(f"has {len(dofs)} labels but the matrices have {n} DOFs", "matrices.dofs")
-        spec.dofs = dofs
-    spec.arrays = arrays
-    return spec
-
-
-def _damping(c: _Ctx, v: Any) -> DampingSpec:
+def _damping(c: FieldReader, v: Any) -> DampingSpec:
     d = c.mapping(v, "damping")
     c.keys(d, ("kind", "ratios"), ("ratios",), "damping")
     kind = d.get("kind", "rayleigh")
@@ -715,7 +445,7 @@ def _damping(c: _Ctx, v: Any) -> DampingSpec:
     return DampingSpec(kind=kind, ratios=ratios)
 
 
-def _sensors(c: _Ctx, v: Any, kind: str, girder, building, matrices) -> list[SensorSpec]:
+def _sensors(c: FieldReader, v: Any, mk: ModelKind, section: Any) -> list[SensorSpec]:
     out: list[SensorSpec] = []
     seen: set[str] = set()
     for i, s in enumerate(c.seq(v, "sensors")):
@@ -731,36 +461,7 @@ def _sensors(c: _Ctx, v: Any, kind: str, girder, building, matrices) -> list[Sen
             raise c.err(
                 f"unknown direction {direction!r} (expected one of: {', '.join(DIRECTIONS)})", f"{fld}.direction"
             )
-        at = dict(c.mapping(s["at"], f"{fld}.at"))
-        if kind == "girder":
-            c.keys(at, ("x",), ("x",), f"{fld}.at")
-            x = c.number(at["x"], f"{fld}.at.x")
-            if not -1e-9 <= x <= girder.length * (1 + 1e-9):
-                raise c.err(f"x = {x} is outside the girder [0, {girder.length}]", f"{fld}.at.x")
-            if direction != "vertical":
-                raise c.err("a girder sensor must be vertical", f"{fld}.direction")
-            at = {"x": x}
-        elif kind == "shear_building":
-            c.keys(at, ("floor",), ("floor",), f"{fld}.at")
-            fl = c.integer(at["floor"], f"{fld}.at.floor", minimum=0)
-            if fl > building.n_floors:
-                raise c.err(
-                    f"floor {fl} does not exist (the building has {building.n_floors} floors)", f"{fld}.at.floor"
-                )
-            if direction == "vertical":
-                raise c.err("a shear-building sensor must be horizontal (x or y)", f"{fld}.direction")
-            at = {"floor": fl}
-        else:
-            c.keys(at, ("dof",), ("dof",), f"{fld}.at")
-            d = at["dof"]
-            if isinstance(d, str):
-                if matrices.dofs is None or d not in matrices.dofs:
-                    raise c.err(f"DOF label {d!r} is not in matrices.dofs", f"{fld}.at.dof")
-            else:
-                d = c.integer(d, f"{fld}.at.dof", minimum=0)
-                if d >= matrices.n_dof:
-                    raise c.err(f"DOF {d} does not exist (the matrices have {matrices.n_dof} DOFs)", f"{fld}.at.dof")
-            at = {"dof": d}
+        at = mk.sensor_location(c, section, c.mapping(s["at"], f"{fld}.at"), direction, fld)
         source = _source(c, s.get("source"), sid, direction, fld)
         out.append(SensorSpec(id=sid, at=at, direction=direction, source=source))
     if not out:
@@ -768,7 +469,7 @@ def _sensors(c: _Ctx, v: Any, kind: str, girder, building, matrices) -> list[Sen
     return out
 
 
-def _source(c: _Ctx, v: Any, sid: str, direction: str, fld: str) -> SourceSpec:
+def _source(c: FieldReader, v: Any, sid: str, direction: str, fld: str) -> SourceSpec:
     if v is None:
         return SourceSpec(topic=sid, axis=DEFAULT_AXIS[direction], sign=1.0, channel=sid)
     m = c.mapping(v, f"{fld}.source")
@@ -785,14 +486,14 @@ def _source(c: _Ctx, v: Any, sid: str, direction: str, fld: str) -> SourceSpec:
     return SourceSpec(topic=topic, axis=axis, sign=sign, channel=channel)
 
 
-def _prior(c: _Ctx, v: Any, fld: str) -> PriorSpec:
+def _prior(c: FieldReader, v: Any, fld: str) -> PriorSpec:
     m = c.mapping(v, fld)
     if "dist" not in m:
         raise c.err("missing required field", f"{fld}.dist")
     dist = m["dist"]
-    if dist not in PRIOR_PARAMS:
-        raise c.err(f"unknown prior {dist!r} (expected one of: {', '.join(PRIOR_PARAMS)})", f"{fld}.dist")
-    need = PRIOR_PARAMS[dist]
+    if dist not in PARAMETER_PRIORS:
+        raise c.err(f"unknown prior {dist!r} (expected one of: {', '.join(PARAMETER_PRIORS)})", f"{fld}.dist")
+    need = PRIOR_FIELDS[dist]
     c.keys(m, ("dist", *need), need, fld)
     p = {k: c.number(m[k], f"{fld}.{k}") for k in need}
     if dist in ("normal", "lognormal") and p["std"] <= 0:
@@ -808,7 +509,7 @@ def _prior(c: _Ctx, v: Any, fld: str) -> PriorSpec:
     return PriorSpec(dist=dist, params=p)
 
 
-def _parameters(c: _Ctx, v: Any, spec: StructureSpec) -> list[ParameterSpec]:
+def _parameters(c: FieldReader, v: Any, spec: StructureSpec) -> list[ParameterSpec]:
     view = spec.to_dict()
     out: list[ParameterSpec] = []
     owner: dict[tuple, str] = {}
@@ -842,10 +543,7 @@ def _parameters(c: _Ctx, v: Any, spec: StructureSpec) -> list[ParameterSpec]:
 
 
 def _product_keys(spec: StructureSpec, loc: Location) -> list[tuple]:
-    """Model terms a location multiplies: E and I share the bending stiffness of a span, rho and A
-    share its mass, so two factors on them would make the model non-affine."""
-    if spec.kind == "girder" and loc[:2] == ("girder", "section"):
-        spans = [loc[2]] if len(loc) == 4 else list(range(len(spec.girder.spans)))
-        term = "EI" if loc[-1] in ("E", "I") else "rhoA"
-        return [("girder", term, k) for k in spans]
+    """Model terms a location multiplies (see ``ModelKind.product_keys``)."""
+    if loc[:1] == (spec.kind,):
+        return spec.model_kind.product_keys(spec.section, loc)
     return [loc]

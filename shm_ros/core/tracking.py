@@ -32,6 +32,7 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.optimize import linear_sum_assignment
 
 from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.modal import mac as modal_mac
 from shm_ros.core.types import ModalEstimate
 
 __all__ = ["TrackingConfig", "ReferenceMode", "EnvironmentalFit", "TrackingResult", "track",
@@ -103,15 +104,6 @@ class TrackingResult:
     notes: list[str] = field(default_factory=list)
 
 
-def _mac(a: np.ndarray, b: np.ndarray) -> float:
-    ok = np.isfinite(a) & np.isfinite(b)
-    if ok.sum() < 2:
-        return 0.0
-    x, y = a[ok], b[ok]
-    den = float(x @ x) * float(y @ y)
-    return float((x @ y) ** 2 / den) if den > 0 else 0.0
-
-
 def _shapes_on(est: ModalEstimate, sensors: list[str]) -> np.ndarray:
     """(n_modes, n_sensors) shapes of one window on the common sensor list (NaN where absent)."""
     out = np.full((len(est.modes), len(sensors)), np.nan)
@@ -139,7 +131,7 @@ def _reference(estimates: list[ModalEstimate], sensors: list[str], cfg: Tracking
         labels = np.zeros(1, int)
     else:
         d = np.abs(f[:, None] - f[None, :]) / np.maximum(f[:, None], f[None, :])
-        mac = np.array([[_mac(a, b) for b in shp] for a in shp])
+        mac = modal_mac(shp[:, None, :], shp[None, :, :], min_common=2)
         d = d + (1.0 - mac)
         iu = np.triu_indices(f.size, 1)
         labels = fcluster(linkage(np.clip(d[iu], 0, None), method="average"),
@@ -177,7 +169,7 @@ def _assign(est: ModalEstimate, sensors: list[str], ref_f: np.ndarray, ref_s: np
         return freq, damp, shapes, macs, 0
     f = np.array([m.frequency_hz for m in est.modes], dtype=float)
     s = _shapes_on(est, sensors)
-    mac = np.array([[_mac(a, b) for b in ref_s] for a in s])
+    mac = modal_mac(s[:, None, :], ref_s[None, :, :], min_common=2)
     with np.errstate(invalid="ignore", divide="ignore"):
         df = np.abs(f[:, None] - ref_f[None, :]) / ref_f[None, :] / cfg.freq_tol
     dm = (1.0 - mac) / (1.0 - cfg.mac_min)

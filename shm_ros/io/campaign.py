@@ -10,7 +10,6 @@ hidden effects and their parameters, the faults, the seed; with ``schema_version
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -23,6 +22,7 @@ import numpy as np
 from shm_ros.core.provenance import stamp_output
 from shm_ros.core.simulate.campaign import Campaign, SimulatedWindow
 from shm_ros.core.structure import structure_from_dict
+from shm_ros.io import jsonio
 from shm_ros.io.bags import BagWriter
 from shm_ros.io.structure import dump_structure
 
@@ -125,7 +125,7 @@ def write_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     truth = out / "truth.json"
     payload = {**campaign.truth_header(), "topics": _topics(campaign, prefix), "windows": entries}
     config = {"scenario": sc.to_dict(), **(command_config or {})}
-    truth.write_text(json.dumps(stamp_output(payload, config=config, seed=sc.seed), indent=1, default=_json_default))
+    jsonio.dump(stamp_output(payload, config=config, seed=sc.seed), truth)
     table = out / "truth_modes.csv"
     write_truth_table(entries, campaign.sensor_ids, table)
     size = sum(p.stat().st_size for p in bag.rglob("*") if p.is_file())
@@ -170,14 +170,6 @@ def _topics(campaign: Campaign, prefix: str) -> dict:
     accel = ({sid: f"{prefix}/accel/{sid}" for sid in campaign.sensor_ids} if sc.output == "imu"
              else {"accel_block": f"{prefix}/accel_block"})
     return {"accel": accel, "temperature": f"{prefix}/temperature/t1", "format": sc.output, "storage": sc.storage}
-
-
-def _json_default(o: object) -> object:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    return str(o)
 
 
 def _write_imu(writer: BagWriter, prefix: str, w: SimulatedWindow) -> None:

@@ -1,8 +1,7 @@
-"""The identified-modes JSON of contracts section 3 (``shm-ros identify --out modes.json``)."""
+"""The identified-modes JSON of docs/interfaces.md section 3 (``shm-ros identify --out modes.json``)."""
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -11,6 +10,7 @@ import numpy as np
 
 from shm_ros.core.provenance import stamp_output
 from shm_ros.core.types import ModalEstimate, Mode, Window
+from shm_ros.io import jsonio
 
 
 def iso(t_ns: int) -> str:
@@ -60,11 +60,8 @@ def modes_document(estimates: list[ModalEstimate], config: dict | None = None,
 
 
 def dump(document: dict[str, Any], path: str | Path) -> Path:
-    """Write a JSON document strictly (NaN/Inf are written as null by the record builders)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(document, indent=1, allow_nan=False))
-    return path
+    """Write a JSON document strictly (NaN/Inf are written as null, :mod:`shm_ros.io.jsonio`)."""
+    return jsonio.dump(document, path)
 
 
 def write_modes_json(path: str | Path, estimates: list[ModalEstimate], config: dict | None = None,
@@ -80,7 +77,7 @@ def read_modes_json(path: str | Path) -> list[ModalEstimate]:
         dt = datetime.fromisoformat(text.replace("Z", "+00:00"))
         return int(round(dt.timestamp() * 1e9))
 
-    doc = json.loads(Path(path).read_text())
+    doc = jsonio.load(path)
     out = []
     for k, w in enumerate(doc.get("windows", [])):
         sensors = list(w["modes"][0]["mode_shape"]) if w.get("modes") else []

@@ -1,4 +1,4 @@
-"""Structure files (contracts section 2): YAML, plus an ``.npz`` for ``kind: matrices``.
+"""Structure files (docs/interfaces.md section 2): YAML, plus an ``.npz`` for ``kind: matrices``.
 
 ``load_structure(path)`` reads and validates; ``dump_structure(spec, path)`` writes the same form
 back (and the ``.npz`` of a matrices structure next to it). Every problem raises
@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from shm_ros.core.models.registry import MODEL_KINDS, model_kind
 from shm_ros.core.structure import StructureError, StructureSpec, structure_from_dict
 
 __all__ = ["StructureError", "load_structure", "dump_structure", "load_matrices"]
@@ -66,25 +67,30 @@ def load_structure(path: str | Path) -> StructureSpec:
     if not isinstance(data, dict):
         raise StructureError(f"must be a YAML mapping at the top level, got {type(data).__name__}", source)
     arrays = None
-    if data.get("kind") == "matrices" and isinstance(data.get("matrices"), dict) and "file" in data["matrices"]:
-        f = data["matrices"]["file"]
+    kind = data.get("kind")
+    fld = model_kind(kind).array_file_field if isinstance(kind, str) and kind in MODEL_KINDS else None
+    section = data.get(kind) if fld else None
+    if fld and isinstance(section, dict) and fld in section:
+        f = section[fld]
         if not isinstance(f, str) or not f:
-            raise StructureError(f"must be a file name, got {f!r}", source, "matrices.file")
+            raise StructureError(f"must be a file name, got {f!r}", source, f"{kind}.{fld}")
         npz = Path(f) if Path(f).is_absolute() else p.parent / f
-        arrays = load_matrices(npz, source)
+        arrays = load_matrices(npz, source, f"{kind}.{fld}")
     return structure_from_dict(data, source=source, matrices_arrays=arrays)
 
 
 def dump_structure(spec: StructureSpec, path: str | Path, write_matrices: bool = True) -> None:
-    """Write ``spec`` as YAML; for ``kind: matrices`` also the ``.npz`` (``matrices.file``, relative)."""
+    """Write ``spec`` as YAML; for a kind whose section names an ``.npz`` (``kind: matrices``) also
+    that file (relative to the YAML)."""
     p = Path(path)
     data = spec.to_dict()
+    fld = spec.model_kind.array_file_field
     p.write_text(
-        f"# structure file of {spec.name} (shm_ros, contracts section 2)\n"
+        f"# structure file of {spec.name} (shm_ros, docs/interfaces.md section 2)\n"
         + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=110),
         encoding="utf-8",
     )
-    if write_matrices and spec.matrices is not None and spec.matrices.arrays:
-        f = Path(spec.matrices.file)
+    if write_matrices and fld and spec.arrays:
+        f = Path(data[spec.kind][fld])
         npz = f if f.is_absolute() else p.parent / f
-        np.savez(npz, **spec.matrices.arrays)
+        np.savez(npz, **spec.arrays)  # type: ignore[arg-type]  # numpy types **kwds as allow_pickle

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from shm_ros.core.modal import mac
 from shm_ros.core.types import ModalEstimate
 
 
@@ -21,10 +22,6 @@ class TruthMatch:
     found_hz: list[float | None]
     error_pct: list[float | None]
     mac: list[float | None]
-
-
-def _mac(a: np.ndarray, b: np.ndarray) -> float:
-    return float(abs(a @ b) ** 2 / ((a @ a) * (b @ b)))
 
 
 def match_to_truth(estimates: list[ModalEstimate], truth: dict[str, Any], n_modes: int = 4,
@@ -48,7 +45,7 @@ def match_to_truth(estimates: list[ModalEstimate], truth: dict[str, Any], n_mode
             found.append(best.frequency_hz)
             err.append(100.0 * (best.frequency_hz - f) / f)
             true_shape = _true_shape(shapes, k, e.sensor_ids)
-            macs.append(None if true_shape is None else _mac(np.asarray(best.mode_shape), true_shape))
+            macs.append(None if true_shape is None else float(mac(np.asarray(best.mode_shape), true_shape)))
         out.append(TruthMatch(e.window_id, true_f, found, err, macs))
     return out
 

@@ -17,7 +17,9 @@ import numpy as np
 
 from .forward import ModalPredictor
 from .observations import ModalObservations
-from .pairing import mac, pair_modes
+from shm_ros.core.modal import mac
+
+from .pairing import pair_modes
 
 
 def modal_fit(predictor: ModalPredictor, obs: ModalObservations, theta: np.ndarray) -> dict:

@@ -17,6 +17,7 @@ from typing import Protocol
 
 import numpy as np
 
+from shm_ros.core.modal import mac
 from shm_ros.core.models.base import AffineModel
 
 
@@ -275,8 +276,6 @@ class RitzModalPredictor:
 
     def max_error(self, reference: ModalPredictor, theta: np.ndarray, n_check: int) -> tuple[float, float]:
         """Largest relative frequency error and MAC deficit of the first ``n_check`` modes."""
-        from .pairing import mac
-
         f_r, p_r = self(theta)
         f_f, p_f = reference(theta)
         ferr = float(np.max(np.abs(f_r[:, :n_check] / f_f[:, :n_check] - 1.0)))

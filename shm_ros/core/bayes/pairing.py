@@ -1,28 +1,14 @@
-"""Pairing measured modes with model modes by MAC (not by order), and the MAC itself."""
+"""Pairing measured modes with model modes by MAC (not by order); the MAC is :mod:`shm_ros.core.modal`."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from shm_ros.core.modal import mac, mac_matrix
+
 # Weight of the log-frequency distance next to MAC in the pairing score: shapes decide, frequency
 # only separates shapes that look alike at few sensors.
 FREQUENCY_WEIGHT = 0.5
-
-
-def mac(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Modal assurance criterion of real vectors along the last axis (broadcasting)."""
-    num = np.sum(a * b, axis=-1) ** 2
-    den = np.sum(a * a, axis=-1) * np.sum(b * b, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / den, 0.0)
-
-
-def mac_matrix(phi_obs: np.ndarray, phi_model: np.ndarray) -> np.ndarray:
-    """MAC of observed shapes (m_o, s) against model shapes (B, s, m_m) -> (B, m_o, m_m)."""
-    num = np.einsum("os,bsm->bom", phi_obs, phi_model) ** 2
-    den = np.sum(phi_obs**2, axis=1)[None, :, None] * np.sum(phi_model**2, axis=1)[:, None, :]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / den, 0.0)
 
 
 def pairing_scores(f_obs: np.ndarray, phi_obs: np.ndarray | None,
@@ -35,7 +21,7 @@ def pairing_scores(f_obs: np.ndarray, phi_obs: np.ndarray | None,
     if phi_obs is not None and phi_model is not None:
         usable = ~np.any(np.isnan(phi_obs), axis=1)
         if usable.any():
-            m = mac_matrix(np.nan_to_num(phi_obs), phi_model)
+            m = mac_matrix(np.nan_to_num(phi_obs), np.swapaxes(phi_model, -1, -2))
             score = score + np.where(usable[None, :, None], m, 0.0)
     return np.nan_to_num(score, nan=-np.inf)
 

@@ -1,4 +1,7 @@
-"""Prior distributions of the updating parameters (contracts section 2) and of error variances.
+"""Prior distributions of the updating parameters (docs/interfaces.md section 2) and of error variances.
+
+The one place that knows the prior families: the structure-file reader takes its field names from
+:data:`PRIOR_FIELDS` and its distributions from :class:`Prior`.
 
 Each prior offers a vectorised ``logpdf`` (hot path of every sampler, hence written out in numpy
 rather than through ``scipy.stats``, whose per-call overhead dominates for a handful of values), and
@@ -20,9 +23,18 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
-PRIOR_KINDS = ("normal", "lognormal", "weibull", "uniform", "inverse_gamma")
+# family -> its fields, in the order of the structure file
+PRIOR_FIELDS: dict[str, tuple[str, ...]] = {
+    "normal": ("mean", "std"),
+    "lognormal": ("mean", "std"),
+    "weibull": ("scale", "shape"),
+    "uniform": ("low", "high"),
+    "inverse_gamma": ("shape", "scale"),
+}
+PRIOR_KINDS = tuple(PRIOR_FIELDS)
+PARAMETER_PRIORS = ("normal", "lognormal", "weibull", "uniform")  # families a structure parameter may use
 
 
 class PriorError(ValueError):
@@ -43,13 +55,7 @@ class Prior:
     def make(kind: str, params: Mapping[str, Any], name: str = "") -> "Prior":
         kind = str(kind).lower().replace("-", "_")
         where = f"prior of parameter '{name}'" if name else "prior"
-        required = {
-            "normal": ("mean", "std"),
-            "lognormal": ("mean", "std"),
-            "weibull": ("scale", "shape"),
-            "uniform": ("low", "high"),
-            "inverse_gamma": ("shape", "scale"),
-        }
+        required = PRIOR_FIELDS
         if kind not in required:
             raise PriorError(f"{where}: unknown dist '{kind}' (use one of {', '.join(PRIOR_KINDS)})")
         clean: dict[str, float] = {}
@@ -141,6 +147,8 @@ def _lognormal_mu_sigma(mean: float, std: float) -> tuple[float, float]:
 
 
 def _scipy_frozen(kind: str, p: Mapping[str, float]):
+    from scipy import stats  # here: the structure-file reader imports this module, rarely needs stats
+
     if kind == "normal":
         return stats.norm(loc=p["mean"], scale=p["std"])
     if kind == "lognormal":

@@ -13,6 +13,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from shm_ros.core.modal import mac, unit_max
 from shm_ros.core.models.base import AffineModel
 
 from .evidence import nested_evidence
@@ -364,7 +365,7 @@ def _map_modes(model: AffineModel, obs: ModalObservations, theta: np.ndarray, fi
         "mode_numbers": list(obs.mode_numbers),
         "dof_labels": list(model.dof_labels),
         "frequencies_hz": [float(sol.frequencies_hz[i]) for i in idx],
-        "model_shapes": [_unit_max(sol.shapes[:, i]).tolist() for i in idx],
+        "model_shapes": [unit_max(sol.shapes[:, i]).tolist() for i in idx],
         "observed_shapes_expanded": None,
     }
     ref = obs.reference_shapes() if obs.has_shapes else None
@@ -373,15 +374,10 @@ def _map_modes(model: AffineModel, obs: ModalObservations, theta: np.ndarray, fi
             from shm_ros.core.models.reduction import expand_sensor_shapes
 
             full = expand_sensor_shapes(model, obs.sensor_ids, ref.T, theta)
-            out["observed_shapes_expanded"] = [_unit_max(full[:, k]).tolist() for k in range(full.shape[1])]
+            out["observed_shapes_expanded"] = [unit_max(full[:, k]).tolist() for k in range(full.shape[1])]
         except (KeyError, ValueError, np.linalg.LinAlgError):
             pass  # sensors not on DOFs (girder read by shape functions): no expansion
     return out
-
-
-def _unit_max(v: np.ndarray) -> np.ndarray:
-    k = int(np.argmax(np.abs(v)))
-    return v / v[k] if v[k] != 0 else v
 
 
 def safe_loglik(lik: Any, x: np.ndarray, d: int) -> np.ndarray:
@@ -449,8 +445,6 @@ def _one_point_predictor(model: AffineModel, lik: Any, theta: np.ndarray, cov: n
     f_r, p_r = pred(pts)
     f_f, p_f = full(pts)
     n = len(lik.stats.f_ref)
-    from .pairing import mac
-
     ok = np.max(np.abs(f_r[:, :n] / f_f[:, :n] - 1)) < 1e-6
     if p_r.shape[1]:
         ok &= np.max(1 - mac(np.swapaxes(p_r[:, :, :n], 1, 2), np.swapaxes(p_f[:, :, :n], 1, 2))) < 1e-6

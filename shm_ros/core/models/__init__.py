@@ -1,12 +1,13 @@
-"""Structural models: girder on bearings, shear building, user matrices; reduction and expansion.
+"""Structural models: one affine model form, built for each structure kind; reduction and expansion.
 
-``build_model(spec, **overrides)`` is the one entry point: it maps every ``parameters:`` entry of a
-structure file to its stiffness/mass term of an :class:`AffineModel`.
+``build_model(spec, **overrides)`` is the one entry point: the structure's kind
+(:mod:`shm_ros.core.models.registry`, one file per kind in ``kinds/``) maps every ``parameters:``
+entry of the structure file to its stiffness/mass term of an :class:`AffineModel`.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from shm_ros.core.models.base import AffineModel, BatchModalSolution, ModalSolution
 from shm_ros.core.models.reduction import (
@@ -19,7 +20,10 @@ from shm_ros.core.models.reduction import (
     reduce_model,
     reduced_modes_batch,
 )
-from shm_ros.core.structure import StructureSpec
+from shm_ros.core.models.registry import model_kind
+
+if TYPE_CHECKING:  # annotation only: the structure module imports this package's registry
+    from shm_ros.core.structure import StructureSpec
 
 __all__ = [
     "AffineModel",
@@ -38,23 +42,11 @@ __all__ = [
 
 
 def build_model(spec: StructureSpec, **overrides: Any) -> AffineModel:
-    """Affine model of a structure.
+    """Affine model of a structure, built by the structure's kind.
 
     Overrides by kind - girder: ``elements_per_span`` (int), ``sensor_nodes`` (bool, default True:
     a node at each sensor; False: shape-function observation); shear_building: ``direction``
     ("x" | "y"); all: ``include_parameters`` (bool, default True; False = nominal model with no
     parameters). Unknown overrides raise TypeError.
     """
-    if spec.kind == "girder":
-        from shm_ros.core.models.girder import build_girder
-
-        return build_girder(spec, **overrides)
-    if spec.kind == "shear_building":
-        from shm_ros.core.models.shear_building import build_shear_building
-
-        return build_shear_building(spec, **overrides)
-    if spec.kind == "matrices":
-        from shm_ros.core.models.matrices import build_matrices
-
-        return build_matrices(spec, **overrides)
-    raise ValueError(f"{spec.source}: unknown structure kind {spec.kind!r}")
+    return model_kind(spec.kind).build(spec, **overrides)

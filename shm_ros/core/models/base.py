@@ -20,6 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from shm_ros.core.models.beam import deck_observation
+from shm_ros.core.models.damping import rayleigh_coefficients, rayleigh_ratios
+
 
 @dataclass
 class ModalSolution:
@@ -67,7 +70,7 @@ class AffineModel:
     input_sensor: str | None = None  # id of the structure's input sensor, if any
     # damping_factors[i]: indices of damping_ratios that parameter i multiplies (empty: none)
     damping_factors: list[list[int]] = field(default_factory=list)
-    kind: str = "matrices"  # "girder" | "shear_building" | "matrices"
+    kind: str = "matrices"  # name of the structure kind (shm_ros.core.models.registry)
     direction: str | None = None  # direction of motion the DOFs describe ("vertical", "x", "y")
     node_x: np.ndarray | None = None  # girder: node coordinates along the deck (m)
 
@@ -122,6 +125,7 @@ class AffineModel:
             z = np.zeros_like(self.K0)
             self._K_stack = np.stack([z if t is None else t for t in self.K_terms]) if self.K_terms else z[None] * 0
             self._M_stack = np.stack([z if t is None else t for t in self.M_terms]) if self.M_terms else z[None] * 0
+        assert self._M_stack is not None  # filled together with the stiffness stack
         return self._K_stack, self._M_stack
 
     def _thetas(self, thetas: np.ndarray) -> np.ndarray:
@@ -183,7 +187,7 @@ class AffineModel:
             return np.array([z[min(k, len(z) - 1)] for k in range(n)])
         w = 2 * np.pi * self.modes(theta, max(n, 2)).frequencies_hz
         a0, a1 = rayleigh_coefficients(w[0], w[1], z[0], z[1])
-        return (a0 / (2 * w) + a1 * w / 2)[:n]
+        return rayleigh_ratios(w, a0, a1)[:n]
 
     def modal_damping_ratios_batch(self, thetas: np.ndarray, frequencies_hz: np.ndarray) -> np.ndarray:
         """Damping ratios (B, k) of modes with ``frequencies_hz`` (B, k) - the model's lowest modes at
@@ -200,12 +204,8 @@ class AffineModel:
             cols = [min(c, z.shape[1] - 1) for c in range(k)]
             return z[:, cols]
         w = 2 * np.pi * f
-        w1, w2 = w[:, :1], w[:, 1:2]
-        z1, z2 = z[:, :1], z[:, 1:2]
-        d = w2**2 - w1**2
-        a0 = 2 * w1 * w2 * (z1 * w2 - z2 * w1) / d
-        a1 = 2 * (z2 * w2 - z1 * w1) / d
-        return a0 / (2 * w) + a1 * w / 2
+        a0, a1 = rayleigh_coefficients(w[:, :1], w[:, 1:2], z[:, :1], z[:, 1:2])
+        return rayleigh_ratios(w, a0, a1)
 
     def damping(self, theta: np.ndarray | None = None) -> np.ndarray:
         """Viscous damping matrix C(theta).
@@ -257,8 +257,6 @@ class AffineModel:
         """Girder only: rows (len(xs), n_dof) reading the vertical displacement at any deck ``x``."""
         if self.node_x is None:
             raise ValueError(f"model {self.name!r} is not a girder: it has no deck coordinates")
-        from shm_ros.core.models.girder import deck_observation
-
         return deck_observation(self.node_x, list(xs))
 
     @property
@@ -280,16 +278,6 @@ class AffineModel:
         return out
 
 
-def rayleigh_coefficients(w1: float, w2: float, z1: float, z2: float) -> tuple[float, float]:
-    """a0, a1 of C = a0 M + a1 K giving ratios z1, z2 at circular frequencies w1, w2."""
-    if abs(w2 - w1) <= 1e-12 * max(w1, w2):
-        return 2 * z1 * w1, 0.0  # coincident frequencies: mass-proportional
-    d = w2**2 - w1**2
-    a0 = 2 * w1 * w2 * (z1 * w2 - z2 * w1) / d
-    a1 = 2 * (z2 * w2 - z1 * w1) / d
-    return a0, a1
-
-
 def generalized_modes_batch(K: np.ndarray, M: np.ndarray, n_modes: int) -> BatchModalSolution:
     """Lowest modes of stacked symmetric pencils (B, n, n) via Cholesky of M and numpy's batched eigh.
 
@@ -305,6 +293,11 @@ def generalized_modes_batch(K: np.ndarray, M: np.ndarray, n_modes: int) -> Batch
     w2, y = w2[:, :n], y[:, :, :n]
     phi = np.swapaxes(Linv, -1, -2) @ y
     return BatchModalSolution(np.sqrt(np.clip(w2, 0.0, None)) / (2 * np.pi), phi)
+
+
+def damping_factors_of(params: list[Any]) -> list[list[int]]:
+    """Per parameter, the indices of the damping ratios it multiplies (``damping.ratios[i]`` targets)."""
+    return [[int(loc[2]) for loc in p.targets if loc[:2] == ("damping", "ratios")] for p in params]
 
 
 def assemble_model(spec: Any, params: list[Any], K0: np.ndarray, M0: np.ndarray,

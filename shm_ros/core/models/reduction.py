@@ -356,6 +356,7 @@ def reduced_modes_batch(
     R = reduce_model(model, np.atleast_2d(thetas), sensor_ids, max_iter=max_iter, tol=tol, method=method)
     with single_threaded_blas():
         sol = R.modes(n_modes)
+    assert isinstance(sol, BatchModalSolution)  # a reduction of a batch of thetas
     if expand:
         return BatchModalSolution(sol.frequencies_hz, R.expand(sol.shapes))
     return sol

@@ -19,11 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from shm_ros.core.simulate import excitation as ex
+import shm_ros.core.simulate.excitation as ex
 from shm_ros.core.simulate.effects import Conditions, Effect, EffectError, make_effect
+from shm_ros.core.simulate.linear import ModalSystem
 from shm_ros.core.simulate.scenario import Scenario, named_scenario
 from shm_ros.core.simulate.sensors import Recording, SensorModel, apply_faults
-from shm_ros.core.simulate.truth import ModalTruth, TruthModel, build_truth
+from shm_ros.core.simulate.truth import ModalTruth, TruthModel, WindowRun, build_truth
+from shm_ros.core.simulate.truth_kinds import TRUTH_KINDS
 from shm_ros.core.types import Window
 
 AMPLITUDE_EFFECTS = ("amplitude_stiffness", "amplitude_damping")
@@ -130,22 +132,13 @@ class Campaign:
         slow = float(np.min(-sys.poles.real[sys.conjugate])) if np.any(sys.conjugate) else 1.0
         n_warm = int(round(min(120.0, max(10.0, 5.0 / slow)) * sc.fs))
         u, event = self._inputs(rng, n_warm + n, cond, i, sys)
-        extra: dict[str, Any] = {}
-        if self.truth_model.kind == "girder" and amp:
-            y, modal, extra = self._girder_amplitude(i, cond, factors, amp, n_warm, dt)
-        elif self.truth_model.kind == "girder":
-            y = sys.simulate_modal(u, dt)  # u holds modal forces
-        elif amp:
-            from shm_ros.core.simulate.newmark import simulate_building_nonlinear
 
-            y, eq = simulate_building_nonlinear(self.truth_model, factors, self.effects, u, dt, n_warm)
-            _, modal = self.truth_model.system(factors, k_scale=eq["k_scale"], c_scale=eq["c_scale"])
-            extra["equivalent_linear"] = {"story_drift_rms_m": eq["drift_rms"].tolist(),
-                                          "story_velocity_rms_m_s": eq["velocity_rms"].tolist(),
-                                          "stiffness_factor": eq["k_scale"].tolist(),
-                                          "damping_factor": eq["c_scale"].tolist()}
-        else:
-            y = sys.simulate(u, dt)
+        def inputs_for(other: ModalSystem) -> np.ndarray:  # the same draws of loads, for another system
+            return self._inputs(rng_for(sc.seed, 3, i), n_warm + n, cond, i, other)[0]
+
+        y, modal, extra = self.truth_model.respond(WindowRun(factors=factors, amplitude_effects=amp, system=sys,
+                                                             modal=modal, inputs=u, dt=dt, n_warm=n_warm,
+                                                             inputs_for=inputs_for))
         accel = np.ascontiguousarray(y[n_warm:])
         start, end = self.window_bounds_ns(i)
         stamps = start + np.round(np.arange(n) * (1e9 / sc.fs)).astype(np.int64)
@@ -162,63 +155,14 @@ class Campaign:
         return SimulatedWindow(index=i, start_ns=start, fs=sc.fs, sensor_ids=self.sensor_ids, accel=accel,
                                recording=rec, truth=truth)
 
-    def _girder_amplitude(self, i: int, cond: Conditions, factors: dict[str, float], amp: list[Effect],
-                          n_warm: int, dt: float, passes: int = 4) -> tuple[np.ndarray, ModalTruth, dict]:
-        """Girder amplitude effects, equivalent-linear per window: the deck stiffness factor
-        1 / (1 + a / a_ref) and damping factor 1 + a / a_ref follow the window's RMS acceleration a
-        (mean over sensors, after warm-up), found by fixed-point passes over the same loads."""
-        keys = {e.key: e for e in amp}
-        k_ref = keys["amplitude_stiffness"].params["accel_ref_m_s2"] if "amplitude_stiffness" in keys else None
-        z_ref = keys["amplitude_damping"].params["accel_ref_m_s2"] if "amplitude_damping" in keys else None
-        n_all = n_warm + int(round(self.scenario.window_s * self.scenario.fs))
-        a = 0.0
-        for _ in range(passes):
-            a_used = a
-            kf = 1.0 / (1.0 + a_used / k_ref) if k_ref else 1.0
-            zf = 1.0 + a_used / z_ref if z_ref else 1.0
-            fac = dict(factors)
-            fac["EI"] = fac.get("EI", 1.0) * kf
-            sys, modal = self.truth_model.system(fac, damping_scale=zf)
-            u, _ = self._inputs(rng_for(self.scenario.seed, 3, i), n_all, cond, i, sys)
-            y = sys.simulate_modal(u, dt)
-            a = float(np.mean(np.sqrt(np.mean(y[n_warm:] ** 2, axis=0))))
-        extra = {"equivalent_linear": {"rms_accel_m_s2": a_used, "stiffness_factor": kf, "damping_factor": zf,
-                                       "rms_accel_response_m_s2": a}}
-        return y, modal, extra
-
     def windows(self, indices: list[int] | None = None) -> Iterator[SimulatedWindow]:
         for i in indices if indices is not None else range(self.n_windows):
             yield self.window(i)
 
     def _inputs(self, rng: np.random.Generator, n: int, cond: Conditions, i: int,
-                sys=None) -> tuple[np.ndarray, dict | None]:
-        """Inputs of a window: building - (n, 1 + n_dof) ground acceleration and floor forces;
-        girder - the modal forces (n, m) of ``sys`` (loads at the load points, projected)."""
-        sc, tm = self.scenario, self.truth_model
-        fs = sc.fs
-        if tm.kind == "girder":
-            proj = None if sys is None else sys.participation.T
-            length = float(sum(tm.nominal.girder.spans))
-            rate = sc.vehicles_per_hour * traffic_profile(cond.local_hour)
-            F, _ = ex.traffic_loads(rng, n, fs, tm.load_x, length, rate,
-                                    support_x=np.array([b.x for b in tm.nominal.girder.bearings]), projection=proj)
-            wind = sc.wind_rms_n * float(rng.lognormal(0.0, 0.4))
-            F += ex.wind_loads(rng, n, fs, tm.load_x.size, wind, projection=proj)
-            return F, None
-        n_dof = tm.model.n_dof
-        shift = tm.info["shift"]
-        u = np.zeros((n, 1 + n_dof))
-        u[:, 0] = ex.microtremor(rng, n, fs, sc.microtremor_rms_m_s2 * float(rng.lognormal(0.0, 0.3)))
-        heights = np.arange(1, n_dof - shift + 1) / (n_dof - shift)
-        wind = sc.wind_rms_n * float(rng.lognormal(0.0, 0.4))
-        u[:, 1 + shift:] = ex.wind_loads(rng, n, fs, n_dof - shift, wind) * heights ** 0.3
-        event = self.earthquakes.get(i)
-        if event is not None:
-            n_warm = n - int(round(sc.window_s * fs))
-            eq = ex.earthquake(rng, n, fs, n_warm / fs + event["onset_s"], event["pga_m_s2"])
-            u[:, 0] += eq
-            event = dict(event)
-        return u, event
+                sys: ModalSystem | None = None) -> tuple[np.ndarray, dict | None]:
+        """Inputs of a window (``TruthModel.loads``) and its earthquake, if any."""
+        return self.truth_model.loads(rng, n, cond, self.scenario, sys, self.earthquakes.get(i))
 
     def _truth_entry(self, i, start, end, cond, factors, modal: ModalTruth, accel, event, faults, extra) -> dict:
         shapes = {sid: modal.shapes[r].round(6).tolist() for r, sid in enumerate(modal.sensor_ids)}
@@ -267,16 +211,7 @@ class Campaign:
     def truth_model_summary(self) -> dict[str, Any]:
         tm = self.truth_model
         out: dict[str, Any] = {"n_dof": tm.model.n_dof, "structure": tm.spec.to_dict()}
-        if tm.kind == "girder":
-            out["modal_damping_ratios"] = [float(z) for z in tm.modal_damping[:12]]
-            out["sensor_x_m"] = tm.info["sensor_x"]
-            out["elements_per_span"] = tm.spec.girder.elements_per_span
-        else:
-            out["rayleigh_a0_a1"] = list(tm.rayleigh)
-            if tm.dampers:
-                out["dampers"] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in tm.dampers.items()}
-            if tm.soil:
-                out["foundation"] = tm.soil
+        out.update(tm.summary())
         return out
 
 
@@ -287,14 +222,6 @@ def single_blas_thread() -> contextlib.AbstractContextManager:
     except ImportError:  # pragma: no cover - pinned in requirements/base.txt
         return contextlib.nullcontext()
     return threadpool_limits(1)
-
-
-def traffic_profile(local_hour: float) -> float:
-    """Relative traffic intensity over the day: quiet nights, morning and evening peaks."""
-    h = local_hour
-    base = 0.15 + 0.85 * np.exp(-((h - 13.0) / 6.0) ** 2)
-    peaks = 0.6 * np.exp(-((h - 8.0) / 1.2) ** 2) + 0.6 * np.exp(-((h - 18.0) / 1.5) ** 2)
-    return float(base + peaks)
 
 
 def _iso(t_ns: int) -> str:
@@ -355,8 +282,9 @@ def simulate_campaign(scenario: Scenario) -> Campaign:
     for q in sc.earthquakes:
         i = int(q["window"])
         quakes[i] = {"pga_m_s2": float(q.get("pga_m_s2", 1.0)), "onset_s": float(q.get("onset_s", 0.3 * sc.window_s))}
-    if quakes and truth.kind != "shear_building":
-        raise ValueError("scenario: earthquakes need a shear_building structure (base input)")
+    if quakes and not truth.supports_earthquakes:
+        able = [c.name for c in TRUTH_KINDS if c.supports_earthquakes]
+        raise ValueError(f"scenario: earthquakes need a structure with a base input ({', '.join(able)})")
     return Campaign(scenario=sc, effects=effects, truth_model=truth, sensors=sensors,
                     temperature_stamps_ns=tstamps, temperature_true_c=true_t, temperature_measured_c=measured_t,
                     window_starts_ns=starts, earthquakes=quakes)

@@ -27,46 +27,20 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from typing import Any
 
-# key -> (vocabulary name of contracts section 5, default parameters per structure kind)
-EFFECTS: dict[str, tuple[str, dict[str, dict[str, Any]]]] = {
-    "temperature_linear": ("temperature_dependent_stiffness", {
-        "girder": {"where": "deck", "alpha_per_c": -0.004, "t_ref_c": 10.0},
-        "shear_building": {"where": "stories", "alpha_per_c": -0.003, "t_ref_c": 15.0},
-    }),
-    "temperature_bilinear": ("temperature_dependent_stiffness", {
-        "girder": {"where": "deck", "alpha_per_c": -0.002, "t_ref_c": 10.0, "knee_c": 0.0,
-                   "below_per_c": -0.05},
-        "shear_building": {"where": "stories", "alpha_per_c": -0.002, "t_ref_c": 15.0, "knee_c": 0.0,
-                           "below_per_c": -0.03},
-    }),
-    "damage": ("stiffness_change_at_time", {
-        "girder": {"at": "48h", "factor": 0.85, "where": "span2"},
-        "shear_building": {"at": "48h", "factor": 0.85, "where": "story1"},
-    }),
-    "repair": ("stiffness_change_at_time", {
-        "girder": {"at": "96h", "factor": 1.10, "where": "span2"},
-        "shear_building": {"at": "96h", "factor": 1.10, "where": "story1"},
-    }),
-    "added_mass": ("added_mass", {
-        "girder": {"fraction": 0.06, "when": "rush_hours"},
-        "shear_building": {"fraction": 0.08, "when": "always"},
-    }),
-    "support_flexibility": ("support_flexibility", {
-        "girder": {"k_soil_n_m": 2.0e9},
-        "shear_building": {"k_soil_rel": 3.0, "mass_rel": 0.15, "soil_damping_ratio": 0.10},
-    }),
-    "amplitude_stiffness": ("amplitude_dependent_stiffness", {
-        "girder": {"accel_ref_m_s2": 1.0},
-        "shear_building": {"drift_ref_m": 0.01},
-    }),
-    "amplitude_damping": ("amplitude_dependent_damping", {
-        "girder": {"accel_ref_m_s2": 0.2},
-        "shear_building": {"velocity_ref_m_s": 0.02},
-    }),
-    "damper": ("damper_stiffness", {
-        "shear_building": {"model": "kelvin_voigt", "k_rel": 0.30, "c_rel_s": 0.02, "stories": "all",
-                           "fail_at": None, "fail_factor": 0.0},
-    }),
+from shm_ros.core.simulate.truth_kinds import TRUTH_KINDS, truth_class
+
+# key -> (vocabulary name of docs/interfaces.md section 5, one line on what it does). The default
+# parameters per structure kind belong to each kind's truth model (``TruthModel.effect_defaults``).
+EFFECTS: dict[str, tuple[str, str]] = {
+    "temperature_linear": ("temperature_dependent_stiffness", "stiffness linear in the air temperature"),
+    "temperature_bilinear": ("temperature_dependent_stiffness", "stiffness bilinear in the air temperature"),
+    "damage": ("stiffness_change_at_time", "stiffness drops at a time"),
+    "repair": ("stiffness_change_at_time", "stiffness rises at a time"),
+    "added_mass": ("added_mass", "mass added at some times"),
+    "support_flexibility": ("support_flexibility", "soil under the supports"),
+    "amplitude_stiffness": ("amplitude_dependent_stiffness", "stiffness falls with the response amplitude"),
+    "amplitude_damping": ("amplitude_dependent_damping", "damping grows with the response amplitude"),
+    "damper": ("damper_stiffness", "damper braces, which may fail"),
 }
 
 # frozen elastomeric bearings lock up: their springs (chiefly the small rotational restraint) grow
@@ -132,13 +106,15 @@ class Effect:
         where = str(self.params.get("where", "deck"))
         if where in ("deck", "stories", "all"):
             return "EI"
-        if where == "bearings":
-            if self.kind != "girder":
-                raise EffectError(f"effect {self.key}: where=bearings exists for girders only")
-            return "bearings"
+        extra = truth_class(self.kind).stiffness_wheres
+        if where in extra:
+            return extra[where]
         m = re.fullmatch(r"(span|story)(\d+)", where)
         if m is None:
-            raise EffectError(f"effect {self.key}: where={where!r} (deck, bearings, spanK or storyK)")
+            more = [w for c in TRUTH_KINDS for w in c.stiffness_wheres if c is not truth_class(self.kind)]
+            hint = f"; {', '.join(more)} exist for other kinds only" if more else ""
+            raise EffectError(f"effect {self.key}: where={where!r} "
+                              f"(deck, stories, all, {''.join(w + ', ' for w in extra)}spanK or storyK{hint})")
         return f"EI:{int(m.group(2))}"
 
     def _mass_active(self, c: Conditions) -> bool:
@@ -169,43 +145,29 @@ class Effect:
             return f"stiffness x{p['factor']} from {p['at']}"
         if self.key == "added_mass":
             return f"mass x{1 + p['fraction']:.3f} when {p['when']}"
-        if self.key == "support_flexibility":
-            return ("series soil spring under every bearing" if self.kind == "girder"
-                    else "foundation sway: soil spring and dashpot under a foundation mass")
-        if self.key == "amplitude_stiffness":
-            if self.kind == "girder":
-                return "deck stiffness x 1 / (1 + a / a_ref), a = the window's RMS acceleration (equivalent linear)"
-            return "softening story springs f = k d / (1 + |d| / d_ref)"
-        if self.key == "amplitude_damping":
-            if self.kind == "girder":
-                return "modal damping x (1 + a / a_ref), a = the window's RMS acceleration (equivalent linear)"
-            return "story dashpots f = c v (1 + |v| / v_ref)"
+        forms = truth_class(self.kind).effect_forms
+        if self.key in forms:
+            return forms[self.key]
         if self.key == "damper":
             return f"{p['model']} damper braces, k_d = {p['k_rel']} k_story, c_d = {p['c_rel_s']} s x k_d"
         return self.key
 
 
 def _default_where(key: str, kind: str) -> str:
-    if key == "support_flexibility":
-        return "bearings" if kind == "girder" else "foundation"
-    if key == "added_mass":
-        return "deck" if kind == "girder" else "floors"
-    if key == "damper":
-        return "stories"
-    if key.startswith("amplitude"):
-        return "deck" if kind == "girder" else "stories"
-    return "deck" if kind == "girder" else "stories"
+    where = truth_class(kind).effect_where
+    return where.get(key, where.get("*", "all"))
 
 
 def make_effect(key: str, kind: str, params: dict[str, Any] | None = None, start_epoch_s: float = 0.0) -> Effect:
     """Effect ``key`` for structure ``kind`` with ``params`` over the defaults (unknown params fail)."""
     if key not in EFFECTS:
         raise EffectError(f"unknown effect {key!r} (known: {', '.join(EFFECTS)})")
-    name, defaults = EFFECTS[key]
-    if kind not in defaults:
+    name = EFFECTS[key][0]
+    available = [c.name for c in TRUTH_KINDS if key in c.effect_defaults]
+    if kind not in available:
         raise EffectError(f"effect {key!r} is not available for {kind} structures "
-                          f"(available for: {', '.join(defaults)})")
-    merged = dict(defaults[kind])
+                          f"(available for: {', '.join(available)})")
+    merged = dict(truth_class(kind).effect_defaults[key])
     if (params or {}).get("where") == "bearings" and key in BEARING_DEFAULTS:
         merged.update(BEARING_DEFAULTS[key])
     for k, v in (params or {}).items():

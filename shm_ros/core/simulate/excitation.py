@@ -168,3 +168,11 @@ def temperature_series(rng: np.random.Generator, t_s: np.ndarray, mean_c: float,
             a = np.exp(-dt / tau)
             drift[k + 1] = a * drift[k] + drift_std_c * np.sqrt(1 - a * a) * e[k]
     return mean_c + cycle + drift
+
+
+def traffic_profile(local_hour: float) -> float:
+    """Relative traffic intensity over the day: quiet nights, morning and evening peaks."""
+    h = local_hour
+    base = 0.15 + 0.85 * np.exp(-((h - 13.0) / 6.0) ** 2)
+    peaks = 0.6 * np.exp(-((h - 8.0) / 1.2) ** 2) + 0.6 * np.exp(-((h - 18.0) / 1.5) ** 2)
+    return float(base + peaks)

@@ -87,10 +87,12 @@ class ModalSystem:
         return Pm @ self.C.real.T + self._filter_real(Pm, dt)
 
     def _simulate_real(self, u: np.ndarray, dt: float) -> np.ndarray:
+        assert self.participation is not None  # classical modes only (from_real_modes)
         return self._filter_real(u @ self.participation.T, dt)
 
     def _filter_real(self, Pm: np.ndarray, dt: float) -> np.ndarray:
         # the conjugate pair 2 Re(R (c1 + c0 q^-1) / (1 - phi q^-1)) as one real biquad
+        assert self.residue is not None  # classical modes only (from_real_modes)
         Q = np.empty_like(Pm)
         for j, lam in enumerate(self.poles):
             c1, c0, phi = _foh_coefficients(complex(lam), dt)
@@ -166,17 +168,3 @@ def from_state_space(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray,
     # a real pole of a real system has real B and C up to a complex scale; keep products exact
     return ModalSystem(poles=poles, conjugate=np.array(conj, bool), B=Bm[keep_a], C=Cm,
                        D=np.asarray(D, float), shapes=shapes)
-
-
-def real_shape(shape: np.ndarray) -> np.ndarray:
-    """Complex shape rotated to its best real phase, scaled so the largest |component| is +1."""
-    v = np.asarray(shape, dtype=complex)
-    if not np.any(np.abs(v) > 0):
-        return np.zeros(v.shape)
-    # best real phase: principal axis of the points (Re v, Im v)
-    X = np.vstack([v.real, v.imag])
-    _, vecs = np.linalg.eigh(X @ X.T)
-    axis = vecs[:, -1]
-    r = axis[0] * v.real + axis[1] * v.imag
-    k = int(np.argmax(np.abs(r)))
-    return r / r[k]

@@ -43,10 +43,9 @@ def simulate_building_nonlinear(tm, factors: dict[str, float], effects: list[Eff
                                 n_warm: int, tol: float = 1e-10, max_iter: int = 20) -> tuple[np.ndarray, dict[str, Any]]:
     """Absolute accelerations at the sensors (n, n_sensors) and the equivalent-linear factors.
 
+    ``tm``: a shear-building truth model (``BuildingTruth``: ``theta``, ``building_matrices``, ``info``);
     ``u`` (n, 1 + n_dof): ground acceleration, then the wind force on every DOF.
     """
-    if tm.kind != "shear_building":
-        raise ValueError("amplitude-dependent effects are simulated for shear buildings only")
     keys = {e.key: e for e in effects}
     stiff = keys.get("amplitude_stiffness")
     damp = keys.get("amplitude_damping")
@@ -101,7 +100,7 @@ def simulate_building_nonlinear(tm, factors: dict[str, float], effects: list[Eff
         vel = vk + dt * ((1 - gamma) * ak + gamma * acc)
         uk, vk, ak = u1, vel, acc
         U[k], V[k], A[k] = uk, vk, ak
-    Sel = tm._building_selection(n)
+    Sel = tm.sensor_selection(n)
     y = A @ Sel.T + u[:, :1]
     drift = (U[n_warm:] @ E.T)
     dvel = (V[n_warm:] @ E.T)

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from shm_ros.core.simulate.sensors import FaultSpec
+from shm_ros.core.simulate.truth_kinds import TRUTH_KINDS
 
 GIRDER_STRUCTURE: dict[str, Any] = {
     "name": "three-span-girder",
@@ -91,7 +92,7 @@ class Scenario:
     """
 
     name: str = "girder"
-    kind: str = "girder"  # girder | shear_building
+    kind: str = "girder"  # a structure kind the simulator has a truth model for (truth_kinds)
     structure: dict[str, Any] = field(default_factory=lambda: copy.deepcopy(GIRDER_STRUCTURE))
     n_windows: int = 3
     window_s: float = 600.0
@@ -162,7 +163,7 @@ def named_scenario(name: str, n_floors: int | None = None, **options: Any) -> Sc
     else:
         raise ValueError(f"unknown scenario {name!r} (known: {', '.join(NAMED)})")
     if n_floors is not None:
-        if base.kind != "shear_building":
+        if name not in ("building", "building-earthquake"):
             raise ValueError(f"scenario {name}: n_floors applies to the building scenarios")
         base.structure = shear_building_structure(int(n_floors))
     for k, v in options.items():
@@ -201,8 +202,9 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<scenario>") -> Scen
         if not isinstance(data["structure"], dict):
             raise ValueError(f"{source}: structure: expected a mapping (a structure file's content)")
         kind = structure_from_dict(copy.deepcopy(data["structure"]), source=f"{source} (structure)").kind
-        if kind not in ("girder", "shear_building"):
-            raise ValueError(f"{source}: structure: kind {kind!r} cannot be simulated (girder or shear_building)")
+        if kind not in TRUTH_KINDS:
+            raise ValueError(f"{source}: structure: kind {kind!r} cannot be simulated "
+                             f"({' or '.join(TRUTH_KINDS.names())})")
     try:
         sc = named_scenario(name, n_floors=n_floors, **data)
     except ValueError as exc:
