@@ -7,7 +7,7 @@ parameters), and ``batch.json`` with what ran where and every error.
 
 from __future__ import annotations
 
-import json
+import math
 import re
 import time
 from collections.abc import Callable, Sequence
@@ -52,7 +52,7 @@ def _folder(name: str) -> str:
 def _write(out: Path, settings: BatchSettings, bags: list[BagResult], structures: list[StructureResult]
            ) -> dict[str, Any]:
     from shm_ros.core.provenance import stamp_output
-    from shm_ros.io.modes_json import dump
+    from shm_ros.io.jsonio import dump
     from shm_ros.io.tables import write_tracked_modes
 
     by_structure: dict[str, list[dict[str, Any]]] = {}
@@ -69,7 +69,7 @@ def _write(out: Path, settings: BatchSettings, bags: list[BagResult], structures
             write_tracked_modes(folder / "tracked_modes.csv", s.tracking.observations)
             dump(stamp_output(_tracking_summary(s.tracking), config), folder / "tracking.json")
         if s.posterior is not None:
-            dump(stamp_output(_jsonable(s.posterior), config), folder / "posterior.json")
+            dump(stamp_output(s.posterior, config), folder / "posterior.json")
         rows.append({"structure": s.structure, "name": s.name, "folder": folder.name,
                      "windows_identified": s.n_windows, "tracked": s.tracking is not None,
                      "updated": s.posterior is not None, "errors": s.errors})
@@ -90,21 +90,4 @@ def _tracking_summary(res: Any) -> dict[str, Any]:
 
 def _num(x: Any) -> float | None:
     v = float(x)
-    return v if v == v and abs(v) != float("inf") else None
-
-
-def _jsonable(x: Any) -> Any:
-    """Through JSON with NaN/Inf as null (strict JSON, like every output of the package)."""
-    import numpy as np
-
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.generic):
-        return _jsonable(x.item())
-    if isinstance(x, float):
-        return _num(x)
-    return json.loads(json.dumps(x)) if not isinstance(x, str | int | bool | type(None)) else x
+    return v if math.isfinite(v) else None

@@ -8,30 +8,26 @@ sample per message), ``<prefix>/accel_block`` (``shm_interfaces/msg/AccelBlock``
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from shm_ros.core.timeutil import join_ns, split_ns
+from shm_ros.io.errors import BagError
+from shm_ros.io.sources.base import BagMessage
 from shm_ros.io.typestore import typestore
+
+__all__ = ["ACCEL_BLOCK", "IMU", "TEMPERATURE", "BagError", "BagMessage", "BagWriter", "bag_topics",
+           "read_messages", "split_ns", "stamp_ns", "topic_kind"]
 
 IMU = "sensor_msgs/msg/Imu"
 TEMPERATURE = "sensor_msgs/msg/Temperature"
 ACCEL_BLOCK = "shm_interfaces/msg/AccelBlock"
 
 
-class BagError(RuntimeError):
-    """A bag cannot be read or written; the message names the bag and what is wrong."""
-
-
-def split_ns(t_ns: int) -> tuple[int, int]:
-    sec, nsec = divmod(int(t_ns), 1_000_000_000)
-    return sec, nsec
-
-
 def stamp_ns(stamp: Any) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+    return join_ns(stamp.sec, stamp.nanosec)
 
 
 class BagWriter:
@@ -149,17 +145,6 @@ class BagWriter:
         msg = self._types[TEMPERATURE](header=self.header(t_ns), temperature=float(value_c),
                                       variance=float(variance))
         self.write(topic, TEMPERATURE, t_ns, msg)
-
-
-@dataclass
-class BagMessage:
-    topic: str
-    msgtype: str
-    receive_ns: int
-    data: bytes
-
-    def decode(self) -> Any:
-        return typestore().deserialize_cdr(self.data, self.msgtype)
 
 
 def topic_kind(topic: str, msgtype: str) -> tuple[str, str] | None:

@@ -120,7 +120,8 @@ class _BagFeeder:
         accel = sorted(t for t, k in kinds.items() if k and k[0] == "imu")
         temps = sorted(t for t, k in kinds.items() if k and k[0] == "temperature")
         has_blocks = any(k and k[0] == "block" for k in kinds.values())
-        if not has_blocks and not self._channels_checked:  # up front; with DAQ blocks, once the first blocks named their channels
+        # up front; with DAQ blocks, once the first blocks have named their channels
+        if not has_blocks and not self._channels_checked:
             self._check_channels(accel, temps)
         try:
             for batch in bag.batches():

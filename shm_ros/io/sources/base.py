@@ -6,7 +6,7 @@ messages together (see :mod:`shm_ros.io.imu_cdr`). Batches come in receive order
 is yielded, every message received before its ``complete_before_ns`` has been yielded, which is
 what lets the ingest cut windows while it reads.
 
-A source raises :class:`~shm_ros.io.bags.BagError` naming the file when its data ends early or is
+A source raises :class:`~shm_ros.io.errors.BagError` naming the file when its data ends early or is
 damaged, after yielding every message read before that point; it never switches to another way
 of reading once it has yielded something.
 """
@@ -16,11 +16,26 @@ from __future__ import annotations
 from collections.abc import Collection, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
-from shm_ros.io.bags import BagError, BagMessage
+from shm_ros.io.errors import BagError
+from shm_ros.io.typestore import typestore
+
+
+@dataclass
+class BagMessage:
+    """One raw message: topic, type, receive time and CDR bytes (``decode()`` when needed)."""
+
+    topic: str
+    msgtype: str
+    receive_ns: int
+    data: bytes
+
+    def decode(self) -> Any:
+        return typestore().deserialize_cdr(self.data, self.msgtype)
+
 
 #: Messages gathered into one batch by the sources that read one message at a time.
 BATCH_MESSAGES = 4096

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from shm_ros.io.bags import BagError
+from shm_ros.io.errors import BagError
 from shm_ros.io.sources.base import MessageSource
 from shm_ros.io.sources.mcap_chunks import MAGIC as MCAP_MAGIC
 from shm_ros.io.sources.mcap_chunks import McapChunkSource, inspect_mcap

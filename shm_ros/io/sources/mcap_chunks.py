@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from shm_ros.io.bags import BagError, BagMessage
-from shm_ros.io.sources.base import Batch, TopicMessages, messages_of
+from shm_ros.io.errors import BagError
+from shm_ros.io.sources.base import BagMessage, Batch, TopicMessages, messages_of
 from shm_ros.io.sources.compression import Lz4Error, ZstdError, lz4_decompress, zstd_decompress
 
 MAGIC = b"\x89MCAP0\r\n"

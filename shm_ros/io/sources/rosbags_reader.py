@@ -10,8 +10,8 @@ from collections.abc import Collection, Iterator
 from functools import lru_cache
 from pathlib import Path
 
-from shm_ros.io.bags import BagError, BagMessage
-from shm_ros.io.sources.base import Batch, batches_of
+from shm_ros.io.errors import BagError
+from shm_ros.io.sources.base import BagMessage, Batch, batches_of
 from shm_ros.io.sources.compression import ZstdError
 from shm_ros.io.typestore import typestore
 

@@ -13,8 +13,8 @@ from collections.abc import Collection, Iterator
 from enum import Enum
 from pathlib import Path
 
-from shm_ros.io.bags import BagError, BagMessage
-from shm_ros.io.sources.base import Batch, TopicMessages, messages_of
+from shm_ros.io.errors import BagError
+from shm_ros.io.sources.base import BagMessage, Batch, TopicMessages, messages_of
 from shm_ros.io.sources.compression import ZSTD_MAGIC, ZstdError, zstd_decompress
 
 #: Rows fetched (and handed on) together.

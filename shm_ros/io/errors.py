@@ -1,0 +1,7 @@
+"""Errors of reading and writing outside formats; each message names the file and what is wrong."""
+
+from __future__ import annotations
+
+
+class BagError(RuntimeError):
+    """A bag cannot be read or written; the message names the bag and what is wrong."""
