@@ -12,7 +12,9 @@ from rclpy.parameter import Parameter
 
 
 def overrides(parameters: dict[str, Any] | None) -> list[Parameter]:
-    return [Parameter(k, value=v) for k, v in (parameters or {}).items()]
+    """Parameter overrides from a dict (single-process graphs, tests); None leaves a parameter at
+    its default, as if it were not given."""
+    return [Parameter(k, value=v) for k, v in (parameters or {}).items() if v is not None]
 
 
 def _terminate(signum, frame) -> None:
