@@ -1,4 +1,4 @@
-"""`shm-ros identify BAG --structure S.yaml --out modes.json [--window SECONDS] [--method M]`.
+"""`shm-ros identify BAG --structure S.yaml --out modes.json [--window SECONDS] [--method M] ...`.
 
 Reads and windows the bag exactly as ``shm-ros ingest`` does, identifies every window with
 ``shm_ros.core.identify.identify_window`` and writes one record per window (contracts section 3):
@@ -17,38 +17,32 @@ import sys
 from pathlib import Path
 from typing import Any
 
+# older spellings of generated options, still accepted
+ALIASES = {"reference_channels": ["--references"], "preprocess.lowpass_hz": ["--lowpass"],
+           "preprocess.highpass_hz": ["--highpass"], "preprocess.target_rate_hz": ["--decimate-to"],
+           "preprocess.detrend": ["--detrend"]}
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.options import add_options
+    from shm_ros.core.identify import IdentifyConfig
+
     p = sub.add_parser("identify", help="identify modes of every window of a recording (SSI)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("bag", help="rosbag2 bag (MCAP or sqlite3 directory)")
     p.add_argument("--structure", required=True, help="structure YAML (sensors, optional input)")
     p.add_argument("--out", required=True, help="output JSON file (modes per window)")
     p.add_argument("--window", type=float, default=600.0, help="window length, s (default 600)")
-    p.add_argument("--method", default="ssi-cov", choices=["ssi-cov", "ssi-data", "ssi-io"],
-                   help="ssi-cov (default), ssi-data, or input-output ssi-io (needs `input:`)")
-    p.add_argument("--weighting", default=None, choices=["pc", "upc", "cva"],
-                   help="SSI-data weighting (default pc; upc = unweighted)")
     p.add_argument("--plots", default=None, help="directory for stabilization diagrams (PNG)")
-    p.add_argument("--max-order", type=int, default=None, help="largest model order (default 60)")
-    p.add_argument("--min-order", type=int, default=None, help="smallest model order (default 2)")
-    p.add_argument("--order-step", type=int, default=None, help="model order step (default 1)")
-    p.add_argument("--block-rows", type=int, default=None, help="block rows (default automatic)")
-    p.add_argument("--references", default=None,
-                   help="comma-separated reference sensor ids (SSI-cov/SSI-data; default all)")
-    p.add_argument("--lowpass", type=float, default=None, help="low-pass corner, Hz (e.g. 20)")
-    p.add_argument("--highpass", type=float, default=None, help="high-pass corner, Hz")
-    p.add_argument("--decimate-to", type=float, default=None,
-                   help="decimate (with anti-alias filter) to about this rate, Hz")
-    p.add_argument("--detrend", default=None, choices=["none", "constant", "linear"],
-                   help="offset/trend removal (default linear: gravity offsets and drift)")
-    p.add_argument("--no-uncertainty", action="store_true", help="skip the jackknife uncertainty")
     p.add_argument("--config", default=None,
-                   help="YAML/JSON file with IdentifyConfig fields (flags override it)")
+                   help="YAML/JSON file with IdentifyConfig fields (options given here override it)")
+    add_options(p.add_argument_group("identification (IdentifyConfig; the identify node's "
+                                     "parameters of the same names)"), IdentifyConfig, aliases=ALIASES)
     p.set_defaults(func=run)
 
 
 def build_config(args: argparse.Namespace):
+    from shm_ros.commands.options import config_from_args
     from shm_ros.core.identify import IdentifyConfig
 
     base: dict[str, Any] = {}
@@ -62,31 +56,9 @@ def build_config(args: argparse.Namespace):
         if not isinstance(base, dict):
             raise ValueError(f"{args.config}: identify configuration must be a mapping")
     try:
-        cfg = IdentifyConfig.from_dict(base)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{args.config}: {exc}") from exc
-    cfg.method = args.method
-    for flag, field in (("max_order", "max_order"), ("min_order", "min_order"),
-                        ("order_step", "order_step"), ("block_rows", "block_rows")):
-        if getattr(args, flag) is not None:
-            setattr(cfg, field, int(getattr(args, flag)))
-    if args.references:
-        cfg.reference_channels = [r.strip() for r in args.references.split(",") if r.strip()]
-    if args.lowpass is not None:
-        cfg.preprocess.lowpass_hz = args.lowpass
-    if args.highpass is not None:
-        cfg.preprocess.highpass_hz = args.highpass
-    if args.decimate_to is not None:
-        cfg.preprocess.target_rate_hz = args.decimate_to
-    if args.detrend is not None:
-        cfg.preprocess.detrend = args.detrend
-    if args.no_uncertainty:
-        cfg.uncertainty = False
-    if args.weighting is not None:
-        cfg.weighting = args.weighting
-    try:
+        cfg = config_from_args(IdentifyConfig, args, base=IdentifyConfig.from_dict(base))
         return cfg.validate()
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         raise ValueError(f"{args.config or 'identify'}: {exc}") from exc
 
 
@@ -96,6 +68,8 @@ def _num(x: float | None) -> float | None:
 
 def run(args: argparse.Namespace) -> int:
     from dataclasses import asdict
+
+    import numpy as np
 
     from shm_ros.core.identify import identify_window_detailed
     from shm_ros.core.provenance import stamp_output
@@ -122,12 +96,12 @@ def run(args: argparse.Namespace) -> int:
             print(str(d), file=sys.stderr)
     plots = Path(args.plots) if args.plots else None
     cfg.spectrum = plots is not None
-    records = []
+    records: list[dict[str, Any]] = []
     n_ok = 0
     for w in res.windows:
         try:
             result = identify_window_detailed(w, cfg)
-        except (ValueError, ArithmeticError, np_linalg_error()) as exc:
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
             records.append({"start": iso_utc(w.start_ns), "end": iso_utc(w.end_ns),
                             "temperature_c": _num(w.temperature_c), "window_id": w.window_id,
                             "modes": [], "error": str(exc)})
@@ -151,9 +125,3 @@ def run(args: argparse.Namespace) -> int:
     n_modes = sum(len(r["modes"]) for r in records)
     print(f"{len(records)} windows ({n_ok} identified), {n_modes} modes -> {out}")
     return 0 if (n_ok or not res.windows) else 1
-
-
-def np_linalg_error() -> type:
-    import numpy as np
-
-    return np.linalg.LinAlgError

@@ -14,20 +14,20 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import Any
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.options import add_options
     from shm_ros.core.tracking import TrackingConfig
 
     p = sub.add_parser("track", help="track modes across windows (identities, temperature, novelty)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("modes", help="modes JSON of `shm-ros identify`")
     p.add_argument("--out", required=True, help="output directory")
-    for f in dataclasses.fields(TrackingConfig):
-        kind = {"int": int, "str": str}.get(str(f.type), float)
-        p.add_argument("--" + f.name.replace("_", "-"), dest=f"cfg_{f.name}", type=kind,
-                       default=None, help=f"(default {f.default})")
     p.add_argument("--no-plot", action="store_true", help="skip tracking.png")
+    add_options(p.add_argument_group("tracking (TrackingConfig; the track node's parameters of the "
+                                     "same names)"), TrackingConfig)
     p.set_defaults(func=run)
 
 
@@ -36,6 +36,7 @@ def _num(v: float) -> float | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from shm_ros.commands.options import config_from_args
     from shm_ros.core.provenance import stamp_output
     from shm_ros.core.tracking import TrackingConfig, track
     from shm_ros.io import jsonio
@@ -43,9 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from shm_ros.io.tables import write_tracked_modes
 
     try:
-        cfg = TrackingConfig(**{f.name: getattr(args, f"cfg_{f.name}")
-                                for f in dataclasses.fields(TrackingConfig)
-                                if getattr(args, f"cfg_{f.name}") is not None})
+        cfg = config_from_args(TrackingConfig, args)
         estimates = read_modes_json(args.modes)
         res = track(estimates, cfg)
     except (OSError, KeyError, ValueError, json.JSONDecodeError) as exc:
@@ -55,20 +54,21 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     write_tracked_modes(out / "tracked_modes.csv", res.observations)
     obs = res.observations
-    payload = {
+    payload: dict[str, Any] = {
         "reference_modes": [{"mode": r.number, "frequency_hz": r.frequency_hz,
                              "presence": r.presence,
-                             "mode_shape": {s: _num(v) for s, v in zip(obs.sensor_ids, r.shape)}}
+                             "mode_shape": {s: _num(v) for s, v in zip(obs.sensor_ids, r.shape, strict=True)}}
                             for r in res.reference],
         "environment": [{k: (_num(v) if isinstance(v, float) else v)
                          for k, v in dataclasses.asdict(e).items()} for e in res.environment],
         "covariate": cfg.covariate,
         "found_fraction": {str(n): float(v) for n, v in
-                           zip(obs.mode_numbers, (obs.frequencies_hz == obs.frequencies_hz).mean(0))},
+                           zip(obs.mode_numbers, (obs.frequencies_hz == obs.frequencies_hz).mean(0),
+                               strict=True)},
         "unassigned_modes": res.unassigned,
         "novelty": {"threshold": _num(res.novelty_threshold), "training_windows": res.n_training,
                     "alarms": int(res.novelty_alarm.sum()),
-                    "alarm_windows": [w for w, a in zip(res.window_ids, res.novelty_alarm) if a],
+                    "alarm_windows": [w for w, a in zip(res.window_ids, res.novelty_alarm, strict=True) if a],
                     "scores": [_num(v) for v in res.novelty_score]},
         "notes": res.notes,
     }

@@ -18,11 +18,15 @@ from typing import Any
 
 import numpy as np
 
+# older spellings of generated options, still accepted
+ALIASES = {"n_chains": ["--chains"], "n_steps": ["--steps"], "rhat_target": ["--rhat"],
+           "ess_target": ["--ess"], "use_shapes": ["--shapes"]}
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.options import add_options
     from shm_ros.core.bayes.update import UpdateConfig
 
-    d = UpdateConfig()  # defaults are declared once, in the core's config
     p = sub.add_parser("update", help="Bayesian updating of the structure's parameters",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--structure", required=True, help="structure file (YAML, contracts section 2)")
@@ -30,45 +34,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--modes", help="tracked-modes table (CSV, contracts section 4)")
     src.add_argument("--bag", help="recording (rosbag2); identified and tracked first")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--sampler", choices=("emcee", "mh"), default=d.sampler,
-                   help="emcee ensemble (default) or adaptive Metropolis-Hastings")
-    p.add_argument("--likelihood", choices=("gaussian", "fitness", "time"), default=d.likelihood,
-                   help="gaussian prediction error on modal data (default), the bridge paper's "
-                        "fitness exp(-J/2k^2), or time: accelerations under the measured input")
-    p.add_argument("--variance", choices=("marginal", "sampled"), default=d.variance,
-                   help="prediction-error variances: integrated out (default) or sampled")
-    p.add_argument("--alpha", type=float, default=d.alpha, help="fitness weight of frequencies")
-    p.add_argument("--beta", type=float, default=d.beta, help="fitness weight of 1 - MAC")
-    p.add_argument("--k", type=float, default=d.k, help="fitness tolerance k")
-    p.add_argument("--no-shapes", action="store_true", help="use frequencies only")
-    p.add_argument("--reduction", choices=("auto", "iirs", "none"), default=d.reduction,
-                   help="IIRS reduction to the measured DOFs (auto: when it is exact and cheaper)")
-    p.add_argument("--chains", type=int, default=d.n_chains, help="walkers / chains (0 = automatic)")
-    p.add_argument("--steps", type=int, default=d.n_steps, help="first run length before diagnostics")
-    p.add_argument("--max-steps", type=int, default=d.max_steps, help="upper bound on steps")
-    p.add_argument("--rhat", type=float, default=d.rhat_target, help="R-hat target")
-    p.add_argument("--ess", type=float, default=d.ess_target, help="ESS target per parameter")
-    p.add_argument("--no-evidence", action="store_true", help="skip the nested-sampling evidence")
-    p.add_argument("--n-live", type=int, default=d.n_live, help="live points of nested sampling")
     p.add_argument("--study", action="store_true",
                    help="run the prior x (alpha, beta) sweep and print the RMSE/MAC table")
     p.add_argument("--refer-to", metavar="COVARIATE[=VALUE]", default=None,
                    help="remove a linear dependence of the frequencies on a covariate column "
                         "(e.g. temperature_c=10) before updating")
     p.add_argument("--window", type=float, default=None, help="--bag: window length, s")
-    p.add_argument("--seed", type=int, default=d.seed, help="random seed")
     p.add_argument("--no-plots", action="store_true", help="skip corner and trace plots")
+    # defaults are declared once, in the core's config
+    add_options(p.add_argument_group("updating (UpdateConfig; the update node's parameters of the "
+                                     "same names)"), UpdateConfig, aliases=ALIASES)
     p.set_defaults(func=run)
 
 
 def _config(args: argparse.Namespace):
+    from shm_ros.commands.options import config_from_args
     from shm_ros.core.bayes.update import UpdateConfig
 
-    return UpdateConfig(likelihood=args.likelihood, sampler=args.sampler, use_shapes=not args.no_shapes,
-                        reduction=args.reduction, variance=args.variance, alpha=args.alpha,
-                        beta=args.beta, k=args.k, n_chains=args.chains, n_steps=args.steps,
-                        max_steps=args.max_steps, rhat_target=args.rhat, ess_target=args.ess,
-                        evidence=not args.no_evidence, n_live=args.n_live, seed=args.seed)
+    return config_from_args(UpdateConfig, args)
 
 
 def _observations(args: argparse.Namespace, spec: Any, model: Any):
@@ -94,10 +77,10 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
     observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
     if args.likelihood == "time":
         return _acceleration_record(args, spec, windows, observed)
+    from threadpoolctl import threadpool_limits
+
     from shm_ros.core.bayes.pairing import observations_for_model
     from shm_ros.core.identify import identify_window
-
-    from threadpoolctl import threadpool_limits
 
     estimates = []
     with threadpool_limits(1, "blas"):  # same result whatever the machine's thread count

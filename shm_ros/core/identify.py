@@ -8,6 +8,7 @@ automatic clustering -> real mode shapes labelled by sensor id (contracts sectio
 
 from __future__ import annotations
 
+import enum
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -15,52 +16,89 @@ import scipy.linalg as sla
 import scipy.signal as sig
 
 from shm_ros.core import ssi
+from shm_ros.core.config import check_choice, option
 from shm_ros.core.modal import mac_matrix
-from shm_ros.core.preprocess import PreprocessConfig, Prepared, preprocess
-from shm_ros.core.stabilization import (Diagram, PickedMode, PickingConfig, StabilityConfig,
-                                        classify, pick_modes, real_mode_shape)
+from shm_ros.core.preprocess import Prepared, PreprocessConfig, preprocess
+from shm_ros.core.stabilization import (
+    Diagram,
+    PickedMode,
+    PickingConfig,
+    StabilityConfig,
+    classify,
+    pick_modes,
+    real_mode_shape,
+)
 from shm_ros.core.types import ModalEstimate, Mode, Window
 
-__all__ = ["IdentifyConfig", "IdentificationResult", "identify_window", "identify_window_detailed",
-           "identify_array", "METHODS"]
+__all__ = ["Method", "Weighting", "LQ", "IdentifyConfig", "IdentificationResult", "identify_window",
+           "identify_window_detailed", "identify_array", "METHODS"]
 
-METHODS = ("ssi-cov", "ssi-data", "ssi-io")
+
+class Method(enum.StrEnum):
+    SSI_COV = "ssi-cov"  # covariance-driven stochastic subspace identification
+    SSI_DATA = "ssi-data"  # data-driven
+    SSI_IO = "ssi-io"  # input-output (needs an input channel)
+
+
+class Weighting(enum.StrEnum):  # SSI-data weighting (see ssi.ssi_data)
+    PC = "pc"
+    UPC = "upc"  # unweighted
+    CVA = "cva"
+
+
+class LQ(enum.StrEnum):  # LQ factorisation of SSI-data / SSI-io
+    AUTO = "auto"
+    GRAM = "gram"
+    QR = "qr"
+
+
+METHODS = tuple(m.value for m in Method)
 
 
 @dataclass
 class IdentifyConfig:
-    method: str = "ssi-cov"  # ssi-cov | ssi-data | ssi-io
-    block_rows: int | None = None  # None: max(20, ceil(max_order / n_refs) + 2)
-    max_order: int = 60
-    min_order: int = 2
-    order_step: int = 1
-    reference_channels: list[str] | None = None  # SSI-cov / SSI-data references (None = all)
-    input_channel: str | None = None  # SSI-io input (None = the window's input_channel)
-    lq: str = "auto"  # SSI-data / SSI-io LQ factor: auto | gram | qr
-    weighting: str = "pc"  # SSI-data weighting: pc | upc (unweighted) | cva (see ssi.ssi_data)
+    method: str = option(Method.SSI_COV.value, "identification method: covariance-driven, data-driven "
+                         "or input-output SSI (ssi-io needs an input sensor)", choices=Method)
+    block_rows: int | None = option(None, "block rows of the Hankel matrix (unset: "
+                                    "max(20, ceil(max_order / references) + 2))")
+    max_order: int = option(60, "largest model order")
+    min_order: int = option(2, "smallest model order")
+    order_step: int = option(1, "model order step")
+    reference_channels: list[str] | None = option(None, "reference sensor ids of SSI-cov / SSI-data "
+                                                  "(unset: all channels)")
+    input_channel: str | None = option(None, "input sensor id of SSI-io (unset: the structure "
+                                       "file's input sensor)")
+    lq: str = option(LQ.AUTO.value, "LQ factorisation of SSI-data / SSI-io", choices=LQ)
+    weighting: str = option(Weighting.PC.value, "SSI-data weighting: pc, upc (unweighted) or cva",
+                            choices=Weighting)
+    # nested configurations: their options are "preprocess.<name>" etc.
     preprocess: PreprocessConfig = field(default_factory=PreprocessConfig)
     stability: StabilityConfig = field(default_factory=StabilityConfig)
     picking: PickingConfig = field(default_factory=PickingConfig)
-    use_filters: bool = True  # two-A + MPC filters (False = plain stabilization diagram)
-    exclude_input: bool = True  # output-only methods leave the window's input channel out
-    uncertainty: bool = True  # jackknife over data blocks (SSI-cov, SSI-data)
-    uncertainty_blocks: int = 10
-    spectrum: bool = False  # keep the mean output spectrum in the diagram (for plots)
+    use_filters: bool = option(True, "two-A and MPC filters of spurious poles (false: plain "
+                               "stabilization diagram)")
+    exclude_input: bool = option(True, "output-only methods leave the window's input channel out")
+    # The jackknife costs about 0.3-0.45 CPU-s per 10-minute window (the SSI itself about 0.2 s):
+    # worth it for the standard deviations every estimate carries, live as well as offline.
+    uncertainty: bool = option(True, "jackknife standard deviations of frequency and damping over "
+                               "data blocks (SSI-cov, SSI-data)")
+    uncertainty_blocks: int = option(10, "data blocks of the jackknife")
+    spectrum: bool = option(False, "keep the mean output spectrum in the diagram (set by the "
+                            "command's --plots)", ros=False, cli=False)
 
     def to_dict(self) -> dict:
         return asdict(self)
 
-    def validate(self) -> "IdentifyConfig":
+    def validate(self) -> IdentifyConfig:
         """Raise ``ValueError`` naming the option when a choice is unknown."""
-        if self.method not in METHODS:
-            raise ValueError(f"identify.method must be one of {METHODS}, got {self.method!r}")
-        if self.weighting not in ssi.WEIGHTINGS:
-            raise ValueError(f"identify.weighting must be one of {ssi.WEIGHTINGS}, "
-                             f"got {self.weighting!r}")
+        check_choice("identify", "method", self.method, Method)
+        check_choice("identify", "weighting", self.weighting, Weighting)
+        check_choice("identify", "lq", self.lq, LQ)
+        self.preprocess.validate()
         return self
 
     @classmethod
-    def from_dict(cls, d: dict) -> "IdentifyConfig":
+    def from_dict(cls, d: dict) -> IdentifyConfig:
         d = dict(d)
         sub = {"preprocess": PreprocessConfig, "stability": StabilityConfig, "picking": PickingConfig}
         for key, typ in sub.items():

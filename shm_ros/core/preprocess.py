@@ -7,27 +7,43 @@ Butterworth, ``scipy.signal.sosfiltfilt``) -> decimation with anti-alias filter
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.signal as sig
 
-__all__ = ["PreprocessConfig", "Prepared", "preprocess"]
+from shm_ros.core.config import check_choice, option
+
+__all__ = ["Detrend", "PreprocessConfig", "Prepared", "preprocess"]
 
 _BAD_STATUS = {"dead", "clipped", "dropped"}
+
+
+class Detrend(enum.StrEnum):
+    NONE = "none"
+    CONSTANT = "constant"  # offsets (e.g. gravity)
+    LINEAR = "linear"  # offsets and drift
 
 
 @dataclass
 class PreprocessConfig:
     """Switchable pre-processing; the defaults only remove offsets and linear trends."""
 
-    channels: list[str] | None = None  # channel selection by name; None = all usable channels
-    detrend: str = "linear"  # "none" | "constant" (offsets, e.g. gravity) | "linear" (+ drift)
-    highpass_hz: float | None = None  # band-pass lower corner (None = off)
-    lowpass_hz: float | None = None  # band-pass upper corner (the building paper: 20 Hz)
-    filter_order: int = 8  # Butterworth order of each band edge (zero-phase, so doubled)
-    target_rate_hz: float | None = None  # decimate by the largest integer factor not below it
-    drop_bad_channels: bool = True  # drop channels whose status is dead/clipped/dropped or NaN
+    channels: list[str] | None = option(None, "channels to identify from, by name (unset: all usable)")
+    detrend: str = option(Detrend.LINEAR.value, "offset/trend removal: none, constant (offsets, e.g. "
+                          "gravity) or linear (offsets and drift)", choices=Detrend)
+    highpass_hz: float | None = option(None, "band-pass lower corner, Hz (unset: off)")
+    lowpass_hz: float | None = option(None, "band-pass upper corner, Hz (unset: off; e.g. 20)")
+    filter_order: int = option(8, "Butterworth order of each band edge (zero-phase, so doubled)")
+    target_rate_hz: float | None = option(None, "decimate (with anti-alias filter) by the largest "
+                                          "integer factor not below this rate, Hz (unset: off)")
+    drop_bad_channels: bool = option(True, "drop channels whose status is dead/clipped/dropped or "
+                                     "that hold NaN or a constant")
+
+    def validate(self) -> PreprocessConfig:
+        check_choice("preprocess", "detrend", self.detrend, Detrend)
+        return self
 
 
 @dataclass
@@ -101,8 +117,7 @@ def preprocess(samples: np.ndarray, fs: float, channel_names: list[str],
     if not np.all(finite[idx]):
         raise ValueError("selected channels contain NaN/inf samples (enable drop_bad_channels)")
 
-    if cfg.detrend not in ("none", "constant", "linear"):
-        raise ValueError(f"preprocess.detrend must be none|constant|linear, got {cfg.detrend!r}")
+    cfg.validate()
     if cfg.detrend != "none":
         x = _detrend(x, cfg.detrend == "linear")
 

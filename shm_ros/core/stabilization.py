@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.cluster.hierarchy import fcluster, linkage
 
+from shm_ros.core.config import option
 from shm_ros.core.modal import mac_matrix
 from shm_ros.core.modal import real_shape as real_mode_shape
 from shm_ros.core.ssi import PoleSet
@@ -33,25 +34,27 @@ __all__ = ["StabilityConfig", "PickingConfig", "PoleFlags", "PickedMode", "mpc",
 
 @dataclass
 class StabilityConfig:
-    freq_tol: float = 0.01  # relative frequency change between consecutive orders
-    damping_tol: float = 0.05  # relative damping change between consecutive orders
-    mac_min: float = 0.98  # MAC between consecutive orders
-    two_a: bool = True  # require agreement of the forward and backward estimates of A
-    two_a_freq_tol: float = 0.01
-    two_a_damping_tol: float = 0.05
-    two_a_mac_min: float = 0.9
-    mpc_min: float = 0.5  # 0 disables the MPC filter
-    damping_min: float = 0.0  # physical limits: damping in (damping_min, damping_max]
-    damping_max: float = 0.20
-    freq_min_hz: float = 0.0
-    freq_max_hz: float | None = None  # None = 0.45 x sample rate (below the anti-alias roll-off)
+    freq_tol: float = option(0.01, "stable pole: relative frequency change between consecutive orders")
+    damping_tol: float = option(0.05, "stable pole: relative damping change between consecutive orders")
+    mac_min: float = option(0.98, "stable pole: MAC between consecutive orders")
+    two_a: bool = option(True, "require agreement of the forward and backward estimates of A")
+    two_a_freq_tol: float = option(0.01, "two-A agreement: relative frequency difference")
+    two_a_damping_tol: float = option(0.05, "two-A agreement: relative damping difference")
+    two_a_mac_min: float = option(0.9, "two-A agreement: MAC")
+    mpc_min: float = option(0.5, "smallest modal phase collinearity (0 disables the MPC filter)")
+    damping_min: float = option(0.0, "physical pole: damping ratio above this")
+    damping_max: float = option(0.20, "physical pole: damping ratio at most this")
+    freq_min_hz: float = option(0.0, "physical pole: frequency at least this, Hz")
+    freq_max_hz: float | None = option(None, "physical pole: frequency at most this, Hz (unset: "
+                                       "0.45 x sample rate, below the anti-alias roll-off)")
 
 
 @dataclass
 class PickingConfig:
-    distance_cutoff: float = 0.03  # of |df|/f + (1 - MAC) in average-linkage clustering
-    min_fraction: float = 0.10  # a mode must be found at this fraction of the evaluated orders
-    min_poles: int = 5  # ... and at least at this many orders
+    distance_cutoff: float = option(0.03, "cut-off of |df|/f + (1 - MAC) in the average-linkage "
+                                    "clustering of poles")
+    min_fraction: float = option(0.10, "a mode is found at least at this fraction of the evaluated orders")
+    min_poles: int = option(5, "a mode is found at least at this many orders")
 
 
 @dataclass

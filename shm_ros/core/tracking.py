@@ -32,6 +32,7 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.optimize import linear_sum_assignment
 
 from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.config import option
 from shm_ros.core.modal import mac as modal_mac
 from shm_ros.core.types import ModalEstimate
 
@@ -44,15 +45,19 @@ MIN_TRAINING = 10  # windows with a novelty score needed before alarms are raise
 
 @dataclass
 class TrackingConfig:
-    reference_windows: int = 24  # windows that establish the tracked mode set
-    min_presence: float = 0.5  # a tracked mode is found in at least this fraction of them
-    cluster_cutoff: float = 0.05  # of |df|/f + (1 - MAC) when clustering the reference windows
-    freq_tol: float = 0.05  # assignment gate: |f - f_ref| / f_ref
-    mac_min: float = 0.8  # assignment gate: MAC with the reference shape
-    adapt: float = 0.1  # exponential average of the reference after each assignment (0 = fixed)
-    covariate: str = "temperature_c"  # environmental variable of the regression
-    training_fraction: float = 0.25  # first part of the windows: environmental model, threshold
-    alarm_quantile: float = 0.99  # novelty threshold = this quantile of the training scores
+    reference_windows: int = option(24, "windows that establish the tracked mode set")
+    min_presence: float = option(0.5, "a tracked mode is found in at least this fraction of the "
+                                 "reference windows")
+    cluster_cutoff: float = option(0.05, "cut-off of |df|/f + (1 - MAC) when clustering the "
+                                   "reference windows' modes")
+    freq_tol: float = option(0.05, "assignment gate: |f - f_ref| / f_ref")
+    mac_min: float = option(0.8, "assignment gate: MAC with the reference shape")
+    adapt: float = option(0.1, "exponential average of the reference after each assignment (0 = fixed)")
+    covariate: str = option("temperature_c", "environmental variable of the frequency regression")
+    # the node trains on its first ``training_windows`` rows instead (it cannot know the total)
+    training_fraction: float = option(0.25, "first fraction of the windows that trains the "
+                                      "environmental model and the novelty threshold", ros=False)
+    alarm_quantile: float = option(0.99, "novelty threshold = this quantile of the training scores")
 
     def __post_init__(self) -> None:
         if self.reference_windows < 1:

@@ -3,51 +3,46 @@
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 
-from shm_ros.core import ssi
-from shm_ros.core.identify import METHODS, IdentifyConfig, identify_window
+from shm_ros.core.config import option
+from shm_ros.core.identify import IdentifyConfig, identify_window
 from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_to_msg, window_from_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import stream_qos
 
 
+@dataclass
+class IdentifyNodeConfig:
+    """Settings of the node itself (the identification's are :class:`IdentifyConfig`)."""
+
+    frame_id: str = option("", "frame_id in the header of the published estimates")
+
+
 class IdentifyNode(Node):
+    """Parameters: every option of :class:`IdentifyConfig` (``preprocess.*``, ``stability.*`` and
+    ``picking.*`` for its nested configurations) and of :class:`IdentifyNodeConfig`."""
+
     def __init__(self, name: str = "identify", parameters: dict[str, Any] | None = None) -> None:
         super().__init__(name, parameter_overrides=overrides(parameters))
-        defaults = IdentifyConfig()
-        self.declare_parameter("method", defaults.method)
-        self.declare_parameter("max_order", defaults.max_order)
-        self.declare_parameter("order_step", defaults.order_step)
-        self.declare_parameter("reference_channels", [""])
-        self.declare_parameter("uncertainty", False)
-        self.declare_parameter("weighting", defaults.weighting)  # SSI-data: pc | upc | cva
-        self.declare_parameter("frame_id", "")
-        get = lambda n: self.get_parameter(n).value  # noqa: E731
-        method = str(get("method"))
-        if method not in METHODS:
-            raise SystemExit(f"identify: parameter 'method' must be one of {METHODS}, not {method!r}")
-        weighting = str(get("weighting"))
-        if weighting not in ssi.WEIGHTINGS:
-            raise SystemExit(f"identify: parameter 'weighting' must be one of {ssi.WEIGHTINGS}, "
-                             f"not {weighting!r}")
-        refs = [r for r in get("reference_channels") if r]
-        self.config = IdentifyConfig(method=method, max_order=int(get("max_order")),
-                                     order_step=int(get("order_step")),
-                                     reference_channels=refs or None,
-                                     uncertainty=bool(get("uncertainty")), weighting=weighting)
-        self.frame_id = str(get("frame_id"))
+        self.config = load_config(self, IdentifyConfig)
+        self.frame_id = load_config(self, IdentifyNodeConfig).frame_id
         self.diag = Diagnostics(self, "identify")
-        self.pub = self.create_publisher(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
-                                         topics.MODAL_ESTIMATES, stream_qos())
+        self.pub: Publisher[Any] = self.create_publisher(
+            topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]), topics.MODAL_ESTIMATES,
+            stream_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS,
                                  self._on_window, stream_qos())
         self.count = 0
-        self.get_logger().info(f"identify with {method}, orders up to {self.config.max_order}")
+        self.get_logger().info(f"identify with {self.config.method}, orders up to {self.config.max_order}"
+                               + ("" if self.config.uncertainty else ", no uncertainty"))
 
     def _on_window(self, msg) -> None:
         t0 = time.perf_counter()

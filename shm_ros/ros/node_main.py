@@ -11,8 +11,17 @@ import rclpy
 from rclpy.parameter import Parameter
 
 
-def overrides(parameters: dict[str, Any] | None) -> list[Parameter]:
-    return [Parameter(k, value=v) for k, v in (parameters or {}).items()]
+def overrides(parameters: dict[str, Any] | None, prefix: str = "") -> list[Parameter]:
+    """Parameter overrides from a dict (single-process graphs, tests). A nested mapping gives
+    dotted names, as in a parameters file (``{"preprocess": {"lowpass_hz": 20.0}}`` is
+    ``preprocess.lowpass_hz``); None leaves a parameter at its default, as if it were not given."""
+    out: list[Parameter] = []
+    for key, value in (parameters or {}).items():
+        if isinstance(value, dict):
+            out += overrides(value, f"{prefix}{key}.")
+        elif value is not None:
+            out.append(Parameter(prefix + key, value=value))
+    return out
 
 
 def _terminate(signum, frame) -> None:

@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import enum
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
 
+from shm_ros.core.config import option
 from shm_ros.io.bags import BagWriter
 from shm_ros.ros import topics
 from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import latched_qos, pipeline_qos, stream_qos
 
 DEFAULT_TOPICS = [topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES, topics.POSTERIOR,
@@ -18,17 +22,29 @@ LATCHED = {topics.POSTERIOR, topics.VERDICT}
 STREAMS = {topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES}
 
 
+class Storage(enum.StrEnum):
+    MCAP = "mcap"  # what `ros2 bag record` writes
+    SQLITE3 = "sqlite3"
+
+
+@dataclass
+class RecorderNodeConfig:
+    output: str = option("shm_output_bag", "output bag directory")
+    topics: list[str] = option(DEFAULT_TOPICS, "topics to record (pipeline topics of known type)")
+    storage: str = option(Storage.MCAP.value, "bag storage", choices=Storage)
+
+
 class RecorderNode(Node):
+    """Parameters: the options of :class:`RecorderNodeConfig`."""
+
     def __init__(self, name: str = "recorder", parameters: dict[str, Any] | None = None) -> None:
         super().__init__(name, parameter_overrides=overrides(parameters))
-        self.declare_parameter("output", "shm_output_bag")
-        self.declare_parameter("topics", DEFAULT_TOPICS)
-        self.declare_parameter("storage", "mcap")
-        out = Path(self.get_parameter("output").value)
-        self.writer = BagWriter(out, storage=self.get_parameter("storage").value)
+        settings = load_config(self, RecorderNodeConfig)
+        out = Path(settings.output)
+        self.writer = BagWriter(out, storage=settings.storage)
         self.writer.__enter__()
         self.count = 0
-        for topic in self.get_parameter("topics").value:
+        for topic in settings.topics:
             msgtype = topics.TYPES.get(topic)
             if msgtype is None:
                 self.get_logger().error(f"parameter topics: no known type for {topic!r}; not recorded")

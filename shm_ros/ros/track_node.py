@@ -8,41 +8,49 @@ also a WARN diagnostic.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 
+from shm_ros.core.config import option
 from shm_ros.core.tracking import Tracker, TrackingConfig
 from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_from_msg, tracked_row_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import stream_qos
 
 
+@dataclass
+class TrackNodeConfig:
+    """Settings of the node itself (the tracking's are :class:`TrackingConfig`; its
+    ``training_fraction`` is for a whole campaign offline, the node counts windows instead)."""
+
+    training_windows: int = option(144, "first rows that train the environmental model and the "
+                                   "novelty threshold (144: one day of 10-minute windows)")
+    frame_id: str = option("", "frame_id in the header of the published tracked modes")
+
+
 class TrackNode(Node):
+    """Parameters: the options of :class:`TrackingConfig` offered to nodes and of
+    :class:`TrackNodeConfig`."""
+
     def __init__(self, name: str = "track", parameters: dict[str, Any] | None = None) -> None:
         super().__init__(name, parameter_overrides=overrides(parameters))
-        d = TrackingConfig()
-        for key, value in (("reference_windows", d.reference_windows), ("min_presence", d.min_presence),
-                           ("freq_tol", d.freq_tol), ("mac_min", d.mac_min), ("adapt", d.adapt),
-                           ("covariate", d.covariate), ("alarm_quantile", d.alarm_quantile),
-                           ("training_windows", 144), ("frame_id", "")):
-            self.declare_parameter(key, value)
-        get = lambda n: self.get_parameter(n).value  # noqa: E731
+        cfg = load_config(self, TrackingConfig)
+        settings = load_config(self, TrackNodeConfig)
         try:
-            cfg = TrackingConfig(reference_windows=int(get("reference_windows")),
-                                 min_presence=float(get("min_presence")),
-                                 freq_tol=float(get("freq_tol")), mac_min=float(get("mac_min")),
-                                 adapt=float(get("adapt")), covariate=str(get("covariate")),
-                                 alarm_quantile=float(get("alarm_quantile")))
-            self.tracker = Tracker(cfg, training_windows=int(get("training_windows")))
+            self.tracker = Tracker(cfg, training_windows=settings.training_windows)
         except ValueError as exc:
-            raise SystemExit(f"track: parameter error: {exc}") from exc
-        self.frame_id = str(get("frame_id"))
+            raise SystemExit(f"{self.get_name()}: parameter error: {exc}") from exc
+        self.frame_id = settings.frame_id
         self.diag = Diagnostics(self, "track")
-        self.pub = self.create_publisher(topics.message_class(topics.TYPES[topics.TRACKED_MODES]),
-                                         topics.TRACKED_MODES, stream_qos())
+        self.pub: Publisher[Any] = self.create_publisher(
+            topics.message_class(topics.TYPES[topics.TRACKED_MODES]), topics.TRACKED_MODES,
+            stream_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
                                  topics.MODAL_ESTIMATES, self._on_estimate, stream_qos())
         self.published = 0

@@ -1,81 +1,160 @@
 """update: modal estimates in, posterior summary out (re-run as new windows arrive).
 
-Accumulates ``/shm/modal_estimates``; once ``min_new_windows`` new windows have arrived (or on the
-first ``min_windows``), warm-starts from the last posterior, pairs every window's modes with the nominal model by MAC and calls
-:func:`shm_ros.core.bayes.update.update`; publishes ``/shm/posterior`` (latched) and writes
-``posterior.json`` to ``output_dir`` when set.
+Accumulates ``/shm/modal_estimates``; on the first ``min_windows`` windows, and then whenever
+``min_new_windows`` new ones have arrived, it pairs every window's modes with the nominal model by
+MAC and calls :func:`shm_ros.core.bayes.update.update`, warm-started from the last posterior;
+publishes ``/shm/posterior`` (latched) and writes ``posterior.json`` to ``output_dir`` when set.
+
+A run (seconds to minutes) goes to a worker process (:mod:`shm_ros.ros.update_worker`): the node
+keeps receiving meanwhile. Windows that arrive during a run are kept; when it is done, the next
+run starts at once if enough new windows came, with every window received by then (so at most one
+run is ever waiting). A timer in the executor thread collects the finished run and publishes. The
+``progress`` diagnostic says what the node is doing ("sampling, 30 windows, started at ...") with
+the values ``received`` (estimates so far), ``sampling`` and ``run_windows``; it is published on
+every estimate, at the start and end of a run and every 30 s during one.
 """
 
 from __future__ import annotations
 
 import json
+import multiprocessing
 import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 
-from shm_ros.core.bayes.pairing import observations_for_model
-from shm_ros.core.bayes.update import UpdateConfig, update
-from shm_ros.ros import topics
+from shm_ros.core.bayes.update import Posterior, UpdateConfig
+from shm_ros.core.config import option
+from shm_ros.ros import topics, update_worker
 from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
+
+PROGRESS_EVERY_S = 30.0
+
+
+@dataclass
+class UpdateNodeConfig:
+    """Settings of the node itself (the updating's are :class:`UpdateConfig`)."""
+
+    structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
+    min_windows: int = option(10, "windows received before the first run")
+    min_new_windows: int = option(10, "new windows received before the next run")
+    output_dir: str | None = option(None, "directory of posterior.json, rewritten after every run "
+                                    "(unset: not written)")
 
 
 class UpdateNode(Node):
+    """Parameters: every option of :class:`UpdateConfig` and of :class:`UpdateNodeConfig`."""
+
     def __init__(self, name: str = "update", parameters: dict[str, Any] | None = None) -> None:
         super().__init__(name, parameter_overrides=overrides(parameters))
-        defaults = UpdateConfig()
-        for key, value in (("structure", ""), ("min_windows", 10), ("min_new_windows", 10),
-                           ("likelihood", "gaussian"), ("sampler", defaults.sampler),
-                           ("n_steps", defaults.n_steps), ("evidence", False), ("seed", 0),
-                           ("output_dir", "")):
-            self.declare_parameter(key, value)
-        get = lambda n: self.get_parameter(n).value  # noqa: E731
+        self.config = load_config(self, UpdateConfig)
+        self.settings = load_config(self, UpdateNodeConfig)
+        if not self.settings.structure:
+            raise SystemExit(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) "
+                             "is required")
+        self.structure: str = self.settings.structure
         from shm_ros.core.models import build_model
         from shm_ros.io.structure import load_structure
 
-        if not get("structure"):
-            raise SystemExit("update: parameter 'structure' (path of the structure YAML) is required")
-        self.spec = load_structure(get("structure"))
-        self.model = build_model(self.spec)
-        self.config = UpdateConfig(likelihood=str(get("likelihood")), sampler=str(get("sampler")),
-                                   n_steps=int(get("n_steps")), evidence=bool(get("evidence")),
-                                   seed=int(get("seed")))
-        self.config.validate()
-        self.min_windows = int(get("min_windows"))
-        self.min_new = int(get("min_new_windows"))
-        self.output_dir = Path(get("output_dir")) if get("output_dir") else None
+        # load here too: a bad structure file stops the node at once, not at its first run
+        self.spec = load_structure(self.structure)
+        build_model(self.spec)
+        self.output_dir = Path(self.settings.output_dir) if self.settings.output_dir else None
         self.estimates: list = []
-        self.posterior = None  # the last one: warm start of the next run
-        self.used = 0
+        self.posterior: Posterior | None = None  # the last one: warm start of the next run
+        self.used = 0  # windows of the latest run
+        self.future: Future | None = None
+        self.run_windows = 0
+        self.run_started = 0.0  # time.time() of the start of the current run
+        self._progress_at = 0.0
         self.diag = Diagnostics(self, "update")
-        self.pub = self.create_publisher(topics.message_class(topics.TYPES[topics.POSTERIOR]),
-                                         topics.POSTERIOR, latched_qos())
+        self.pub: Publisher[Any] = self.create_publisher(
+            topics.message_class(topics.TYPES[topics.POSTERIOR]), topics.POSTERIOR, latched_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
                                  topics.MODAL_ESTIMATES, self._on_estimate, stream_qos())
+        self._workers: set[multiprocessing.process.BaseProcess] = set()
+        self.pool = self._new_pool()
+        self.create_timer(0.25, self._poll)
+
+    # worker process ---------------------------------------------------------------------------
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        # spawn, not fork: this process runs DDS threads, which a forked child would inherit dead
+        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=update_worker.init, initargs=(self.structure,))
+        self._submit(pool, update_worker.ready)  # start the process now, not at the first run
+        return pool
+
+    def _submit(self, pool: ProcessPoolExecutor, fn: Any, *args: Any) -> Future:
+        before = set(multiprocessing.active_children())
+        future = pool.submit(fn, *args)
+        self._workers |= set(multiprocessing.active_children()) - before
+        return future
+
+    def destroy_node(self) -> None:
+        """Stop a run in progress: the worker process is terminated, not waited for."""
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        for proc in self._workers:
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(5.0)
+        super().destroy_node()
+
+    # runs -------------------------------------------------------------------------------------
 
     def _on_estimate(self, msg) -> None:
         self.estimates.append(estimate_from_msg(msg))
-        n = len(self.estimates)
-        if n >= self.min_windows and n - self.used >= (self.min_new if self.used else 0):
-            self.run_update()
+        if self.future is None:
+            self._maybe_start()
+        self._progress()
 
-    def run_update(self) -> None:
-        t0 = time.perf_counter()
+    def _maybe_start(self) -> None:
         n = len(self.estimates)
+        if n >= self.settings.min_windows and n - self.used >= (
+                self.settings.min_new_windows if self.used else 0):
+            self.used = self.run_windows = n
+            self.run_started = time.time()
+            args = (list(self.estimates), self.config, self.posterior)
+            try:
+                self.future = self._submit(self.pool, update_worker.run, *args)
+            except BrokenProcessPool:  # the worker died while idle: once more with a new one
+                self.pool = self._new_pool()
+                self.future = self._submit(self.pool, update_worker.run, *args)
+
+    def _poll(self) -> None:
+        """Timer (executor thread): collect a finished run, publish it, start the next one."""
+        if self.future is None:
+            return
+        if not self.future.done():
+            if time.time() - self._progress_at >= PROGRESS_EVERY_S:
+                self._progress()
+            return
+        future, self.future = self.future, None
+        n, took = self.run_windows, time.time() - self.run_started
         try:
-            obs = observations_for_model(self.model, self.estimates, self.spec.sensor_ids)
-            posterior = update(self.model, obs, self.config, self.spec.parameters,
-                               warm_start=self.posterior)
+            posterior = future.result()
+        except BrokenProcessPool as exc:  # the worker died (e.g. out of memory): start another
+            self.diag.report("error", f"update with {n} windows failed: worker process lost ({exc})",
+                             "posterior")
+            self.pool = self._new_pool()
         except Exception as exc:  # a failed update must not take the node down
             self.diag.report("error", f"update with {n} windows failed: {exc}", "posterior")
-            self.diag.publish()
-            self.used = n
-            return
-        self.used = n
+        else:
+            self._publish(posterior, n, took)
+        self._maybe_start()
+        self._progress()
+
+    def _publish(self, posterior: Posterior, n: int, took: float) -> None:
         self.posterior = posterior
         self.pub.publish(posterior_to_msg(posterior.summary_record(self.spec.name)))
         if self.output_dir is not None:
@@ -83,14 +162,29 @@ class UpdateNode(Node):
 
             self.output_dir.mkdir(parents=True, exist_ok=True)
             (self.output_dir / "posterior.json").write_text(json.dumps(
-                stamp_output(posterior.to_dict(), self.config.__dict__ | {"n_windows": n},
+                stamp_output(posterior.to_dict(), asdict(self.config) | {"n_windows": n},
                              self.config.seed), indent=1, default=float))
         summary = ", ".join(f"{k} {v.mean:.4f}±{v.std:.4f}" for k, v in posterior.parameters.items())
         level = "ok" if posterior.diagnostics.get("converged", False) else "warn"
-        self.diag.report(level, f"{n} windows in {time.perf_counter() - t0:.1f} s: {summary}",
-                         "posterior")
-        self.diag.publish()
+        self.diag.report(level, f"{n} windows in {took:.1f} s: {summary}", "posterior")
         self.get_logger().info(f"posterior from {n} windows: {summary}")
+
+    def _progress(self) -> None:
+        received = len(self.estimates)
+        if self.future is not None:
+            started = datetime.fromtimestamp(self.run_started, UTC).isoformat(timespec="seconds")
+            waiting = received - self.run_windows
+            text = f"sampling, {self.run_windows} windows, started at {started}" + (
+                f"; {waiting} new windows since" if waiting else "")
+            self.diag.report("ok", text, "progress", received=received, sampling="true",
+                             run_windows=self.run_windows, started_at=started)
+        else:
+            need = self.settings.min_new_windows if self.used else self.settings.min_windows
+            text = f"waiting: {received - self.used} of {need} windows for the next run"
+            self.diag.report("ok", text, "progress", received=received, sampling="false",
+                             run_windows=self.used)
+        self.diag.publish()
+        self._progress_at = time.time()
 
 
 def make_node(name: str, parameters: dict[str, Any]) -> UpdateNode:

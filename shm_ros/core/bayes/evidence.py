@@ -8,8 +8,8 @@ not affected by the instability of posterior-sample estimators such as the harmo
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .forward import ModalPredictor
-from .observations import ModalObservations
 from shm_ros.core.modal import mac
 
+from .forward import ModalPredictor
+from .observations import ModalObservations
 from .pairing import pair_modes
 
 

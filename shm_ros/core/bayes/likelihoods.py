@@ -38,7 +38,7 @@ class InverseGamma:
     scale: float
 
     @staticmethod
-    def weak(typical_std: float, shape: float = 1.0) -> "InverseGamma":
+    def weak(typical_std: float, shape: float = 1.0) -> InverseGamma:
         """A weak prior whose mode is ``typical_std**2``."""
         return InverseGamma(shape, (shape + 1.0) * typical_std**2)
 
@@ -75,7 +75,7 @@ class ModalStatistics:
     scatter_unit: np.ndarray | None  # (m, s, s) sum phi phi^T / |phi|^2 (for MAC sums)
 
     @staticmethod
-    def from_observations(obs: ModalObservations, use_shapes: bool = True) -> "ModalStatistics":
+    def from_observations(obs: ModalObservations, use_shapes: bool = True) -> ModalStatistics:
         f = obs.frequencies_hz
         present = np.isfinite(f) & (f > 0)
         n_freq = present.sum(axis=0).astype(float)

@@ -54,7 +54,7 @@ class ModalObservations:
     def has_shapes(self) -> bool:
         return self.shapes is not None and len(self.sensor_ids) > 0
 
-    def subset(self, windows: np.ndarray | slice) -> "ModalObservations":
+    def subset(self, windows: np.ndarray | slice) -> ModalObservations:
         """The same data restricted to some windows (e.g. a held-out split)."""
         return ModalObservations(
             times=self.times[windows], mode_numbers=list(self.mode_numbers),
@@ -65,7 +65,7 @@ class ModalObservations:
             covariates={k: v[windows] for k, v in self.covariates.items()},
             notes=list(self.notes), time_kind=self.time_kind)
 
-    def without_empty_modes(self) -> tuple["ModalObservations", list[int]]:
+    def without_empty_modes(self) -> tuple[ModalObservations, list[int]]:
         """The same data without modes that have no frequency in any window (and their numbers)."""
         present = np.any(np.isfinite(self.frequencies_hz) & (self.frequencies_hz > 0), axis=0)
         if present.all():
@@ -104,7 +104,7 @@ class ModalObservations:
             out[k] = np.nanmean(rows * signs[:, None], axis=0)
         return out
 
-    def referred_to(self, covariate: str, reference: float | None = None) -> "ModalObservations":
+    def referred_to(self, covariate: str, reference: float | None = None) -> ModalObservations:
         """Frequencies with a linear dependence on ``covariate`` removed, referred to ``reference``.
 
         Per mode, ``f = a + b (c - reference)`` is fitted by least squares over the windows where

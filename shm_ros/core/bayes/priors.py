@@ -19,8 +19,9 @@ Parametrisations follow the structure file:
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from scipy import special
@@ -52,7 +53,7 @@ class Prior:
 
     # -- construction -------------------------------------------------------------------------
     @staticmethod
-    def make(kind: str, params: Mapping[str, Any], name: str = "") -> "Prior":
+    def make(kind: str, params: Mapping[str, Any], name: str = "") -> Prior:
         kind = str(kind).lower().replace("-", "_")
         where = f"prior of parameter '{name}'" if name else "prior"
         required = PRIOR_FIELDS

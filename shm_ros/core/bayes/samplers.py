@@ -15,8 +15,8 @@ kept is a proper (non-adaptive) Markov chain.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

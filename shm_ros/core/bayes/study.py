@@ -13,8 +13,9 @@ Per-mode RMSE = root mean square over the windows of the relative frequency erro
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Sequence
+from typing import Any
 
 from shm_ros.core.models.base import AffineModel
 

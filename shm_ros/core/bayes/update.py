@@ -7,12 +7,15 @@ emcee until the ArviZ diagnostics are met, estimates the evidence by nested samp
 
 from __future__ import annotations
 
+import enum
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
+from shm_ros.core.config import check_choice, option
 from shm_ros.core.modal import mac, unit_max
 from shm_ros.core.models.base import AffineModel
 
@@ -24,56 +27,78 @@ from .observations import ModalObservations
 from .priors import JointPrior, Prior, PriorError, priors_from_specs
 from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance, run_sampler
 
-LIKELIHOODS = ("gaussian", "fitness", "time")
-SAMPLERS = ("emcee", "mh")
+
+class Likelihood(enum.StrEnum):
+    GAUSSIAN = "gaussian"  # Gaussian prediction error on modal data
+    FITNESS = "fitness"  # the bridge paper's exp(-J / 2k^2)
+    TIME = "time"  # accelerations under the measured input
+
+
+class Sampler(enum.StrEnum):
+    EMCEE = "emcee"  # affine-invariant ensemble
+    MH = "mh"  # adaptive Metropolis-Hastings
+
+
+class Variance(enum.StrEnum):  # prediction-error variances of the Gaussian likelihood
+    MARGINAL = "marginal"  # integrated out
+    SAMPLED = "sampled"
+
+
+class Reduction(enum.StrEnum):
+    AUTO = "auto"  # IIRS when sensors are fewer than DOFs and it is exact and cheaper
+    IIRS = "iirs"
+    NONE = "none"
+
+
+LIKELIHOODS = tuple(m.value for m in Likelihood)
+SAMPLERS = tuple(m.value for m in Sampler)
 
 
 @dataclass
 class UpdateConfig:
     """Settings of one updating run (every field has a default; all are plain data)."""
 
-    likelihood: str = "gaussian"  # gaussian | fitness | time
-    sampler: str = "emcee"  # emcee | mh
+    likelihood: str = option(Likelihood.GAUSSIAN.value, "gaussian prediction error on modal data, "
+                             "the bridge paper's fitness exp(-J/2k^2), or time: accelerations under "
+                             "the measured input", choices=Likelihood)
+    sampler: str = option(Sampler.EMCEE.value, "emcee ensemble or adaptive Metropolis-Hastings",
+                          choices=Sampler)
     # priors by parameter name: {"dist": "normal", "mean": 1.0, "std": 0.1}; None = from the model
-    # caller (``priors`` argument of :func:`update`)
+    # caller (``priors`` argument of :func:`update`); not an option: the structure file has them
     priors: dict[str, dict[str, Any]] | None = None
-    n_modes: int | None = None  # model modes offered to pairing (default: data's modes + 2)
-    use_shapes: bool = True
-    reduction: str = "auto"  # auto | iirs | none  (auto = IIRS when sensors are fewer than DOFs)
-    # Gaussian likelihood: variances with inverse-gamma priors, marginalised or sampled
-    variance: str = "marginal"  # marginal | sampled
-    ig_shape: float = 1.0
-    frequency_error_guess: float = 0.01  # prior mode of the relative frequency error std
-    shape_error_guess: float = 0.05  # prior mode of the shape error std
-    # fitness likelihood (bridge paper)
-    alpha: float = 0.5
-    beta: float = 0.5
-    k: float = 0.05
-    # sampling
-    n_chains: int = 0
-    n_steps: int = 1500
-    max_steps: int = 20000
-    burn_in: int = 0
-    rhat_target: float = 1.01
-    ess_target: float = 1000.0
-    # evidence
-    evidence: bool = True
-    n_live: int = 300
-    seed: int = 0
-    # BLAS threads during the run: the batched small-matrix algebra is fastest single-threaded
-    # (several threads per tiny eigenproblem only contend); 0 = leave the library default
-    blas_threads: int = 1
-    # large full models: sample with a Rayleigh-Ritz projection when it matches the full model to
-    # 1e-7 around the MAP (checked); MAP, fit and evidence always use the exact predictor
-    ritz: bool = True
+    n_modes: int | None = option(None, "model modes offered to pairing (unset: the data's modes + 2)")
+    use_shapes: bool = option(True, "use mode shapes (false: frequencies only)")
+    reduction: str = option(Reduction.AUTO.value, "IIRS reduction to the measured DOFs (auto: when "
+                            "sensors are fewer than DOFs)", choices=Reduction)
+    variance: str = option(Variance.MARGINAL.value, "prediction-error variances (inverse-gamma "
+                           "priors): integrated out or sampled", choices=Variance)
+    ig_shape: float = option(1.0, "shape of the inverse-gamma priors of the error variances")
+    frequency_error_guess: float = option(0.01, "prior mode of the relative frequency error std")
+    shape_error_guess: float = option(0.05, "prior mode of the shape error std")
+    alpha: float = option(0.5, "fitness likelihood: weight of the frequencies")
+    beta: float = option(0.5, "fitness likelihood: weight of 1 - MAC")
+    k: float = option(0.05, "fitness likelihood: tolerance k")
+    n_chains: int = option(0, "walkers / chains (0 = automatic)")
+    n_steps: int = option(1500, "first run length before the diagnostics are checked")
+    max_steps: int = option(20000, "upper bound on steps")
+    burn_in: int = option(0, "Metropolis-Hastings adaptation steps (0 = automatic)")
+    rhat_target: float = option(1.01, "R-hat target")
+    ess_target: float = option(1000.0, "effective sample size target per parameter")
+    evidence: bool = option(True, "estimate the log evidence by nested sampling")
+    n_live: int = option(300, "live points of nested sampling")
+    seed: int = option(0, "random seed")
+    # the batched small-matrix algebra is fastest single-threaded (several threads per tiny
+    # eigenproblem only contend)
+    blas_threads: int = option(1, "BLAS threads during the run (0 = the library default)")
+    # MAP, fit and evidence always use the exact predictor
+    ritz: bool = option(True, "large full models: sample with a Rayleigh-Ritz projection when it "
+                        "matches the full model to 1e-7 around the MAP (checked)")
 
     def validate(self) -> None:
-        if self.likelihood not in LIKELIHOODS:
-            raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {self.likelihood!r}")
-        if self.sampler not in SAMPLERS:
-            raise ValueError(f"sampler must be one of {SAMPLERS}, got {self.sampler!r}")
-        if self.reduction not in ("auto", "iirs", "none"):
-            raise ValueError(f"reduction must be auto, iirs or none, got {self.reduction!r}")
+        check_choice("update", "likelihood", self.likelihood, Likelihood)
+        check_choice("update", "sampler", self.sampler, Sampler)
+        check_choice("update", "reduction", self.reduction, Reduction)
+        check_choice("update", "variance", self.variance, Variance)
 
 
 @dataclass
@@ -219,7 +244,7 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
 
 def update(model: AffineModel, observations: Any, config: UpdateConfig | None = None,
            priors: JointPrior | Sequence[Any] | None = None,
-           warm_start: "Posterior | None" = None) -> Posterior:
+           warm_start: Posterior | None = None) -> Posterior:
     """Calibrate the model's parameters to the data; see the module docstring.
 
     ``observations`` is :class:`ModalObservations` (likelihood ``gaussian`` or ``fitness``) or an
@@ -239,7 +264,7 @@ def update(model: AffineModel, observations: Any, config: UpdateConfig | None = 
 
 
 def _update(model: AffineModel, observations: Any, config: UpdateConfig,
-            priors: JointPrior | Sequence[Any] | None, warm_start: "Posterior | None" = None
+            priors: JointPrior | Sequence[Any] | None, warm_start: Posterior | None = None
             ) -> Posterior:
     timing: dict[str, float] = {}
     t0 = time.perf_counter()

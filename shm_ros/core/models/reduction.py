@@ -26,7 +26,6 @@ import numpy as np
 
 from shm_ros.core.models.base import AffineModel, BatchModalSolution, ModalSolution, generalized_modes_batch
 
-
 _CONTROLLER = None
 R_MAX = 0.9  # largest convergence ratio the extrapolation trusts (jump factor <= 10)
 

@@ -1,0 +1,42 @@
+"""The update node's sampling process (no ROS here: it is imported by a spawned interpreter).
+
+Sampling is Python-bound (it holds the GIL most of the time) and may run for minutes; in a process of
+its own it neither slows down the node's executor nor keeps the node from stopping: the node
+terminates it. The structure is loaded and the model built once per process, by :func:`init`.
+"""
+
+from __future__ import annotations
+
+import signal
+from typing import Any
+
+from shm_ros.core.bayes.update import Posterior, UpdateConfig
+
+_state: dict[str, Any] = {}
+
+
+def init(structure: str) -> None:
+    """Pool initializer: load the structure and build its model."""
+    from shm_ros.core.models import build_model
+    from shm_ros.io.structure import load_structure
+
+    # Ctrl-C in a terminal reaches the whole process group: the node decides when this process
+    # ends (it terminates it on shutdown), so a run is not torn down half-way by the signal.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    spec = load_structure(structure)
+    _state.update(spec=spec, model=build_model(spec))
+
+
+def ready() -> bool:
+    """A no-op task: submitted at start so that the process is up before the first run."""
+    return "model" in _state
+
+
+def run(estimates: list, config: UpdateConfig, warm_start: Posterior | None) -> Posterior:
+    """Pair every estimate's modes with the model's by MAC and update (warm-started)."""
+    from shm_ros.core.bayes.pairing import observations_for_model
+    from shm_ros.core.bayes.update import update
+
+    spec, model = _state["spec"], _state["model"]
+    obs = observations_for_model(model, estimates, spec.sensor_ids)
+    return update(model, obs, config, spec.parameters, warm_start=warm_start)
