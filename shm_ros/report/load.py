@@ -88,17 +88,21 @@ def _diagrams(modes_path: Path, windows_dir: Path, estimates: list, n: int) -> d
     except (TypeError, ValueError):
         cfg = IdentifyConfig()
     cfg.spectrum, cfg.uncertainty = True, False  # the plot's spectrum; no jackknife needed
-    wanted = {e.window_id for e in estimates}
     ordered = sorted(estimates, key=lambda e: e.start_ns)
-    picks = {ordered[i].window_id for i in sorted({0, len(ordered) // 2, len(ordered) - 1})[:n]}
+    picks = [ordered[i].window_id for i in sorted({0, len(ordered) // 2, len(ordered) - 1})[:n]]
     out: dict[str, Any] = {}
-    for f in files:
-        w = load_window(f)
-        if w.window_id in wanted and w.window_id in picks:
+    for wid in picks:
+        # file names of `shm-ros ingest`: w<index>_<window id without ':' and '-'>.npz
+        tag = wid.replace(":", "").replace("-", "")
+        for f in (f for f in files if f.stem.split("_", 1)[-1] == tag):
+            w = load_window(f)
+            if w.window_id != wid:
+                continue
             try:
-                out[w.window_id] = identify_window_detailed(w, cfg).diagram
+                out[wid] = identify_window_detailed(w, cfg).diagram
             except (ValueError, ArithmeticError, np.linalg.LinAlgError):
-                continue  # that window is shown without a diagram, as identify left it
+                pass  # that window is shown without a diagram, as identify left it
+            break
     return out
 
 
