@@ -18,4 +18,5 @@ COMMANDS = [
     "batch",
     "predict",
     "explain",
+    "report",
 ]
