@@ -76,7 +76,7 @@ def load_identify(modes_path: str | Path, windows_dir: str | Path | None = None,
 
 def _diagrams(modes_path: Path, windows_dir: Path, estimates: list, n: int) -> dict[str, Any]:
     from shm_ros.core.identify import IdentifyConfig, identify_window_detailed
-    from shm_ros.io.recording import load_window
+    from shm_ros.io.window_files import load_window
 
     wdir = windows_dir if windows_dir.name == "windows" else windows_dir / "windows"
     files = sorted(wdir.glob("*.npz")) if wdir.is_dir() else []

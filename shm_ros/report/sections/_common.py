@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import json
 import math
 from collections.abc import Iterable, Sequence
 from datetime import datetime, timezone
@@ -12,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from shm_ros.io.jsonio import dump as jsonio_dump
+from shm_ros.io.jsonio import to_jsonable
 from shm_ros.report.document import Figure
 from shm_ros.report.figures import save_figure
 
@@ -28,29 +29,12 @@ def pyplot() -> Any:
 
 
 def plain(x: Any) -> Any:
-    """JSON-ready: numpy scalars/arrays to Python, non-finite floats to None (JSON has no NaN)."""
-    if isinstance(x, dict):
-        return {str(k): plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return plain(x.tolist())
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, Path):
-        return str(x)
-    return x
+    """JSON-ready (numpy to Python, non-finite floats to None): the package's one JSON helper."""
+    return to_jsonable(x)
 
 
 def write_json(path: Path, obj: Any) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(plain(obj), indent=1, allow_nan=False), encoding="utf-8")
-    return path
+    return jsonio_dump(obj, path)
 
 
 def _csv_cell(v: Any) -> str:
