@@ -22,8 +22,10 @@ from ros_helpers.graph import node_process, stop
 from shm_ros.core.bayes.update import UpdateConfig
 from shm_ros.core.config import OptionSpec, nested_configs, option_specs
 from shm_ros.core.identify import IdentifyConfig
+from shm_ros.core.ingest import IngestConfig
 from shm_ros.core.tracking import TrackingConfig
 from shm_ros.ros.identify_node import IdentifyNodeConfig
+from shm_ros.ros.ingest_node import IngestNodeConfig
 from shm_ros.ros.track_node import TrackNodeConfig
 from shm_ros.ros.update_node import UpdateNodeConfig
 
@@ -33,6 +35,12 @@ ROS_OWN = {"use_sim_time", "start_type_description_service"}  # every rclpy node
 # stage -> (core configuration, the node's own settings, node start parameters,
 #           node-only parameters, command-only options, in both but required on the command line)
 STAGES: dict[str, tuple[type, type, dict[str, Any], set[str], set[str], set[str]]] = {
+    "ingest": (IngestConfig, IngestNodeConfig, {"structure": str(ROOT / "examples" / "building.yaml")},
+               # live-graph settings: offline reading knows when a window is complete
+               {"reliable_input", "idle_flush_s", "discovery_period_s", "discovery_timeout_s", "frame_id",
+                "max_latency_s", "settle_s", "check_interval_s"},
+               {"bag", "out", "no_samples", "quiet"},
+               {"structure"}),
     "identify": (IdentifyConfig, IdentifyNodeConfig, {},
                  {"frame_id"},
                  # the recording, the files, and the window length of ingest (IngestConfig's)

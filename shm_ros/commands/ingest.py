@@ -16,6 +16,7 @@ from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.options import add_options
     from shm_ros.core.ingest import IngestConfig
 
     p = sub.add_parser("ingest", help="check, align and window a recording (bag -> windows)",
@@ -23,19 +24,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("bag", help="rosbag2 bag (MCAP or sqlite3 directory)")
     p.add_argument("--structure", required=True, help="structure YAML (its sensors name the channels)")
     p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--window", type=float, default=600.0, help="window length, s (default 600)")
     p.add_argument("--no-samples", action="store_true", help="write only windows.json, no .npz")
     p.add_argument("--quiet", action="store_true", help="print only the summary line")
-    for f in dataclasses.fields(IngestConfig):
-        if f.name in ("window_s", "max_latency_s", "settle_s", "check_interval_s"):
-            continue  # --window; offline reading decides finality itself
-        kind = {"int": int, "str": str, "EventDetector": str}.get(str(f.type), float)
-        p.add_argument("--" + f.name.replace("_", "-"), dest=f"cfg_{f.name}", type=kind, default=None,
-                       help=f"{f.metadata['help']} (default {f.default})")
+    # every windowing option (the streaming-only ones are node parameters)
+    add_options(p.add_argument_group("ingest options"), IngestConfig, aliases={"window_s": ["--window"]})
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from shm_ros.commands.options import config_from_args
     from shm_ros.core.ingest import IngestConfig, windows_summary
     from shm_ros.core.provenance import stamp_output
     from shm_ros.io import jsonio
@@ -48,13 +45,12 @@ def run(args: argparse.Namespace) -> int:
     except Exception as exc:  # StructureError and I/O errors name the file
         print(f"shm-ros ingest: {exc}", file=sys.stderr)
         return 2
-    overrides = {k[4:]: v for k, v in vars(args).items() if k.startswith("cfg_") and v is not None}
     try:
-        config = IngestConfig(**{**overrides, "window_s": args.window})
+        config = config_from_args(IngestConfig, args)
     except ValueError as exc:
         print(f"shm-ros ingest: {exc}", file=sys.stderr)
         return 2
-    res = ingest_bag(args.bag, spec, window_s=args.window, config=config)
+    res = ingest_bag(args.bag, spec, window_s=config.window_s, config=config)
     for d in res.mismatches:  # a misspelt topic or sensor id: say so before anything else
         print(f"shm-ros ingest: {args.bag}: warning: {d.message}", file=sys.stderr)
     out = Path(args.out)
@@ -81,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
                   "samples_not_windowed": dict(res.stats.samples_not_windowed),
                   "messages_rejected": res.stats.messages_rejected, "messages": res.messages},
     }
-    cfg = {"window_s": args.window, **overrides, "structure": str(args.structure), "bag": str(args.bag)}
+    cfg = {"ingest": dataclasses.asdict(config), "structure": str(args.structure), "bag": str(args.bag)}
     jsonio.dump(stamp_output(payload, cfg), out / "windows.json")
     if not args.quiet:
         for d in res.diagnostics:

@@ -17,58 +17,54 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import String, UInt64
 
+from shm_ros.core.config import option
 from shm_ros.core.diagnostics import Diagnostic, Level
-from shm_ros.core.ingest import ChannelMap, EventDetector, IngestConfig, IngestCore, channel_mismatches
+from shm_ros.core.ingest import ChannelMap, IngestConfig, IngestCore, channel_mismatches
 from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
 from shm_ros.io.imu_cdr import decode_imu_batch
 from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import WINDOW_HISTORY, latched_qos, pipeline_qos, recording_qos, stream_qos
 
 IMU_BATCH = 512  # Imu messages decoded together (also every 0.05 s)
 
 
+@dataclass
+class IngestNodeConfig:
+    """Settings of the node itself (the windowing's are :class:`IngestConfig`)."""
+
+    structure: str | None = option(None, "path of the structure YAML (required)")
+    reliable_input: bool = option(False, "subscribe to recording topics reliable (default: best effort, "
+                                  "which also matches reliable publishers)")
+    idle_flush_s: float = option(5.0, "wall-clock seconds without input after which the data held is "
+                                 "cut into windows")
+    discovery_period_s: float = option(0.5, "how often the graph is searched for new recording topics, s")
+    discovery_timeout_s: float = option(10.0, "a structure sensor that no topic feeds this long after "
+                                        "start is reported, s")
+    frame_id: str = option("", "frame_id in the header of the published windows")
+
+
 class IngestNode(Node):
+    """Parameters: the options of :class:`IngestConfig` and of :class:`IngestNodeConfig`."""
+
     def __init__(self, name: str = "ingest", parameters: dict[str, Any] | None = None) -> None:
         super().__init__(name, parameter_overrides=overrides(parameters))
-        p = self.declare_parameter
-        d = IngestConfig()  # the defaults (and their reasons) are the core's
-        p("structure", "")
-        p("window_s", d.window_s)
-        p("sample_rate_hz", d.sample_rate_hz or 0.0)  # 0 = from the data
-        p("burst_pause_s", d.burst_pause_s)
-        p("settle_s", -1.0 if d.settle_s is None else d.settle_s)  # negative = only max_latency_s
-        p("max_latency_s", d.max_latency_s)
-        p("event_detector", str(d.event_detector))
-        p("pga_threshold_m_s2", d.pga_threshold_m_s2)
-        p("reliable_input", False)
-        p("idle_flush_s", 5.0)
-        p("discovery_period_s", 0.5)
-        # a structure sensor that no topic feeds this long after start is reported
-        p("discovery_timeout_s", 10.0)
-        p("frame_id", "")
-        value = lambda n: self.get_parameter(n).value  # noqa: E731
-        settle = float(value("settle_s"))
-        self.core = IngestCore(self._channel_map(value("structure")), IngestConfig(
-            window_s=float(value("window_s")),
-            sample_rate_hz=float(value("sample_rate_hz")) or None,
-            burst_pause_s=float(value("burst_pause_s")),
-            max_latency_s=float(value("max_latency_s")),
-            settle_s=None if settle < 0 else settle,
-            event_detector=EventDetector(str(value("event_detector"))),
-            pga_threshold_m_s2=float(value("pga_threshold_m_s2")),
-        ))
-        self.frame_id = str(value("frame_id"))
-        self.idle_flush_s = float(value("idle_flush_s"))
-        self.reliable = bool(value("reliable_input"))
+        config = load_config(self, IngestConfig)
+        settings = load_config(self, IngestNodeConfig)
+        self.core = IngestCore(self._channel_map(settings.structure), config)
+        self.frame_id = settings.frame_id
+        self.idle_flush_s = settings.idle_flush_s
+        self.reliable = settings.reliable_input
         self.diag = Diagnostics(self, "ingest")
         self.window_pub: Any = self.create_publisher(
             topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, stream_qos(WINDOW_HISTORY))
@@ -79,7 +75,7 @@ class IngestNode(Node):
         self.temperature_topics: set[str] = set()
         self.block_topics: set[str] = set()
         self.block_channels: set[str] = set()
-        self.discovery_timeout_s = float(value("discovery_timeout_s"))
+        self.discovery_timeout_s = settings.discovery_timeout_s
         self.started = time.monotonic()
         self.sensors_checked = False
         self._imu_raw: dict[str, tuple[str, list[bytes]]] = {}
@@ -89,7 +85,7 @@ class IngestNode(Node):
         self.windows_out = 0
         self.last_stamp_ns: int | None = None
         self.last_msg_wall = time.monotonic()
-        self.create_timer(float(value("discovery_period_s")), self._discover)
+        self.create_timer(settings.discovery_period_s, self._discover)
         self.create_timer(0.05, self._on_ack_timer)
         # The count also goes out when it does not change, so that a replay started later learns
         # where the count stands before it counts its own messages (its flow control needs that).
@@ -98,7 +94,7 @@ class IngestNode(Node):
         self._discover()
         self.get_logger().info(f"ingest for sensors {self.core.channels}")
 
-    def _channel_map(self, structure: str) -> ChannelMap:
+    def _channel_map(self, structure: str | None) -> ChannelMap:
         if not structure:
             raise SystemExit("ingest: parameter 'structure' (path of the structure YAML) is required")
         from shm_ros.io.structure import load_structure

@@ -36,25 +36,26 @@ class IngestConfig:
         120.0, "streaming: a window waits at most this long (stamp time, median channel past its end) "
         "for a lagging or silent channel, s; with settle_s this only bounds that wait, so it is long "
         "(a replay delivers minutes of stamp time quickly); inf = everything waits for the end of "
-        "the stream (offline readers that know their order call advance() themselves)")
+        "the stream (offline readers that know their order call advance() themselves)", cli=False)
     settle_s: float | None = option(
         2.0, "streaming: a window is cut as soon as EVERY channel's newest stamp is this far past "
         "its end, s (DDS keeps each topic in order, not across topics; 2 s covers the spread of "
-        "topics in a live graph); None: only max_latency_s decides")
+        "topics in a live graph); None: only max_latency_s decides", cli=False)
     min_coverage: float = option(0.5, "a channel with less than this fraction of a window's samples is dropped for it")
     clip_run: int = option(3, "this many equal samples at a channel's extreme count as clipping")
     saturation_m_s2: float | None = option(None, "|a| at or above this is flagged CLIPPED (default: only flat tops)")
     dead_ptp_m_s2: float = option(0.0, "a channel whose peak-to-peak in a window is at most this is dead")
     spike_k: float = option(12.0, "an isolated sample this many robust sigmas from its 5-point median is a spike")
     noisy_fraction: float = option(0.01, "a channel with more NaN/spike samples than this fraction is 'noisy'")
-    event_detector: EventDetector = option(EventDetector.STA_LTA, "earthquake/event trigger", choices=EventDetector)
+    event_detector: str = option(EventDetector.STA_LTA.value, "earthquake/event trigger", choices=EventDetector)
     sta_s: float = option(1.0, "STA window, s")
     lta_s: float = option(30.0, "LTA window, s")
     sta_lta_on: float = option(
         10.0, "STA/LTA ratio that triggers an event (narrow-band ambient response of a lightly damped "
         "structure reaches 5-9 within 10 min; earthquakes go far above 10)")
     pga_threshold_m_s2: float = option(0.5, "peak |a - median| that triggers an event (pga, either, both)")
-    check_interval_s: float = option(5.0, "streaming: at most this often (stamp time) a burst end is looked for, s")
+    check_interval_s: float = option(5.0, "streaming: at most this often (stamp time) a burst end is looked for, s",
+                                     cli=False)
     rate_tolerance: float = option(0.01, "relative difference of a channel's rate from the grid's that is reported")
     max_repeats: int = option(5, "diagnostics of one code and source recorded between two windows (the rest counted)")
 

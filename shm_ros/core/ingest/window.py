@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from shm_ros.core.diagnostics import Level
-from shm_ros.core.ingest.config import IngestConfig
+from shm_ros.core.ingest.config import EventDetector, IngestConfig
 from shm_ros.core.ingest.diagnostics import DiagnosticLog
 from shm_ros.core.ingest.events import detect_event
 from shm_ros.core.ingest.quality import assess_channel
@@ -89,7 +89,7 @@ def make_window(ctx: WindowContext, start_ns: int, vals: np.ndarray, flags: np.n
         inside = (temp_t >= start_ns) & (temp_t < end_ns)
         if inside.any():
             temp = float(temp_v[inside].mean())
-    is_event, pga = detect_event(vals, status, nominal_rate, cfg.event_detector, sta_s=cfg.sta_s,
+    is_event, pga = detect_event(vals, status, nominal_rate, EventDetector(cfg.event_detector), sta_s=cfg.sta_s,
                                  lta_s=cfg.lta_s, sta_lta_on=cfg.sta_lta_on, pga_threshold=cfg.pga_threshold_m_s2)
     in_ch = ctx.input_channel if ctx.input_channel in ctx.names else None
     w = Window(
