@@ -18,12 +18,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", type=float, default=0.0,
                    help="1 = real time, N = N x real time, 0 = as fast as the graph keeps up (default)")
     p.add_argument("--credit", type=int, default=256,
-                   help="messages in flight at most when flow-controlled (default 256; the shared-memory transport queues 512 per reader)")
+                   help="messages in flight at most when flow-controlled (default 256; the shared-memory "
+                        "transport queues 512 per reader)")
     p.add_argument("--credit-bytes", type=int, default=192 * 1024,
                    help="bytes in flight at most when flow-controlled (default 192 KiB)")
     p.add_argument("--all-topics", action="store_true",
                    help="also replay topics that are not recording topics")
     p.add_argument("--wait", type=float, default=15.0, help="seconds to wait for the graph")
+    p.add_argument("--clock", type=float, nargs="?", const=40.0, default=0.0, metavar="HZ",
+                   help="publish /clock with the recording's time (every 1/HZ s of it, default 40), for "
+                        "nodes started with use_sim_time:=true, as `ros2 bag play --clock` does")
     p.set_defaults(func=run)
 
 
@@ -35,8 +39,9 @@ def run(args: argparse.Namespace) -> int:
 
     rclpy.init()
     try:
-        result = replay_bag(args.bag, rate=args.rate, credit=args.credit, credit_bytes=args.credit_bytes, wait_s=args.wait,
-                            recording_only=not args.all_topics, progress=True)
+        result = replay_bag(args.bag, rate=args.rate, credit=args.credit, credit_bytes=args.credit_bytes,
+                            wait_s=args.wait,
+                            recording_only=not args.all_topics, progress=True, clock_hz=args.clock)
     except BagError as exc:
         print(f"shm-ros replay: {exc}", file=sys.stderr)
         return 2

@@ -35,6 +35,7 @@ from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
 from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import WINDOW_HISTORY, latched_qos, pipeline_qos, recording_qos, stream_qos
+from shm_ros.ros.timers import steady_timer
 
 IMU_BATCH = 512  # Imu messages decoded together (also every 0.05 s)
 
@@ -85,12 +86,12 @@ class IngestNode(Node):
         self.windows_out = 0
         self.last_stamp_ns: int | None = None
         self.last_msg_wall = time.monotonic()
-        self.create_timer(settings.discovery_period_s, self._discover)
-        self.create_timer(0.05, self._on_ack_timer)
+        steady_timer(self, settings.discovery_period_s, self._discover)
+        steady_timer(self, 0.05, self._on_ack_timer)
         # The count also goes out when it does not change, so that a replay started later learns
         # where the count stands before it counts its own messages (its flow control needs that).
-        self.create_timer(0.5, self._heartbeat)
-        self.create_timer(1.0, self._idle)
+        steady_timer(self, 0.5, self._heartbeat)
+        steady_timer(self, 1.0, self._idle)
         self._discover()
         self.get_logger().info(f"ingest for sensors {self.core.channels}")
 

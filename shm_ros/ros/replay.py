@@ -22,6 +22,7 @@ from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String, UInt64
 
+from shm_ros.core.timeutil import split_ns
 from shm_ros.io.bags import BagError, BagMessage, topic_kind
 from shm_ros.io.sources import open_source
 from shm_ros.ros import topics
@@ -85,7 +86,7 @@ def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], I
 def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
                drain_timeout_s: float = 60.0, stall_s: float = 30.0, recording_only: bool = True,
-               progress: bool = False) -> ReplayResult:
+               progress: bool = False, clock_hz: float = 0.0) -> ReplayResult:
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
 
     ``rate``: 1.0 = real time, N = N x real time, 0 = as fast as the graph acknowledges.
@@ -129,9 +130,12 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         in_flight_bytes = 0
         acked_upto = 0
         messages = reader(list(node.pubs))
+        clock = _Clock(node, clock_hz) if clock_hz > 0 else None
         for k, m in enumerate(_until_error(messages, result)):
             t0_bag = m.receive_ns if t0_bag is None else t0_bag
             last_bag = m.receive_ns
+            if clock is not None:
+                clock.at(m.receive_ns)
             if rate > 0:
                 due = t0_wall + (m.receive_ns - t0_bag) / 1e9 / rate
                 while (delay := due - time.monotonic()) > 0:
@@ -186,6 +190,30 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     finally:
         node.destroy_node()
     return result
+
+
+class _Clock:
+    """``/clock`` (rosgraph_msgs/Clock) with the recording's time, as ``ros2 bag play --clock``
+    does, so that nodes started with ``use_sim_time:=true`` see recording time. Published before
+    the first message and then whenever the recording has advanced by ``1 / hz`` seconds."""
+
+    def __init__(self, node: Node, hz: float) -> None:
+        from rosgraph_msgs.msg import Clock
+
+        self.msg = Clock()
+        self.step_ns = int(1e9 / hz)
+        self.next_ns: int | None = None
+        # reliable, last value only: matches the best-effort /clock subscription of every node
+        self.pub = node.create_publisher(Clock, "/clock", QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.VOLATILE))
+
+    def at(self, t_ns: int) -> None:
+        if self.next_ns is not None and t_ns < self.next_ns:
+            return
+        self.msg.clock.sec, self.msg.clock.nanosec = split_ns(t_ns)
+        self.pub.publish(self.msg)
+        self.next_ns = t_ns + self.step_ns
 
 
 def _until_error(messages: Iterator[BagMessage], result: ReplayResult) -> Iterator[BagMessage]:

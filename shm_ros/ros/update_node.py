@@ -37,6 +37,7 @@ from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
 from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
+from shm_ros.ros.timers import steady_timer
 
 PROGRESS_EVERY_S = 30.0
 
@@ -84,7 +85,7 @@ class UpdateNode(Node):
                                  topics.MODAL_ESTIMATES, self._on_estimate, stream_qos())
         self._workers: set[multiprocessing.process.BaseProcess] = set()
         self.pool = self._new_pool()
-        self.create_timer(0.25, self._poll)
+        steady_timer(self, 0.25, self._poll)
 
     # worker process ---------------------------------------------------------------------------
 

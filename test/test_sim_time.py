@@ -1,0 +1,56 @@
+"""`shm-ros replay --clock` publishes /clock with the recording's time, as `ros2 bag play --clock`
+does: nodes started with use_sim_time:=true then live in recording time (their clocks, hence the
+stamps of their diagnostics and the recorder's log times), not in wall time."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ros_helpers.graph import node_process, replay, running
+
+FS = 50.0
+T0 = 1_714_521_600_000_000_000  # 2024-05-01T00:00:00Z: years before any wall time of a test run
+SPAN_S = 40.0
+STRUCTURE = """
+name: two-storey
+kind: shear_building
+shear_building:
+  floors: [{mass: 1.0e+5, stiffness: 2.0e+8}, {mass: 1.0e+5, stiffness: 2.0e+8}]
+sensors:
+  - {id: f1, at: {floor: 1}, direction: x}
+  - {id: f2, at: {floor: 2}, direction: x}
+"""
+
+
+def test_nodes_on_sim_time_see_the_recordings_time(tmp_path):
+    from shm_ros.io.bags import BagWriter, read_messages
+
+    (tmp_path / "s.yaml").write_text(STRUCTURE)
+    n = int(SPAN_S * FS)
+    stamps = T0 + np.round(np.arange(n) * 1e9 / FS).astype(np.int64)
+    rng = np.random.default_rng(3)
+    with BagWriter(tmp_path / "bag") as w:
+        w.imu_streams({f"/site/accel/{s}": (stamps, rng.standard_normal((n, 3)) * 0.01) for s in ("f1", "f2")})
+    out = tmp_path / "out"
+    sim = {"use_sim_time": True}
+    ingest = node_process("ingest", {"structure": str(tmp_path / "s.yaml"), "window_s": 10.0, **sim})
+    recorder = node_process("recorder", {"output": str(out), "topics": ["/shm/windows", "/diagnostics"], **sim})
+    with running(ingest, recorder, subscribers={"/shm/windows": 1}, publishers={"/shm/ingest/received": 1}):
+        rep = replay(tmp_path / "bag", "--clock")
+    assert rep.returncode == 0, rep.stdout + rep.stderr
+
+    end = T0 + int(SPAN_S * 1e9)
+    windows = [m for m in read_messages(out) if m.topic == "/shm/windows"]
+    diags = [m for m in read_messages(out) if m.topic == "/diagnostics"]
+    assert len(windows) == 4 and diags
+    # the recorder's clock: every message logged at a recording time (not at wall time, 2 years on)
+    for m in windows + diags:
+        assert T0 <= m.receive_ns <= end + 10**9, (m.topic, m.receive_ns)
+    # the ingest node's clock: its diagnostics are stamped in recording time
+    for m in diags:
+        st = m.decode().header.stamp
+        t = int(st.sec) * 10**9 + int(st.nanosec)
+        assert T0 <= t <= end + 10**9, t
+    # the windows carry the recording's sample times
+    starts = sorted(int(w.decode().header.stamp.sec) * 10**9 + int(w.decode().header.stamp.nanosec) for w in windows)
+    assert starts == [T0 + k * 10**10 for k in range(4)]
