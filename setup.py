@@ -21,6 +21,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", ["config/pipeline.yaml"]),
+        ("share/" + package_name + "/launch", ["launch/pipeline.launch.py"]),
         ("lib/" + package_name, [f"executables/{n}" for n in NODES]),
     ],
     package_data={"shm_ros": ["py.typed"]},

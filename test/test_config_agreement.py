@@ -10,14 +10,11 @@ must offer the same options apart from the exceptions listed here.
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
-from ros_helpers.graph import node_process, stop
+from ros_helpers.graph import node_parameters, node_process, stop
 
 from shm_ros.core.bayes.update import UpdateConfig
 from shm_ros.core.config import OptionSpec, nested_configs, option_specs
@@ -57,36 +54,6 @@ STAGES: dict[str, tuple[type, type, dict[str, Any], set[str], set[str], set[str]
                {"structure"}),
 }
 
-PROBE = r"""
-import json, sys
-import rclpy
-from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters
-from rclpy.parameter import parameter_value_to_python
-
-target = sys.argv[1]
-rclpy.init()
-node = rclpy.create_node("test_parameter_probe")
-
-def call(srv, name, request):
-    client = node.create_client(srv, f"/{target}/{name}")
-    if not client.wait_for_service(timeout_sec=120.0):
-        sys.exit(f"no service /{target}/{name}")
-    future = client.call_async(request)
-    rclpy.spin_until_future_complete(node, future, timeout_sec=60.0)
-    if future.result() is None:
-        sys.exit(f"/{target}/{name}: no answer")
-    return future.result()
-
-names = list(call(ListParameters, "list_parameters", ListParameters.Request()).result.names)
-values = call(GetParameters, "get_parameters", GetParameters.Request(names=names)).values
-descriptors = call(DescribeParameters, "describe_parameters",
-                   DescribeParameters.Request(names=names)).descriptors
-assert len(values) == len(names) == len(descriptors), (len(values), len(names))
-print(json.dumps({n: {"value": parameter_value_to_python(v), "type": d.type,
-                      "dynamic": d.dynamic_typing, "description": d.description,
-                      "constraints": d.additional_constraints, "read_only": d.read_only}
-                  for n, v, d in zip(names, values, descriptors)}))
-"""
 
 # rcl_interfaces/msg/ParameterType
 ROS_TYPE = {bool: 1, int: 2, float: 3, str: 4, list: 9}
@@ -102,13 +69,11 @@ def _specs(cls: type, prefix: str = "") -> dict[str, OptionSpec]:
 def _node_parameters(kind: str, params: dict[str, Any]) -> dict[str, dict[str, Any]]:
     node = node_process(kind, params)
     try:
-        probe = subprocess.run([sys.executable, "-c", PROBE, kind], capture_output=True, text=True,
-                               timeout=300)
+        found = node_parameters(kind)
     finally:
         code, log = stop(node)
-    assert probe.returncode == 0, probe.stdout + probe.stderr + log[-3000:]
     assert code == 0, log[-3000:]
-    return json.loads(probe.stdout.strip().splitlines()[-1])
+    return found
 
 
 def _command_options(command: str) -> dict[str, argparse.Action]:

@@ -44,11 +44,14 @@ DEPENDENCIES: dict[str, tuple[str, str | None]] = {
     "threadpoolctl": ("python3-threadpoolctl-pip", "threadpoolctl"),
     "obspy": ("python3-obspy-pip", "obspy"),
     "dask": ("python3-dask-distributed-pip", "dask"),
+    "apsw": ("python3-rosbags-pip", "rosbags"),  # rosbags' sqlite3 back end (only its error type is used)
     "rclpy": ("rclpy", None),
     "std_msgs": ("std_msgs", None),
     "sensor_msgs": ("sensor_msgs", None),
     "diagnostic_msgs": ("diagnostic_msgs", None),
     "builtin_interfaces": ("builtin_interfaces", None),
+    "rcl_interfaces": ("rcl_interfaces", None),
+    "rosgraph_msgs": ("rosgraph_msgs", None),
     "shm_interfaces": ("shm_interfaces", None),
 }
 

@@ -8,9 +8,10 @@ import sys
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="start the node graph from a YAML config", description=__doc__)
-    p.add_argument("config", help="graph config (see config/pipeline.yaml)")
+    p.add_argument("config", help="ROS 2 parameters file naming the nodes (see config/pipeline.yaml)")
     p.add_argument("--single-process", action="store_true",
-                   help="run every node in this process (overrides graph.mode)")
+                   help="run every node in this process (default: one process per node)")
+    p.add_argument("--no-restart", action="store_true", help="do not restart a node that exits")
     p.set_defaults(func=run)
 
 
@@ -18,10 +19,11 @@ def run(args: argparse.Namespace) -> int:
     from shm_ros.ros.supervisor import ConfigError, Supervisor, load_graph_config, run_single_process
 
     try:
-        config = load_graph_config(args.config)
+        config = load_graph_config(args.config, mode="single" if args.single_process else None,
+                                   restart=False if args.no_restart else None)
     except ConfigError as exc:
         print(f"shm-ros run: {exc}", file=sys.stderr)
         return 2
-    if args.single_process or config.mode == "single":
+    if config.mode == "single":
         return run_single_process(config)
     return Supervisor(config, log=lambda s: print(s, flush=True)).run()

@@ -74,9 +74,24 @@ class GraphConfig:
     restart: bool = True
     max_restarts: int = 5
     source: str = "<dict>"
+    # the ROS 2 parameters file the graph came from: every node process reads it itself
+    params_file: str | None = None
 
 
-def load_graph_config(path_or_dict: str | Path | dict) -> GraphConfig:
+def node_kind(name: str, source: str) -> str:
+    """The node kind a node name starts with: ``identify`` and ``identify_data`` are identify nodes."""
+    for kind in sorted(NODE_KINDS, key=len, reverse=True):
+        if name == kind or name.startswith(kind + "_"):
+            return kind
+    raise ConfigError(f"{source}: {name}: a node's name must start with its kind "
+                      f"({', '.join(NODE_KINDS)})")
+
+
+def load_graph_config(path_or_dict: str | Path | dict, *, mode: str | None = None,
+                      restart: bool | None = None) -> GraphConfig:
+    """The graph of a ROS 2 parameters file (``<node>: {ros__parameters: {...}}`` per node, what
+    ``--ros-args --params-file`` reads), or of the older layout (``graph: {mode, restart}``,
+    ``nodes: {<name>: {kind, parameters}}``)."""
     if isinstance(path_or_dict, dict):
         raw, source = path_or_dict, "<dict>"
     else:
@@ -85,10 +100,37 @@ def load_graph_config(path_or_dict: str | Path | dict) -> GraphConfig:
             raw = yaml.safe_load(Path(path_or_dict).read_text()) or {}
         except (OSError, yaml.YAMLError) as exc:
             raise ConfigError(f"{source}: cannot read graph config: {exc}") from exc
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: must be a mapping of node names")
+    if "nodes" in raw or "graph" in raw:
+        config = _legacy(raw, source)
+    else:
+        nodes = []
+        for name, spec in raw.items():
+            if name == "/**":
+                raise ConfigError(f"{source}: '/**' (parameters for every node) is not supported: "
+                                  "give each node its own section")
+            if not isinstance(spec, dict) or set(spec) != {"ros__parameters"}:
+                raise ConfigError(f"{source}: {name}: expected `ros__parameters:` (a ROS 2 parameters file)")
+            params = spec["ros__parameters"] or {}
+            if not isinstance(params, dict):
+                raise ConfigError(f"{source}: {name}.ros__parameters must be a mapping")
+            nodes.append(NodeSpec(str(name), node_kind(str(name), source), params))
+        if not nodes:
+            raise ConfigError(f"{source}: no nodes")
+        config = GraphConfig(nodes, source=source)
+        config.params_file = None if isinstance(path_or_dict, dict) else str(Path(path_or_dict).resolve())
+    if mode is not None:
+        config.mode = mode
+    if restart is not None:
+        config.restart = restart
+    if config.mode not in ("processes", "single"):
+        raise ConfigError(f"{source}: graph mode must be 'processes' or 'single', not {config.mode!r}")
+    return config
+
+
+def _legacy(raw: dict, source: str) -> GraphConfig:
     graph = raw.get("graph", {}) or {}
-    mode = graph.get("mode", "processes")
-    if mode not in ("processes", "single"):
-        raise ConfigError(f"{source}: graph.mode must be 'processes' or 'single', not {mode!r}")
     nodes = []
     for name, spec in (raw.get("nodes") or {}).items():
         spec = spec or {}
@@ -102,7 +144,7 @@ def load_graph_config(path_or_dict: str | Path | dict) -> GraphConfig:
         nodes.append(NodeSpec(name, kind, params))
     if not nodes:
         raise ConfigError(f"{source}: no nodes")
-    return GraphConfig(nodes, mode, bool(graph.get("restart", True)),
+    return GraphConfig(nodes, graph.get("mode", "processes"), bool(graph.get("restart", True)),
                        int(graph.get("max_restarts", 5)), source)
 
 
@@ -123,8 +165,9 @@ class Supervisor:
         return path
 
     def command(self, node: NodeSpec) -> list[str]:
+        params = self.config.params_file or str(self._params_file(node))
         return [sys.executable, "-m", f"shm_ros.ros.{node.kind}_node", "--ros-args",
-                "-r", f"__node:={node.name}", "--params-file", str(self._params_file(node))]
+                "-r", f"__node:={node.name}", "--params-file", params]
 
     def start(self, node: NodeSpec) -> None:
         self.procs[node.name] = subprocess.Popen(self.command(node), env=dict(os.environ))

@@ -106,3 +106,46 @@ def recorded_windows(bag: Path) -> list:
             n, c = int(w.n_samples), len(w.channel_names)
             out.append((w, np.asarray(w.samples).reshape(n, c)))
     return out
+
+
+_PARAMETERS = r"""
+import json, sys
+import rclpy
+from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters
+from rclpy.parameter import parameter_value_to_python
+
+target = sys.argv[1]
+rclpy.init()
+node = rclpy.create_node("test_parameter_probe")
+
+def call(srv, name, request):
+    client = node.create_client(srv, f"/{target}/{name}")
+    if not client.wait_for_service(timeout_sec=120.0):
+        sys.exit(f"no service /{target}/{name}")
+    future = client.call_async(request)
+    rclpy.spin_until_future_complete(node, future, timeout_sec=60.0)
+    if future.result() is None:
+        sys.exit(f"/{target}/{name}: no answer")
+    return future.result()
+
+names = list(call(ListParameters, "list_parameters", ListParameters.Request()).result.names)
+values = call(GetParameters, "get_parameters", GetParameters.Request(names=names)).values
+descriptors = call(DescribeParameters, "describe_parameters",
+                   DescribeParameters.Request(names=names)).descriptors
+assert len(values) == len(names) == len(descriptors), (len(values), len(names))
+print(json.dumps({n: {"value": parameter_value_to_python(v), "type": d.type,
+                      "dynamic": d.dynamic_typing, "description": d.description,
+                      "constraints": d.additional_constraints, "read_only": d.read_only}
+                  for n, v, d in zip(names, values, descriptors, strict=True)}))
+"""
+
+
+def node_parameters(name: str, timeout: float = 300.0) -> dict[str, dict]:
+    """Every parameter of the running node ``/name`` as its services report them: value, type,
+    dynamic typing, description, constraints, read-only (waits for the node's services)."""
+    import json
+
+    run = subprocess.run([sys.executable, "-c", _PARAMETERS, name], capture_output=True, text=True,
+                         timeout=timeout)
+    assert run.returncode == 0, run.stdout + run.stderr
+    return json.loads(run.stdout.strip().splitlines()[-1])
