@@ -26,22 +26,39 @@ def test_talker_and_listener_processes_exchange_every_message():
     assert stamps == [1_700_000_000 + k for k in range(n)]
 
 
+def _watch(n: int, env: dict[str, str]) -> subprocess.Popen:
+    proc = subprocess.Popen([sys.executable, str(HELPER), "watch", str(n)], env=env, stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    assert proc.stdout.readline().strip() == "ready"  # subscribed before anything is published
+    return proc
+
+
 def test_other_domains_see_nothing():
-    """Isolation: a listener on another domain receives nothing from this run's talker."""
-    other = dict(os.environ, ROS_DOMAIN_ID=str((int(os.environ["ROS_DOMAIN_ID"]) + 37) % 200 + 1))
-    code = (
-        "import rclpy, time\n"
-        "from sensor_msgs.msg import Imu\n"
-        "rclpy.init(); n = rclpy.create_node('iso'); got = []\n"
-        "n.create_subscription(Imu, '/smoke/accel/s1', got.append, 10)\n"
-        "end = time.monotonic() + 4\n"
-        "while time.monotonic() < end: rclpy.spin_once(n, timeout_sec=0.1)\n"
-        "print(len(got))\n"
-    )
-    listener = subprocess.Popen([sys.executable, "-c", code], env=other, stdout=subprocess.PIPE, text=True)
-    talker = subprocess.Popen([sys.executable, str(HELPER), "talk", "5"], stdout=subprocess.PIPE,
+    """Isolation: of two identical watchers, the one on this run's domain receives the talker's
+    messages (so the set-up can deliver them) and the one on another domain receives none, though
+    it was subscribed for the whole exchange."""
+    n = 5
+    domain = int(os.environ["ROS_DOMAIN_ID"])
+    other_domain = (domain + 37) % 200 + 1
+    assert other_domain != domain
+    other = _watch(n, dict(os.environ, ROS_DOMAIN_ID=str(other_domain)))
+    same = _watch(n, dict(os.environ))
+    talker = subprocess.Popen([sys.executable, str(HELPER), "talk", str(n)], stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)
-    out, _ = listener.communicate(timeout=60)
-    talker.kill()
-    talker.communicate()
-    assert out.strip() == "0"
+    try:
+        # the event that ends the exchange: the watcher on this domain has every message
+        same.wait(timeout=90)  # (not communicate: closing its stdin would end it at once)
+        assert same.stdout is not None and same.stderr is not None
+        same_out, same_err = same.stdout.read(), same.stderr.read()
+        talker.communicate(timeout=90)
+        other_out, other_err = other.communicate(input="", timeout=60)  # stdin closed: report
+    finally:
+        for proc in (same, other, talker):
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+    assert same.returncode == 0 and same_out.strip() == str(n), same_err  # positive control
+    assert talker.returncode == 0
+    assert other.returncode == 0, other_err
+    assert other_out.strip() == "0"

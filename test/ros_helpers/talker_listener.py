@@ -2,11 +2,14 @@
 
 ``talk N`` publishes N sensor_msgs/Imu with increasing stamps once a listener is matched;
 ``listen N`` prints the stamps it received, in order, then exits.
+``watch N`` prints ``ready`` once subscribed, then the number of messages it received when it has
+N of them or when its stdin is closed (whichever comes first), then exits.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 
 
@@ -31,6 +34,16 @@ def main(role: str, n: int) -> int:
         # stay until the listener is gone (it leaves after receiving everything)
         while pub.get_subscription_count() > 0 and time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.05)
+        ok = time.monotonic() < deadline
+    elif role == "watch":
+        count = [0]
+        node.create_subscription(Imu, "/smoke/accel/s1", lambda m: count.__setitem__(0, count[0] + 1), qos)
+        closed = threading.Event()
+        threading.Thread(target=lambda: (sys.stdin.read(), closed.set()), daemon=True).start()
+        print("ready", flush=True)
+        while count[0] < n and not closed.is_set() and time.monotonic() < deadline:
+            rclpy.spin_once(node, timeout_sec=0.05)
+        print(count[0], flush=True)
         ok = time.monotonic() < deadline
     else:
         got: list[int] = []
