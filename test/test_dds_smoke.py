@@ -26,33 +26,39 @@ def test_talker_and_listener_processes_exchange_every_message():
     assert stamps == [1_700_000_000 + k for k in range(n)]
 
 
-def _watch(n: int, env: dict[str, str]) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, str(HELPER), "watch", str(n)], env=env, stdin=subprocess.PIPE,
+def _start(args: list[str], env: dict[str, str] | None = None) -> subprocess.Popen:
+    """A helper process, returned once it says it is ready (subscribed or publishing)."""
+    proc = subprocess.Popen([sys.executable, str(HELPER), *args], env=env, stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None
-    assert proc.stdout.readline().strip() == "ready"  # subscribed before anything is published
+    assert proc.stdout.readline().strip() == "ready"
     return proc
 
 
 def test_other_domains_see_nothing():
-    """Isolation: of two identical watchers, the one on this run's domain receives the talker's
-    messages (so the set-up can deliver them) and the one on another domain receives none, though
-    it was subscribed for the whole exchange."""
-    n = 5
+    """Isolation: two identical watchers join a talker's stream at the same moment; the one on
+    this run's domain receives it (so the set-up delivers to a subscriber in exactly the other's
+    position) and the one on another domain receives nothing in the same time."""
+    # 4 s of stream after the first delivery: longer than the 3 s period at which DDS participants
+    # announce themselves, so a subscriber on the talker's domain would have been found by then
+    n = 200
     domain = int(os.environ["ROS_DOMAIN_ID"])
     other_domain = (domain + 37) % 200 + 1
     assert other_domain != domain
-    other = _watch(n, dict(os.environ, ROS_DOMAIN_ID=str(other_domain)))
-    same = _watch(n, dict(os.environ))
-    talker = subprocess.Popen([sys.executable, str(HELPER), "talk", str(n)], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True)
+    talker = _start(["stream"])
+    # (started in this order, so the watcher on the talker's domain is not the first to be seen)
+    other = subprocess.Popen([sys.executable, str(HELPER), "watch", str(n)], stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env=dict(os.environ, ROS_DOMAIN_ID=str(other_domain)))
+    same = _start(["watch", str(n)])
     try:
-        # the event that ends the exchange: the watcher on this domain has every message
+        assert other.stdout is not None and other.stdout.readline().strip() == "ready"
+        # the event that ends the exchange: the watcher on this domain has n messages
         same.wait(timeout=90)  # (not communicate: closing its stdin would end it at once)
         assert same.stdout is not None and same.stderr is not None
         same_out, same_err = same.stdout.read(), same.stderr.read()
-        talker.communicate(timeout=90)
         other_out, other_err = other.communicate(input="", timeout=60)  # stdin closed: report
+        talker.communicate(input="", timeout=60)
     finally:
         for proc in (same, other, talker):
             if proc.poll() is None:
