@@ -9,7 +9,8 @@ on the clock; this checks that they also pass when the cores are taken by other 
 busy loops (``--burners``) run for the whole stress run, and each run is a fresh ``pytest``
 process (so a fresh ROS domain id from ``test/conftest.py``). Prints the pass count of every run
 and ``N/RUNS passed`` (a run passes when none of its tests failed or errored); writes
-``bench/results/stress_ros.json``; exit status 1 unless every run passed. Not part of ``.ci/run``.
+``bench/results/stress_ros.json`` (and the output of each failed run, ``stress_ros_run_K.log``);
+exit status 1 unless every run passed. Not part of ``.ci/run``.
 """
 
 from __future__ import annotations
@@ -131,6 +132,11 @@ def main(argv: list[str] | None = None) -> int:
             for k in range(1, args.runs + 1):
                 r = run_once(k, repo, files, args.pytest_args.split(), args.timeout, Path(tmp))
                 runs.append(r)
+                if not r.ok:  # keep the output of a failed run
+                    RESULTS.mkdir(parents=True, exist_ok=True)
+                    kept = RESULTS / f"stress_ros_run_{k}.log"
+                    kept.write_text((Path(tmp) / f"run_{k}.log").read_text())
+                    r.not_passed.append(f"(output: {kept})")
                 tail = f"; not passed: {', '.join(r.not_passed)}" if r.not_passed else ""
                 print(f"run {k}/{args.runs}: {r.passed}/{r.tests} tests passed ({r.skipped} skipped) "
                       f"in {r.wall_s:.0f} s, {'ok' if r.ok else 'FAILED'}{tail}", flush=True)
