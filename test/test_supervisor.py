@@ -184,21 +184,11 @@ def test_single_process_graph_stops_on_sigint(tmp_path, mode):
     }))
     proc = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(config)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    lines: list[str] = []
-
-    def read() -> None:
-        for line in proc.stdout:
-            lines.append(line)
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
+    out = _Lines(proc)
     # both nodes constructed (each logs a line when it is up), not just some seconds elapsed
-    up = _wait_for(lambda: any("identify with" in x for x in lines) and any(
-        "ingest for sensors" in x for x in lines), timeout=90)
-    assert proc.poll() is None, "".join(lines)
-    assert up, "".join(lines)
+    up = _wait_for(lambda: out.count("[identify]:") and out.count("[ingest]:"), timeout=90)
+    assert proc.poll() is None, out.text()
+    assert up, out.text()
     proc.send_signal(signal.SIGINT)
     proc.wait(timeout=30)
-    reader.join(timeout=10)
-    out = "".join(lines)
-    assert proc.returncode == 0, out
+    assert proc.returncode == 0, out.text(join_timeout=10)

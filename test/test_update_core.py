@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from bayes_synth import building_dict, spec_and_model, synth_modal
@@ -10,7 +12,7 @@ from shm_ros.core.bayes.update import UpdateConfig, build_likelihood, joint_prio
 
 TRUTH = np.array([0.93, 1.06, 0.97])
 SENSORS = ["f2", "f4", "f6", "f8"]
-FAST = dict(n_steps=400, rhat_target=1.03, ess_target=400, evidence=False)
+FAST: dict[str, Any] = dict(n_steps=400, rhat_target=1.03, ess_target=400, evidence=False)
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +90,7 @@ def test_bad_data_and_wide_priors_do_not_crash(problem):
     post = update(model, obs, UpdateConfig(n_steps=200, rhat_target=1.1, ess_target=100, n_live=50),
                   priors=wide)
     assert any("mode(s) [3]" in w for w in post.warnings)
-    assert np.isfinite(post.log_evidence)
+    assert post.log_evidence is not None and np.isfinite(post.log_evidence)
     for i, n in enumerate(post.parameter_names):
         assert abs(post.parameters[n].mean - TRUTH[i]) < 0.03
 

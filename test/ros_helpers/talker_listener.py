@@ -18,7 +18,12 @@ import time
 def _stdin_closed() -> threading.Event:
     """An event set when this process's stdin is closed (the test's way to say stop)."""
     closed = threading.Event()
-    threading.Thread(target=lambda: (sys.stdin.read(), closed.set()), daemon=True).start()
+
+    def wait_for_eof() -> None:
+        sys.stdin.read()
+        closed.set()
+
+    threading.Thread(target=wait_for_eof, daemon=True).start()
     return closed
 
 
