@@ -79,6 +79,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"simulate: {res['n_windows']} windows in {res['wall_s']:.1f} s, bag {res['bag_bytes'] / 1e9:.2f} GB "
           f"(full campaign: ~{res['extrapolated_full_wall_s'] / 60:.1f} min, ~{res['extrapolated_full_bag_gb']:.2f} GB)",
           file=sys.stderr)
+    # target: the full campaign written in under 10 minutes (checked here, not in the tests)
+    if res["extrapolated_full_wall_s"] > 600.0:
+        print(f"FAILED: full campaign ~{res['extrapolated_full_wall_s']:.0f} s, target 600 s", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -1,9 +1,9 @@
 """Issue 4 (ROS half), benchmark: a recording replayed over DDS into a separate ingest process with
 flow control loses no sample (count, values, grid slots), per-sample Imu and AccelBlock.
 
-CI runs 10 s x 16 channels x 200 Hz (32,000 Imu messages) and only reports the real-time factor;
-``SHM_FULL=1`` runs the full 120 s (384,000 messages) and also asserts the targets (>= 2x real time
-for Imu, >= 20x for blocks). Same as ``python -m bench.bench_replay [--seconds 10 --no-target]``.
+CI runs 10 s x 16 channels x 200 Hz (32,000 Imu messages), ``SHM_FULL=1`` the full 120 s (384,000
+messages); both only report the real-time factor. The speed targets (>= 2x real time for Imu, >= 20x
+for blocks) are checked by ``python -m bench.bench_replay``, not here.
 """
 
 from __future__ import annotations
@@ -24,4 +24,4 @@ def test_replay_over_dds_loses_no_sample():
               f"load {res['load_average'][0]:.1f}")
         assert r["samples_windowed"] == r["samples"] == int(seconds * 200) * 16, r
         assert r["lost_messages"] == 0 and r["values_altered"] == 0 and r["rows_duplicated"] == 0, r
-        assert ok(r, check_target=full_size()), r
+        assert ok(r, check_target=False), r

@@ -1,4 +1,5 @@
-"""The campaign benchmark at CI size (SHM_FULL=1: the full 8-day campaign, under 10 minutes)."""
+"""The campaign benchmark at CI size (SHM_FULL=1: the full 8-day campaign); its 10-minute target is
+checked by ``python -m bench.bench_simulate``, not here."""
 
 from __future__ import annotations
 
@@ -17,5 +18,3 @@ def test_campaign_benchmark(tmp_path):
     assert res["samples"] == n * int(window_s * 100) * 9
     # quantised 24-bit-like samples compress: well under the 8 bytes of a raw float64
     assert res["bag_bytes_per_sample"] < 4.5
-    if full_size():
-        assert res["wall_s"] < 600.0, res

@@ -13,8 +13,16 @@ from pathlib import Path
 
 import pytest
 import yaml
-
 from test_graph_replay import STRUCTURE
+
+
+def _stat(pid: int) -> tuple[int, str, int] | None:
+    """(parent pid, state, start time in clock ticks) of a process, None if there is none."""
+    try:
+        fields = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return int(fields[1]), fields[0], int(fields[19])
 
 
 def _children(pid: int) -> dict[int, str]:
@@ -23,13 +31,32 @@ def _children(pid: int) -> dict[int, str]:
         if not entry.name.isdigit():
             continue
         try:
-            stat = (entry / "stat").read_text()
-            ppid = int(stat.rsplit(")", 1)[1].split()[1])
-            if ppid == pid:
+            stat = _stat(int(entry.name))
+            if stat is not None and stat[0] == pid:
                 out[int(entry.name)] = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-        except (OSError, IndexError, ValueError):
+        except (OSError, ValueError):
             continue
     return out
+
+
+def _identity(pids) -> dict[int, int]:
+    """pid -> start time, so that a later check is not fooled by a reused pid."""
+    out = {}
+    for pid in pids:
+        stat = _stat(pid)
+        if stat is not None:
+            out[pid] = stat[2]
+    return out
+
+
+def _still_running(seen: dict[int, int]) -> list[int]:
+    """Those of the processes ``seen`` (pid -> start time) that still run (zombies do not)."""
+    left = []
+    for pid, start in seen.items():
+        stat = _stat(pid)
+        if stat is not None and stat[2] == start and stat[1] != "Z":
+            left.append(pid)
+    return left
 
 
 def _wait_for(pred, timeout: float = 30.0):
@@ -40,6 +67,28 @@ def _wait_for(pred, timeout: float = 30.0):
             return value
         time.sleep(0.2)
     return None
+
+
+class _Lines:
+    """Collects a process's output lines in a thread, so a test can wait for a given line."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=self._read, args=(proc,), daemon=True)
+        self._thread.start()
+
+    def _read(self, proc: subprocess.Popen) -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            self.lines.append(line)
+
+    def count(self, text: str) -> int:
+        return sum(text in line for line in list(self.lines))
+
+    def text(self, join_timeout: float = 0.0) -> str:
+        if join_timeout:
+            self._thread.join(timeout=join_timeout)
+        return "".join(self.lines)
 
 
 def test_supervisor_restarts_a_killed_node_and_stops_cleanly(tmp_path):
@@ -56,30 +105,62 @@ def test_supervisor_restarts_a_killed_node_and_stops_cleanly(tmp_path):
     }))
     sup = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(config)],
                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    out = _Lines(sup)
+    seen: dict[int, int] = {}  # every node process the supervisor ran: pid -> start time
     try:
         kids = _wait_for(lambda: k if len(k := _children(sup.pid)) == 3 else None)
         assert kids, "three node processes expected"
+        seen.update(_identity(kids))
+        assert len(seen) == 3 and not set(seen) - set(_still_running(seen))
         assert sorted(c.split("shm_ros.ros.")[1].split()[0] for c in kids.values()) == [
             "identify_node", "ingest_node", "recorder_node"]
-        time.sleep(2.0)  # let the nodes come up
+        # each node logs under its own name once it is constructed (ROS set up, handlers in place)
+        up = _wait_for(lambda: all(out.count(f"[{n}]:") for n in ("ingest", "identify", "recorder")),
+                       timeout=90)
+        assert up, out.text()
         victim = next(p for p, c in kids.items() if "identify_node" in c)
         os.kill(victim, signal.SIGKILL)
         restarted = _wait_for(lambda: next((p for p, c in _children(sup.pid).items()
                                              if "identify_node" in c and p != victim), None))
         assert restarted, "the killed node was not restarted"
+        seen.update(_identity([restarted]))
         assert len(_children(sup.pid)) == 3
-        time.sleep(1.0)
+        logged = out.count("[identify]:")
+        assert _wait_for(lambda: out.count("[identify]:") > logged, timeout=90), out.text()
         sup.send_signal(signal.SIGINT)
-        out, _ = sup.communicate(timeout=40)
+        sup.wait(timeout=40)
     finally:
         if sup.poll() is None:
             sup.kill()
-            sup.communicate()
-    assert sup.returncode == 0, out
-    assert "restarting" in out
-    assert "all nodes stopped" in out
-    assert not _children(sup.pid)
+            sup.wait()
+    text = out.text(join_timeout=10)
+    assert sup.returncode == 0, text
+    assert "restarting" in text
+    assert "all nodes stopped" in text
+    # every node process seen while the graph ran (the killed one, its replacement, the others)
+    # is gone now that the supervisor has exited: no orphans
+    assert len(seen) == 4
+    assert _still_running(seen) == [], text
     assert (tmp_path / "out" / "metadata.yaml").exists()  # the recorder closed its bag cleanly
+
+
+def test_the_orphan_check_sees_a_process_left_running():
+    """Positive control for the check above: a child its parent leaves behind IS reported."""
+    parent = subprocess.run(
+        [sys.executable, "-c",
+         "import subprocess, sys\n"
+         "p = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(120)'],\n"
+         "                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
+         "print(p.pid)\n"],
+        capture_output=True, text=True, timeout=30)
+    orphan = int(parent.stdout)
+    try:
+        seen = _identity([orphan])
+        assert seen, "the orphan was not seen running"
+        assert _still_running(seen) == [orphan]
+    finally:
+        os.kill(orphan, signal.SIGKILL)
+    assert _wait_for(lambda: _still_running(seen) == [], timeout=10)
 
 
 def test_bad_graph_config_names_the_field(tmp_path):
@@ -103,21 +184,11 @@ def test_single_process_graph_stops_on_sigint(tmp_path, mode):
     }))
     proc = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(config)],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    lines: list[str] = []
-
-    def read() -> None:
-        for line in proc.stdout:
-            lines.append(line)
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
+    out = _Lines(proc)
     # both nodes constructed (each logs a line when it is up), not just some seconds elapsed
-    up = _wait_for(lambda: any("identify with" in x for x in lines) and any(
-        "ingest for sensors" in x for x in lines), timeout=90)
-    assert proc.poll() is None, "".join(lines)
-    assert up, "".join(lines)
+    up = _wait_for(lambda: out.count("[identify]:") and out.count("[ingest]:"), timeout=90)
+    assert proc.poll() is None, out.text()
+    assert up, out.text()
     proc.send_signal(signal.SIGINT)
     proc.wait(timeout=30)
-    reader.join(timeout=10)
-    out = "".join(lines)
-    assert proc.returncode == 0, out
+    assert proc.returncode == 0, out.text(join_timeout=10)

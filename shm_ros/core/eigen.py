@@ -18,6 +18,7 @@ eigenvalues, vectors ``x`` of ``H`` and ``v = D Q x``.
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,28 +27,55 @@ import scipy.linalg as sla
 __all__ = ["Eigenvalues", "eigenvalues", "eigenvectors", "AVAILABLE"]
 
 
-def _bind(name: str, n_args: int):
+# LAPACK's Fortran calling convention: every argument by reference, no return value. Character
+# options are single bytes, integers 32-bit (scipy's LAPACK is not ILP64), matrices contiguous in
+# column-major order: each prototype below spells this out so that ctypes checks every argument.
+_CHR = ctypes.c_char_p
+_INT = ctypes.POINTER(ctypes.c_int)
+_DBL = np.ctypeslib.ndpointer(np.float64, flags="F_CONTIGUOUS")  # matrix, vector or workspace
+_I32 = np.ctypeslib.ndpointer(np.int32, ndim=1, flags="C_CONTIGUOUS")
+_PROTOTYPES: dict[str, tuple] = {
+    # job, compz, n, ilo, ihi, h, ldh, wr, wi, z, ldz, work, lwork, info
+    "dhseqr": (_CHR, _CHR, _INT, _INT, _INT, _DBL, _INT, _DBL, _DBL, _DBL, _INT, _DBL, _INT, _INT),
+    # wantt, wantz, n, ilo, ihi, h, ldh, wr, wi, iloz, ihiz, z, ldz, info
+    "dlahqr": (_INT, _INT, _INT, _INT, _INT, _DBL, _INT, _DBL, _DBL, _INT, _INT, _DBL, _INT, _INT),
+    # side, eigsrc, initv, select, n, h, ldh, wr, wi, vl, ldvl, vr, ldvr, mm, m, work, ifaill,
+    # ifailr, info
+    "dhsein": (_CHR, _CHR, _CHR, _I32, _INT, _DBL, _INT, _DBL, _DBL, _DBL, _INT, _DBL, _INT, _INT,
+               _INT, _DBL, _I32, _I32, _INT),
+    # side, trans, m, n, ilo, ihi, a, lda, tau, c, ldc, work, lwork, info
+    "dormhr": (_CHR, _CHR, _INT, _INT, _INT, _INT, _DBL, _INT, _DBL, _DBL, _INT, _DBL, _INT, _INT),
+}
+
+
+def _capsule_pointer(capsule: object) -> int | None:
+    get_name = ctypes.pythonapi.PyCapsule_GetName
+    get_name.restype = ctypes.c_char_p
+    get_name.argtypes = [ctypes.py_object]
+    get_ptr = ctypes.pythonapi.PyCapsule_GetPointer
+    get_ptr.restype = ctypes.c_void_p
+    get_ptr.argtypes = [ctypes.py_object, ctypes.c_char_p]
+    return get_ptr(capsule, get_name(capsule))
+
+
+def _bind(name: str) -> Callable[..., None] | None:
+    """The LAPACK routine ``name`` of scipy's own LAPACK, typed by its prototype, or None."""
     try:
         import scipy.linalg.cython_lapack as cl
 
-        capsule = cl.__pyx_capi__[name]
-        get_name = ctypes.pythonapi.PyCapsule_GetName
-        get_name.restype = ctypes.c_char_p
-        get_name.argtypes = [ctypes.py_object]
-        get_ptr = ctypes.pythonapi.PyCapsule_GetPointer
-        get_ptr.restype = ctypes.c_void_p
-        get_ptr.argtypes = [ctypes.py_object, ctypes.c_char_p]
-        ptr = get_ptr(capsule, get_name(capsule))
+        ptr = _capsule_pointer(cl.__pyx_capi__[name])
     except (ImportError, KeyError, AttributeError, ValueError):
         return None
-    # every LAPACK argument is passed by reference
-    return ctypes.CFUNCTYPE(None, *([ctypes.c_void_p] * n_args))(ptr)
+    if not ptr:
+        return None
+    fn: Callable[..., None] = ctypes.CFUNCTYPE(None, *_PROTOTYPES[name])(ptr)
+    return fn
 
 
-_HSEQR = _bind("dhseqr", 14)
-_LAHQR = _bind("dlahqr", 14)
-_HSEIN = _bind("dhsein", 19)
-_ORMHR = _bind("dormhr", 14)
+_HSEQR = _bind("dhseqr")
+_LAHQR = _bind("dlahqr")
+_HSEIN = _bind("dhsein")
+_ORMHR = _bind("dormhr")
 AVAILABLE = None not in (_HSEQR, _LAHQR, _HSEIN, _ORMHR)
 # dhseqr hands matrices above 75 to the multishift QR with aggressive early deflation, which on
 # the 75..150 state matrices of a diagram is ~40 % slower than the double-shift dlahqr it uses
@@ -59,11 +87,10 @@ def _int(v: int) -> ctypes.c_int:
     return ctypes.c_int(v)
 
 
-def _call(fn, *args) -> None:
-    """Call a LAPACK entry point with ``args`` (bytes, ``c_int`` or arrays) by reference; they
-    stay referenced during the call."""
-    fn(*[a if isinstance(a, bytes) else
-         ctypes.addressof(a) if isinstance(a, ctypes.c_int) else a.ctypes.data for a in args])
+def _call(fn: Callable[..., None] | None, *args: bytes | ctypes.c_int | np.ndarray) -> None:
+    """Call a LAPACK entry point; ``c_int`` arguments go by reference (the others already are)."""
+    assert fn is not None, "LAPACK entry point missing (callers check AVAILABLE)"
+    fn(*[ctypes.byref(a) if isinstance(a, ctypes.c_int) else a for a in args])
 
 
 @dataclass
@@ -89,14 +116,16 @@ def eigenvalues(a: np.ndarray, balance: bool = True) -> Eigenvalues:
     """All eigenvalues of the real square matrix ``a`` (``a`` is not modified).
 
     ``balance=False`` skips the diagonal scaling, for matrices already in a well-scaled basis.
+    Whenever a LAPACK step fails, the whole decomposition is redone by ``scipy.linalg.eig`` on
+    the original ``a`` (never on its balanced form), so eigenvectors are always those of ``a``.
     """
     n = a.shape[0]
     if not AVAILABLE or n < 2:
         return _dense(a)
-    scale = None
+    work, scale = a, None
     if balance:
-        a, (scale, _) = sla.matrix_balance(a, permute=False, separate=True)
-    refl, tau, info = sla.lapack.dgehrd(a)
+        work, (scale, _) = sla.matrix_balance(a, permute=False, separate=True)
+    refl, tau, info = sla.lapack.dgehrd(work)
     if info != 0:
         return _dense(a)
     refl = np.asfortranarray(refl)
@@ -105,8 +134,8 @@ def eigenvalues(a: np.ndarray, balance: bool = True) -> Eigenvalues:
     if info != 0 and n <= _LAHQR_MAX:
         wr, wi, info = _qr_eigenvalues(h, False)
     if info != 0:  # QR iteration did not converge: let LAPACK's driver try
-        return _dense(a if scale is None else a * scale[None, :] / scale[:, None])
-    return Eigenvalues(wr + 1j * wi, h, refl, tau, scale)
+        return _dense(a)
+    return Eigenvalues(wr + 1j * wi, h, refl, np.ascontiguousarray(tau), scale)
 
 
 def _qr_eigenvalues(h: np.ndarray, small: bool) -> tuple[np.ndarray, np.ndarray, int]:
