@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-COPY = ["package.xml", "setup.py", "setup.cfg", "executables", "resource", "config", "shm_ros", "msg_defs",
+COPY = ["package.xml", "setup.py", "setup.cfg", "executables", "resource", "config", "launch", "shm_ros", "msg_defs",
         "README.md", "LICENSE"]
 
 

@@ -1,20 +1,38 @@
 """Replay a bag through a freshly started node graph and collect what the graph published.
 
 Used by ``shm-ros example`` and by end-to-end tests: the nodes are real processes started by the
-:class:`~shm_ros.ros.supervisor.Supervisor`, data crosses DDS, and the recorder node's output bag is
-what comes back.
+:class:`~shm_ros.ros.supervisor.Supervisor`, data crosses DDS, the stages overlap as data flows
+(identify works on a window while track and update work on earlier ones), and the recorder node's
+output bag is what comes back.
 """
 
 from __future__ import annotations
 
+import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from shm_ros.core.progress import Progress
 from shm_ros.core.types import ModalEstimate, Window
 from shm_ros.ros.replay import ReplayResult
 from shm_ros.ros.supervisor import GraphConfig, NodeSpec, Supervisor
+
+
+@dataclass
+class PipelineRecord:
+    """What the recorder node wrote: windows, modal estimates, tracked-mode rows (message fields
+    as a dict per window), posterior summaries (one per update run) and non-OK diagnostics."""
+
+    windows: list[Window] = field(default_factory=list)
+    estimates: list[ModalEstimate] = field(default_factory=list)
+    tracked: list[dict[str, Any]] = field(default_factory=list)
+    posteriors: list[dict[str, Any]] = field(default_factory=list)
+    diagnostics: list[str] = field(default_factory=list)
+    # every diagnostic status: level (0 OK .. 3 STALE), source (the status name), message, values
+    diagnostic_rows: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -25,94 +43,149 @@ class GraphRun:
     diagnostics: list[str] = field(default_factory=list)
     output_bag: Path | None = None
     node_exit_code: int = 0
+    tracked: list[dict[str, Any]] = field(default_factory=list)
+    posteriors: list[dict[str, Any]] = field(default_factory=list)
+    wall_s: float = 0.0
+    diagnostic_rows: list[dict[str, Any]] = field(default_factory=list)
 
 
-def read_pipeline_bag(path: Path) -> tuple[list[Window], list[ModalEstimate], list[str]]:
-    """Windows, modal estimates and non-OK diagnostics recorded by the recorder node."""
+def read_pipeline_bag(path: Path) -> PipelineRecord:
+    """Everything the recorder node recorded, decoded."""
     from rclpy.serialization import deserialize_message
 
     from shm_ros.io.bags import read_messages
     from shm_ros.ros import topics
     from shm_ros.ros.convert import estimate_from_msg, window_from_msg
 
-    windows, estimates, diags = [], [], []
+    rec = PipelineRecord()
     for m in read_messages(path):
         cls = topics.message_class(m.msgtype)
         msg: Any = deserialize_message(m.data, cls)
         if m.topic == topics.WINDOWS:
-            windows.append(window_from_msg(msg))
+            rec.windows.append(window_from_msg(msg))
         elif m.topic == topics.MODAL_ESTIMATES:
-            estimates.append(estimate_from_msg(msg))
+            rec.estimates.append(estimate_from_msg(msg))
+        elif m.topic == topics.TRACKED_MODES:
+            rec.tracked.append({"window_id": msg.window_id, "mode_numbers": list(msg.mode_numbers),
+                                "frequencies_hz": list(msg.frequencies_hz),
+                                "damping_ratios": list(msg.damping_ratios)})
+        elif m.topic == topics.POSTERIOR:
+            rec.posteriors.append({"n_windows": int(msg.n_windows), "converged": bool(msg.converged),
+                                   "parameters": {p.name: {"mean": p.mean, "std": p.std} for p in msg.parameters}})
         elif m.topic == topics.DIAGNOSTICS:
-            diags += [f"{s.name}: {s.message}" for s in msg.status if s.level != 0]
-    return windows, estimates, diags
+            rec.diagnostics += [f"{s.name}: {s.message}" for s in msg.status if s.level != 0]
+            for st in msg.status:
+                values = {kv.key: kv.value for kv in st.values}
+                rec.diagnostic_rows.append({"level": int.from_bytes(st.level, "little") if isinstance(
+                    st.level, bytes) else int(st.level), "source": st.name, "message": st.message,
+                    "code": values.get("code", st.hardware_id or ""), "values": values})
+    return rec
+
+
+def analysis_nodes(structure: str | Path, window_s: float, *, identify: dict | None = None,
+                   track: dict | None = None, update: dict | None = None) -> list[NodeSpec]:
+    """ingest + identify, and track / update when their parameters are given."""
+    nodes = [NodeSpec("ingest", "ingest", {"structure": str(structure), "window_s": float(window_s)}),
+             NodeSpec("identify", "identify", dict(identify or {}))]
+    if track is not None:
+        nodes.append(NodeSpec("track", "track", dict(track)))
+    if update is not None:
+        nodes.append(NodeSpec("update", "update", {"structure": str(structure), **update}))
+    return nodes
 
 
 def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | Path, *,
                          window_s: float, expected_windows: int | None = None,
-                         identify: dict | None = None, timeout_s: float = 600.0,
-                         log=print) -> GraphRun:
-    """Start ingest + identify + recorder as processes, replay ``bag``, wait, stop, collect."""
+                         identify: dict | None = None, track: dict | None = None,
+                         update: dict | None = None, timeout_s: float = 600.0,
+                         log: Callable[[str], None] = print) -> GraphRun:
+    """Start the analysis nodes and a recorder as processes, replay ``bag``, wait until every
+    window is identified (and tracked, and in a posterior, when those nodes run), stop, collect."""
+    nodes = analysis_nodes(structure, window_s, identify=identify, track=track, update=update)
+    return run_graph(bag, nodes, workdir, expected_windows=expected_windows, timeout_s=timeout_s, log=log)
+
+
+def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
+              expected_windows: int | None = None, timeout_s: float = 600.0,
+              log: Callable[[str], None] = print) -> GraphRun:
     import rclpy
     from rclpy.node import Node
 
     from shm_ros.ros import topics
-    from shm_ros.ros.qos import pipeline_qos
+    from shm_ros.ros.qos import latched_qos, pipeline_qos
     from shm_ros.ros.replay import replay_bag
 
+    kinds = {n.kind for n in nodes}
     workdir = Path(workdir)
     out_bag = workdir / "pipeline_bag"
     if out_bag.exists():
-        import shutil
-
         shutil.rmtree(out_bag)
-    config = GraphConfig(nodes=[
-        NodeSpec("ingest", "ingest", {"structure": str(structure), "window_s": float(window_s)}),
-        NodeSpec("identify", "identify", dict(identify or {})),
-        NodeSpec("recorder", "recorder", {"output": str(out_bag)}),
-    ], restart=False)
-    sup = Supervisor(config, log=log)
+    recorder = NodeSpec("recorder", "recorder", {"output": str(out_bag)})
+    sup = Supervisor(GraphConfig(nodes=[*nodes, recorder], restart=False), log=log)
+    t0 = time.monotonic()
     sup.start_all()
     rclpy.init()
     try:
-        # Count estimates as they arrive, so we know when the graph is done with the recording.
-        watcher = Node("shm_example_watch")
-        seen: list[str] = []
+        # Count results as they arrive, so we know when the graph is done with the recording.
+        watcher = Node("shm_graph_watch")
+        seen: dict[str, set[str]] = {"estimates": set(), "tracked": set()}
+        posterior_windows = [0]
+
+        def on_posterior(m: Any) -> None:
+            posterior_windows[0] = max(posterior_windows[0], int(m.n_windows))
+
         watcher.create_subscription(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
-                                    topics.MODAL_ESTIMATES, lambda m: seen.append(m.window_id),
+                                    topics.MODAL_ESTIMATES, lambda m: seen["estimates"].add(m.window_id),
                                     pipeline_qos())
+        watcher.create_subscription(topics.message_class(topics.TYPES[topics.TRACKED_MODES]),
+                                    topics.TRACKED_MODES, lambda m: seen["tracked"].add(m.window_id),
+                                    pipeline_qos())
+        watcher.create_subscription(topics.message_class(topics.TYPES[topics.POSTERIOR]),
+                                    topics.POSTERIOR, on_posterior, latched_qos())
         # Every node must be up before the first message: windows are not kept for late joiners.
+        estimate_readers = 1 + ("track" in kinds) + ("update" in kinds)  # + the watcher's own
         ready_by = time.monotonic() + 120.0
         while time.monotonic() < ready_by and not (
                 watcher.count_subscribers(topics.WINDOWS) >= 2
                 and watcher.count_publishers(topics.MODAL_ESTIMATES) >= 1
-                and watcher.count_publishers(topics.INGEST_RECEIVED) >= 1):
+                and watcher.count_publishers(topics.INGEST_RECEIVED) >= 1
+                and watcher.count_subscribers(topics.MODAL_ESTIMATES) >= estimate_readers + 1
+                and ("track" not in kinds or watcher.count_publishers(topics.TRACKED_MODES) >= 1)
+                and ("update" not in kinds or watcher.count_publishers(topics.POSTERIOR) >= 1)):
             rclpy.spin_once(watcher, timeout_sec=0.2)
         result = replay_bag(bag, rate=0.0, wait_s=60.0, progress=True)
         log(f"replayed {result.published} messages, lost {result.lost}")
-        windows_seen: list[str] = []
-        watcher.create_subscription(topics.message_class(topics.TYPES[topics.WINDOWS]),
-                                    topics.WINDOWS, lambda m: windows_seen.append(m.window_id),
-                                    pipeline_qos())
+
+        def done() -> bool:
+            if expected_windows is None:
+                return False
+            return (len(seen["estimates"]) >= expected_windows
+                    and ("track" not in kinds or len(seen["tracked"]) >= expected_windows)
+                    and ("update" not in kinds or posterior_windows[0] >= expected_windows))
+
+        bar = Progress("graph", every_s=5.0)
         end = time.monotonic() + timeout_s
-        quiet_since = time.monotonic()
-        last = 0
-        while time.monotonic() < end:
+        quiet_since, last = time.monotonic(), 0
+        while time.monotonic() < end and not done():
             rclpy.spin_once(watcher, timeout_sec=0.2)
-            if expected_windows is not None and len(seen) >= expected_windows:
-                break
+            if expected_windows:
+                bar(len(seen["estimates"]), expected_windows)
             dead = [name for name, p in sup.procs.items() if p.poll() is not None]
             if dead:
-                log(f"node(s) {dead} exited before every window was identified")
+                log(f"node(s) {dead} exited before the graph was done with the recording")
                 break
-            if len(seen) != last:
-                last, quiet_since = len(seen), time.monotonic()
-            if expected_windows is None and seen and time.monotonic() - quiet_since > 20:
+            if len(seen["estimates"]) != last:
+                last, quiet_since = len(seen["estimates"]), time.monotonic()
+            if expected_windows is None and last and time.monotonic() - quiet_since > 20:
                 break
-        time.sleep(1.0)  # let the recorder write the last estimate
+        log(f"identified {len(seen['estimates'])} windows"
+            + (f", tracked {len(seen['tracked'])}" if "track" in kinds else "")
+            + (f", posterior from {posterior_windows[0]} windows" if "update" in kinds else ""))
+        time.sleep(1.0)  # let the recorder write the last messages
         watcher.destroy_node()
     finally:
         rclpy.try_shutdown()
         code = sup.stop_all()
-    windows, estimates, diags = read_pipeline_bag(out_bag)
-    return GraphRun(result, windows, estimates, diags, out_bag, code)
+    rec = read_pipeline_bag(out_bag)
+    return GraphRun(result, rec.windows, rec.estimates, rec.diagnostics, out_bag, code, rec.tracked,
+                    rec.posteriors, time.monotonic() - t0, rec.diagnostic_rows)
