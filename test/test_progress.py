@@ -21,3 +21,11 @@ def test_updates_are_rate_limited_but_first_and_last_always_print():
         p(k, 100)
     lines = out.getvalue().splitlines()
     assert len(lines) == 2 and lines[0].startswith("x [") and " 1/100 " in lines[0] and "100/100" in lines[1]
+
+
+def test_a_count_is_shown_once():
+    out = io.StringIO()
+    p = Progress("x", stream=out, every_s=0.0)
+    for _ in range(5):
+        p(3, 3)
+    assert len(out.getvalue().splitlines()) == 1

@@ -130,9 +130,8 @@ def _acceleration_record(args, spec, windows, observed):
 def run(args: argparse.Namespace) -> int:
     from shm_ros.core.bayes.priors import PriorError
     from shm_ros.core.models import build_model
-    from shm_ros.core.provenance import stamp_output
     from shm_ros.core.structure import StructureError
-    from shm_ros.io import jsonio
+    from shm_ros.io.posterior_files import write_posterior
     from shm_ros.io.structure import load_structure
     from shm_ros.io.tables import TableError
 
@@ -160,11 +159,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     cfg_dict = {k: v for k, v in vars(config).items()}
     cfg_dict.update({"structure": args.structure, "modes": args.modes, "bag": args.bag})
-    payload = stamp_output(post.to_dict(), cfg_dict, args.seed)
-    jsonio.dump(payload, out / "posterior.json", indent=2)
-    np.savez_compressed(out / "samples.npz", samples=post.samples, log_prob=post.log_prob,
-                        chains=post.chains, chain_names=np.array(post.chain_names),
-                        parameter_names=np.array(post.parameter_names))
+    write_posterior(out, post, cfg_dict, args.seed)
     if not args.no_plots:
         from shm_ros.report.posterior import posterior_plots
 

@@ -11,18 +11,20 @@ from typing import TextIO
 
 
 class Progress:
-    """``label [#####     ] done/total  elapsed, ETA`` lines; the first and last update always print."""
+    """``label [#####     ] done/total  elapsed, ETA`` lines; the first and last update always print,
+    and a count is shown once."""
 
     def __init__(self, label: str, stream: TextIO | None = None, every_s: float = 1.0, width: int = 30) -> None:
         self.label, self.stream, self.every_s, self.width = label, stream, every_s, width
         self.t0 = time.monotonic()
         self._last = -float("inf")
+        self._shown: tuple[int, int] | None = None
 
     def __call__(self, done: int, total: int) -> None:
         now = time.monotonic()
-        if 0 < done < total and now - self._last < self.every_s:
+        if (done, total) == self._shown or (0 < done < total and now - self._last < self.every_s):
             return
-        self._last = now
+        self._last, self._shown = now, (done, total)
         print(self.line(done, total, now - self.t0), file=self.stream or sys.stderr, flush=True)
 
     def line(self, done: int, total: int, elapsed: float) -> str:

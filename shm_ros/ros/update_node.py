@@ -16,7 +16,6 @@ every estimate, at the start and end of a run and every 30 s during one.
 
 from __future__ import annotations
 
-import json
 import multiprocessing
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -159,12 +158,9 @@ class UpdateNode(Node):
         self.posterior = posterior
         self.pub.publish(posterior_to_msg(posterior.summary_record(self.spec.name)))
         if self.output_dir is not None:
-            from shm_ros.core.provenance import stamp_output
+            from shm_ros.io.posterior_files import write_posterior
 
-            self.output_dir.mkdir(parents=True, exist_ok=True)
-            (self.output_dir / "posterior.json").write_text(json.dumps(
-                stamp_output(posterior.to_dict(), asdict(self.config) | {"n_windows": n},
-                             self.config.seed), indent=1, default=float))
+            write_posterior(self.output_dir, posterior, asdict(self.config) | {"n_windows": n}, self.config.seed)
         summary = ", ".join(f"{k} {v.mean:.4f}±{v.std:.4f}" for k, v in posterior.parameters.items())
         level = "ok" if posterior.diagnostics.get("converged", False) else "warn"
         self.diag.report(level, f"{n} windows in {took:.1f} s: {summary}", "posterior")
