@@ -1,7 +1,7 @@
 """The shipped graph file is a standard ROS 2 parameters file: a node started with
 ``--ros-args --params-file config/pipeline.yaml`` has exactly the parameters it has under
-``shm-ros run config/pipeline.yaml``; a launch file for ROS installations starts the same nodes
-with the same file."""
+``shm-ros run config/pipeline.yaml``; every node of that graph reports on /diagnostics; a launch
+file for ROS installations starts the same nodes with the same file."""
 
 from __future__ import annotations
 
@@ -14,8 +14,7 @@ import sys
 from pathlib import Path
 
 import yaml
-
-from ros_helpers.graph import node_parameters, stop
+from ros_helpers.graph import diagnostics_seen, node_parameters, stop
 
 ROOT = Path(__file__).resolve().parents[1]
 PIPELINE = ROOT / "config" / "pipeline.yaml"
@@ -43,11 +42,14 @@ def test_params_file_gives_every_node_the_parameters_it_has_under_shm_ros_run(tm
                              start_new_session=True)
     try:
         under_run = {name: node_parameters(name) for name in nodes}
+        # every node of the graph reports on /diagnostics, busy or idle
+        status = diagnostics_seen([f"{name}: status" for name in nodes])
     finally:
         graph.send_signal(signal.SIGINT)
         out, _ = graph.communicate(timeout=60)
     assert graph.returncode == 0, out[-3000:]
     assert "all nodes stopped" in out
+    assert "0 windows published" in status["ingest: status"] and "recorded" in status["recorder: status"]
 
     for name, given in nodes.items():
         shutil.rmtree(cwd / "out", ignore_errors=True)
@@ -78,7 +80,8 @@ def _flat(d: dict, prefix: str = "") -> dict:
 def test_launch_file_starts_the_same_nodes_with_the_same_file():
     """`launch`/`launch_ros` are not on PyPI: the launch file is checked by parsing it."""
     tree = ast.parse((ROOT / "launch" / "pipeline.launch.py").read_text())
-    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", getattr(n.func, "attr", "")) == "Node"]
+    calls = [n for n in ast.walk(tree)
+             if isinstance(n, ast.Call) and getattr(n.func, "id", getattr(n.func, "attr", "")) == "Node"]
     started = {}
     for call in calls:
         kw = {k.arg: k.value for k in call.keywords}

@@ -2,33 +2,53 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 from shm_ros.core.diagnostics import Level
 
+#: what a node says of itself on every heartbeat: level, message, key/values
+Summary = Callable[[], tuple[Level | str, str, dict[str, Any]]]
+
 
 class Diagnostics:
-    """Collects status entries of one node and publishes them as one DiagnosticArray."""
+    """Collects status entries of one node and publishes them as one DiagnosticArray.
 
-    def __init__(self, node: Any, hardware_id: str = "shm_ros") -> None:
+    With ``summary``, the node also reports its state every ``heartbeat_s`` seconds (steady clock)
+    under the name ``<node>: status``, so that a monitor sees every node of the graph, busy or
+    idle (a silent node is a stale one)."""
+
+    def __init__(self, node: Any, hardware_id: str = "shm_ros", summary: Summary | None = None,
+                 heartbeat_s: float = 2.0) -> None:
         from shm_ros.ros.qos import pipeline_qos
+        from shm_ros.ros.timers import steady_timer
 
         self._node = node
         self._pub = node.create_publisher(DiagnosticArray, "/diagnostics", pipeline_qos())
         self._hardware_id = hardware_id
         self._pending: list[DiagnosticStatus] = []
+        self._summary = summary
+        if summary is not None:
+            steady_timer(node, heartbeat_s, self._heartbeat)
+
+    def _heartbeat(self) -> None:
+        assert self._summary is not None
+        level, message, values = self._summary()
+        self._pending.append(self._status(Level.parse(level), message, "status", values))
+        self.publish()
+
+    def _status(self, level: Level, message: str, name: str, values: dict[str, Any]) -> DiagnosticStatus:
+        return DiagnosticStatus(
+            level=bytes([level]), name=f"{self._node.get_name()}: {name}" if name else self._node.get_name(),
+            message=message[:500], hardware_id=self._hardware_id,
+            values=[KeyValue(key=str(k), value=str(v)) for k, v in values.items()])
 
     def report(self, level: Level | str, message: str, name: str = "", **values: Any) -> None:
         """Queue one status; ``name`` says what it is about (a topic, a field, a stage)."""
         level = Level.parse(level)  # "ok" | "warn" | "error" | "stale" or a Level
-        status = DiagnosticStatus(
-            level=bytes([level]), name=f"{self._node.get_name()}: {name}" if name else self._node.get_name(),
-            message=message[:500], hardware_id=self._hardware_id,
-            values=[KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
-        )
-        self._pending.append(status)
+        self._pending.append(self._status(level, message, name, values))
         # rclpy refuses a call site that logs at changing severities ("Logger severity cannot be
         # changed between calls"): one call per severity.
         text = f"{name}: {message}" if name else message

@@ -34,7 +34,8 @@ class IdentifyNode(Node):
         super().__init__(name, parameter_overrides=overrides(parameters))
         self.config = load_config(self, IdentifyConfig)
         self.frame_id = load_config(self, IdentifyNodeConfig).frame_id
-        self.diag = Diagnostics(self, "identify")
+        self.diag = Diagnostics(self, "identify", summary=lambda: (
+            "ok", f"{self.count} windows identified", {"windows": self.count}))
         self.pub: Publisher[Any] = self.create_publisher(
             topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]), topics.MODAL_ESTIMATES,
             stream_qos())

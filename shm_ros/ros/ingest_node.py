@@ -66,7 +66,9 @@ class IngestNode(Node):
         self.frame_id = settings.frame_id
         self.idle_flush_s = settings.idle_flush_s
         self.reliable = settings.reliable_input
-        self.diag = Diagnostics(self, "ingest")
+        self.diag = Diagnostics(self, "ingest", summary=lambda: (
+            "ok", f"{self.received} messages received, {self.windows_out} windows published",
+            {"messages": self.received, "windows": self.windows_out}))
         self.window_pub: Any = self.create_publisher(
             topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, stream_qos(WINDOW_HISTORY))
         self.ack_pub = self.create_publisher(UInt64, topics.INGEST_RECEIVED, pipeline_qos())

@@ -12,6 +12,7 @@ from rclpy.node import Node
 from shm_ros.core.config import option
 from shm_ros.io.bags import BagWriter
 from shm_ros.ros import topics
+from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
 from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import latched_qos, pipeline_qos, stream_qos
@@ -44,6 +45,8 @@ class RecorderNode(Node):
         self.writer = BagWriter(out, storage=settings.storage)
         self.writer.__enter__()
         self.count = 0
+        self.diag = Diagnostics(self, "recorder", summary=lambda: (
+            "ok", f"{self.count} messages recorded to {out}", {"messages": self.count, "output": out}))
         for topic in settings.topics:
             msgtype = topics.TYPES.get(topic)
             if msgtype is None:

@@ -47,7 +47,8 @@ class TrackNode(Node):
         except ValueError as exc:
             raise SystemExit(f"{self.get_name()}: parameter error: {exc}") from exc
         self.frame_id = settings.frame_id
-        self.diag = Diagnostics(self, "track")
+        self.diag = Diagnostics(self, "track", summary=lambda: (
+            "ok", f"{self.published} windows tracked", {"windows": self.published}))
         self.pub: Publisher[Any] = self.create_publisher(
             topics.message_class(topics.TYPES[topics.TRACKED_MODES]), topics.TRACKED_MODES,
             stream_qos())

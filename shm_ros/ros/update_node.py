@@ -77,7 +77,10 @@ class UpdateNode(Node):
         self.run_windows = 0
         self.run_started = 0.0  # time.time() of the start of the current run
         self._progress_at = 0.0
-        self.diag = Diagnostics(self, "update")
+        self.diag = Diagnostics(self, "update", summary=lambda: (
+            "ok", f"{len(self.estimates)} windows received"
+            + (f", sampling {self.run_windows} of them" if self.future is not None else ", idle"),
+            {"received": len(self.estimates), "sampling": self.future is not None}))
         self.pub: Publisher[Any] = self.create_publisher(
             topics.message_class(topics.TYPES[topics.POSTERIOR]), topics.POSTERIOR, latched_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),

@@ -149,3 +149,33 @@ def node_parameters(name: str, timeout: float = 300.0) -> dict[str, dict]:
                          timeout=timeout)
     assert run.returncode == 0, run.stdout + run.stderr
     return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+_DIAGNOSTICS = r"""
+import json, sys, time
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+wanted, timeout = set(json.loads(sys.argv[1])), float(sys.argv[2])
+rclpy.init()
+node = rclpy.create_node("test_diagnostics_probe")
+seen = {}
+def on(msg):
+    for s in msg.status:
+        seen.setdefault(s.name, s.message)
+node.create_subscription(DiagnosticArray, "/diagnostics", on, 50)
+end = time.monotonic() + timeout
+while time.monotonic() < end and not wanted <= set(seen):
+    rclpy.spin_once(node, timeout_sec=0.1)
+print(json.dumps(seen))
+sys.exit(0 if wanted <= set(seen) else 1)
+"""
+
+
+def diagnostics_seen(names: list[str], timeout: float = 60.0) -> dict[str, str]:
+    """Wait until a /diagnostics status of each of ``names`` arrived; returns name -> message."""
+    import json
+
+    run = subprocess.run([sys.executable, "-c", _DIAGNOSTICS, json.dumps(names), str(timeout)],
+                         capture_output=True, text=True, timeout=timeout + 60)
+    assert run.returncode == 0, f"no /diagnostics from {names}: {run.stdout[-2000:]} {run.stderr[-2000:]}"
+    return json.loads(run.stdout.strip().splitlines()[-1])
