@@ -29,3 +29,23 @@ def test_a_count_is_shown_once():
     for _ in range(5):
         p(3, 3)
     assert len(out.getvalue().splitlines()) == 1
+
+
+def test_sampler_progress_reports_and_leaves_the_draws_unchanged():
+    """emcee and MH report (steps done, steps planned) while sampling; the draws are the same as
+    without a progress callback."""
+    import numpy as np
+
+    from shm_ros.core.bayes.samplers import SamplerSettings, run_emcee, run_mh
+
+    def log_prob(x):
+        return -0.5 * np.sum(np.atleast_2d(x) ** 2, axis=1)
+
+    for run in (run_emcee, run_mh):
+        calls = []
+        base = dict(n_steps=200, max_steps=200, rhat_target=2.0, ess_target=10.0, seed=4)
+        quiet = run(log_prob, np.zeros(2), np.eye(2), SamplerSettings(**base), ["a", "b"])
+        loud = run(log_prob, np.zeros(2), np.eye(2),
+                   SamplerSettings(**base, progress=lambda d, t: calls.append((d, t))), ["a", "b"])
+        np.testing.assert_array_equal(quiet.chains, loud.chains)
+        assert calls and calls[-1][0] == calls[-1][1] and all(0 < d <= t for d, t in calls), (run, calls)

@@ -98,7 +98,11 @@ def run(args: argparse.Namespace) -> int:
     cfg.spectrum = plots is not None
     records: list[dict[str, Any]] = []
     n_ok = 0
-    for w in res.windows:
+    from shm_ros.core.progress import Progress
+
+    progress = Progress("windows identified", every_s=2.0)
+    for k, w in enumerate(res.windows):
+        progress(k, len(res.windows))
         try:
             result = identify_window_detailed(w, cfg)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -122,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
     config = {"identify": asdict(cfg), "window_s": args.window, "bag": str(args.bag),
               "structure": str(args.structure)}
     out = dump(stamp_output({"windows": records}, config), args.out)
+    progress(len(res.windows), len(res.windows))
     n_modes = sum(len(r["modes"]) for r in records)
     print(f"{len(records)} windows ({n_ok} identified), {n_modes} modes -> {out}")
     return 0 if (n_ok or not res.windows) else 1

@@ -152,8 +152,10 @@ def run(args: argparse.Namespace) -> int:
         if args.study:
             return _run_study(args, spec, model, obs, config, out)
         from shm_ros.core.bayes.update import update
+        from shm_ros.core.progress import Progress
 
-        post = update(model, obs, config, priors=spec.parameters)
+        post = update(model, obs, config, priors=spec.parameters,
+                      progress=Progress(f"{config.sampler} steps", every_s=2.0))
     except (ValueError, TypeError, KeyError, OSError, StructureError, TableError, PriorError) as exc:
         print(f"shm-ros update: error: {exc}", file=sys.stderr)
         return 2

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -38,6 +39,21 @@ class SamplerSettings:
     rhat_target: float = 1.01
     ess_target: float = 1000.0
     seed: int = 0
+    # called with (steps done, steps planned so far) while sampling: progress and ETA on a terminal
+    progress: Callable[[int, int], None] | None = None
+
+
+def _emcee_steps(sampler: Any, start: Any, steps: int, settings: SamplerSettings) -> Any:
+    """``sampler.run_mcmc(start, steps)`` (the same draws), reporting progress every 50 steps."""
+    if settings.progress is None:
+        return sampler.run_mcmc(start, steps, progress=False)
+    target = sampler.iteration + steps
+    state = None
+    for k, drawn in enumerate(sampler.sample(start, iterations=steps), 1):
+        state = drawn
+        if k % 50 == 0 or k == steps:
+            settings.progress(sampler.iteration, target)
+    return state
 
 
 @dataclass
@@ -229,7 +245,7 @@ def run_emcee(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: 
     moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
     sampler = emcee.EnsembleSampler(n_w, d, lp, vectorize=True, moves=moves)
     sampler.random_state = np.random.RandomState(settings.seed).get_state()
-    state = sampler.run_mcmc(p0, settings.n_steps, progress=False)
+    state = _emcee_steps(sampler, p0, settings.n_steps, settings)
     warnings_: list[str] = []
     while True:
         n = sampler.iteration
@@ -242,7 +258,7 @@ def run_emcee(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: 
         # extend by the steps the ESS shortfall suggests (at least half the current length)
         need = settings.ess_target / max(diag.ess_min, 1.0) * (n - burn)
         extra = int(min(max(need - (n - burn), n // 2, 100), settings.max_steps - n))
-        state = sampler.run_mcmc(state, extra, progress=False)
+        state = _emcee_steps(sampler, state, extra, settings)
     acc = float(np.mean(sampler.acceptance_fraction))
     diag.acceptance = acc
     converged = diag.meets(settings.rhat_target, settings.ess_target)
@@ -295,6 +311,8 @@ def run_mh(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: Sam
             x = np.where(accept[:, None], prop, x)
             lp = np.where(accept, lp_new, lp)
             step += 1
+            if settings.progress is not None and (step % 100 == 0 or step == total):
+                settings.progress(step, total)
             if step <= burn:
                 hist.append(x.copy())
                 acc_hist.append(accept)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import enum
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -244,7 +244,8 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
 
 def update(model: AffineModel, observations: Any, config: UpdateConfig | None = None,
            priors: JointPrior | Sequence[Any] | None = None,
-           warm_start: Posterior | None = None) -> Posterior:
+           warm_start: Posterior | None = None,
+           progress: Callable[[int, int], None] | None = None) -> Posterior:
     """Calibrate the model's parameters to the data; see the module docstring.
 
     ``observations`` is :class:`ModalObservations` (likelihood ``gaussian`` or ``fitness``) or an
@@ -252,6 +253,7 @@ def update(model: AffineModel, observations: Any, config: UpdateConfig | None = 
     the structure's parameter specs, a :class:`JointPrior`, or None to use ``config.priors``.
     ``warm_start``: a previous posterior of the same parameters (e.g. before new windows arrived);
     its draws join the starting points of the MAP search, so a re-run starts where the last ended.
+    ``progress(steps done, steps planned)`` is called while the sampler runs.
     """
     config = config or UpdateConfig()
     config.validate()
@@ -259,13 +261,13 @@ def update(model: AffineModel, observations: Any, config: UpdateConfig | None = 
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=config.blas_threads, user_api="blas"):
-            return _update(model, observations, config, priors, warm_start)
-    return _update(model, observations, config, priors, warm_start)
+            return _update(model, observations, config, priors, warm_start, progress)
+    return _update(model, observations, config, priors, warm_start, progress)
 
 
 def _update(model: AffineModel, observations: Any, config: UpdateConfig,
-            priors: JointPrior | Sequence[Any] | None, warm_start: Posterior | None = None
-            ) -> Posterior:
+            priors: JointPrior | Sequence[Any] | None, warm_start: Posterior | None = None,
+            progress: Callable[[int, int], None] | None = None) -> Posterior:
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     warnings_: list[str] = []
@@ -309,7 +311,8 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
 
     t1 = time.perf_counter()
     settings = SamplerSettings(config.sampler, config.n_chains, config.n_steps, config.max_steps,
-                               config.burn_in, config.rhat_target, config.ess_target, config.seed)
+                               config.burn_in, config.rhat_target, config.ess_target, config.seed,
+                               progress)
     chains: ChainResult = run_sampler(log_post, x_map, cov, settings, names)
     timing["sampling_s"] = time.perf_counter() - t1
     flat = chains.flat
