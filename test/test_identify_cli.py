@@ -45,7 +45,7 @@ def _write_case(tmp_path, duration=300.0):
     return s, bag, truth, names
 
 
-def test_identify_cli_writes_contract_json_and_plots(tmp_path):
+def test_identify_cli_writes_modes_json_and_plots(tmp_path):
     s, bag, truth, names = _write_case(tmp_path)
     out = tmp_path / "modes.json"
     plots = tmp_path / "plots"

@@ -54,7 +54,7 @@ def test_worker_processes_write_the_same_bytes(tmp_path):
     assert _digest(one.bag) == _digest(two.bag)
 
 
-def test_accel_block_bag_follows_the_contract(tmp_path):
+def test_accel_block_bag_follows_the_recording_layout(tmp_path):
     sc = named_scenario("girder", n_windows=3, window_s=30.0, seed=2)
     c = simulate_campaign(sc)
     files = write_campaign(c, tmp_path)

@@ -270,10 +270,10 @@ parameters:
 """
 
 
-def test_contract_example_loads(tmp_path):
+def test_interfaces_example_loads(tmp_path):
     """A girder in the documented form (docs/interfaces.md §2; YAML 1.1 reads 3.4e10 as text, it is
     still a number), with the unused shear_building section ignored."""
-    p = tmp_path / "contract.yaml"
+    p = tmp_path / "interfaces_example.yaml"
     p.write_text(CONTRACT_EXAMPLE)
     spec = load_structure(p)
     assert spec.girder.sections[0].E == 3.4e10 and spec.girder.bearings[1].k_vertical == 5.0e9

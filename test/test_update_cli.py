@@ -27,7 +27,7 @@ def building_files(tmp_path_factory):
     return d
 
 
-def test_update_writes_contract_outputs(building_files, capsys):
+def test_update_writes_its_documented_outputs(building_files, capsys):
     out = building_files / "out"
     code = main(["update", "--structure", str(building_files / "structure.yaml"), "--modes",
                  str(building_files / "modes.csv"), "--out", str(out), "--seed", "3", *FAST])

@@ -1,7 +1,7 @@
 """`shm-ros identify BAG --structure S.yaml --out modes.json [--window SECONDS] [--method M] ...`.
 
 Reads and windows the bag exactly as ``shm-ros ingest`` does, identifies every window with
-``shm_ros.core.identify.identify_window`` and writes one record per window (contracts section 3):
+``shm_ros.core.identify.identify_window`` and writes one record per window (docs/interfaces.md §3):
 start, end, temperature, and the modes sorted by frequency with damping, MPC, real mode shapes
 labelled by sensor id, the spread across model orders and (SSI-cov, SSI-data) jackknife standard
 deviations.

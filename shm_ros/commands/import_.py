@@ -1,4 +1,4 @@
-"""`shm-ros import FILE... --out BAG`: recordings from other tools -> a contract bag.
+"""`shm-ros import FILE... --out BAG`: recordings from other tools -> a bag of the recording layout (docs/interfaces.md §1).
 
 Formats (from the file name unless --format): CSV (.csv/.txt/.tsv; a header row of channel names or
 --channels; --rate or a --time-column), NPY (.npy, (n_samples, n_channels); --rate, --channels),
@@ -14,7 +14,7 @@ import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("import", help="convert CSV/NPY/V2/MiniSEED recordings into a contract bag",
+    p = sub.add_parser("import", help="convert CSV/NPY/V2/MiniSEED recordings into a bag (docs/interfaces.md §1)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("files", nargs="+", help="input files (all go into one bag)")
     p.add_argument("--out", required=True, help="bag to create (a new directory)")

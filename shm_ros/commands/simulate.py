@@ -1,6 +1,6 @@
 """`shm-ros simulate SCENARIO --out DIR`: a recording whose truth is known.
 
-Writes ``DIR/bag`` (contract bag: AccelBlock or per-sample Imu, temperature), ``DIR/structure.yaml``
+Writes ``DIR/bag`` (bag of docs/interfaces.md §1: AccelBlock or per-sample Imu, temperature), ``DIR/structure.yaml``
 (the NOMINAL structure file), ``DIR/truth.json`` (true modal properties per window, hidden effects,
 faults, seed) and ``DIR/truth_modes.csv`` (the true modes as a tracked-modes table). Scenarios: girder, building, building-earthquake, or a YAML file (--scenario-file).
 """

@@ -1,7 +1,7 @@
 """`shm-ros track MODES.json --out DIR`: mode identities across windows, temperature, novelty.
 
-Reads the modal estimates written by ``shm-ros identify`` (contracts section 3), tracks them with
-``shm_ros.core.tracking.track`` and writes ``DIR/tracked_modes.csv`` (contracts section 4, the
+Reads the modal estimates written by ``shm-ros identify`` (docs/interfaces.md §3), tracks them with
+``shm_ros.core.tracking.track`` and writes ``DIR/tracked_modes.csv`` (docs/interfaces.md §4, the
 input of ``shm-ros update --modes``), ``DIR/tracking.json`` (reference modes, the environmental
 model per mode, novelty threshold and alarms; with provenance) and ``DIR/tracking.png``.
 """

@@ -1,4 +1,4 @@
-"""`shm-ros update`: Bayesian calibration of a structure file's parameters (contracts section 6).
+"""`shm-ros update`: Bayesian calibration of a structure file's parameters (docs/interfaces.md §6).
 
     shm-ros update --structure S.yaml (--modes TABLE.csv | --bag BAG) --out DIR
                    [--sampler mh|emcee] [--likelihood gaussian|fitness|time] [--study]
@@ -29,9 +29,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("update", help="Bayesian updating of the structure's parameters",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--structure", required=True, help="structure file (YAML, contracts section 2)")
+    p.add_argument("--structure", required=True, help="structure file (YAML, docs/interfaces.md §2)")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--modes", help="tracked-modes table (CSV, contracts section 4)")
+    src.add_argument("--modes", help="tracked-modes table (CSV, docs/interfaces.md §4)")
     src.add_argument("--bag", help="recording (rosbag2); identified and tracked first")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--study", action="store_true",

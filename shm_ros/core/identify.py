@@ -2,7 +2,7 @@
 
 ``identify_window(window, config)`` = pre-processing -> SSI (cov / data / input-output) -> poles
 of every model order from one factorisation -> stability, two-A, MPC and physical filters ->
-automatic clustering -> real mode shapes labelled by sensor id (contracts section 3).
+automatic clustering -> real mode shapes labelled by sensor id (docs/interfaces.md §3).
 ``identify_window_detailed`` returns the same plus the stabilization diagram.
 """
 

@@ -1,4 +1,4 @@
-"""``schema_version`` and ``provenance`` carried by every JSON output (contracts section 3)."""
+"""``schema_version`` and ``provenance`` carried by every JSON output (docs/interfaces.md §3)."""
 
 from __future__ import annotations
 

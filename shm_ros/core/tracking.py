@@ -2,7 +2,7 @@
 
 ``track(estimates, TrackingConfig())`` turns a sequence of per-window modal estimates (modes
 unnumbered, sorted by frequency, spurious ones possible, true ones sometimes missing) into the
-tracked-modes table of contracts section 4:
+tracked-modes table of docs/interfaces.md §4:
 
 1. **Reference set** from the first ``reference_windows`` windows: their modes are clustered on
    ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)`` (average linkage, as the stabilization-diagram
@@ -93,7 +93,7 @@ class EnvironmentalFit:
 
 @dataclass
 class TrackingResult:
-    observations: ModalObservations  # the tracked-modes table (contracts section 4)
+    observations: ModalObservations  # the tracked-modes table (docs/interfaces.md §4)
     reference: list[ReferenceMode]
     mac_to_reference: np.ndarray  # (n_windows, n_modes), NaN = not found
     environment: list[EnvironmentalFit]

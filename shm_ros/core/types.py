@@ -81,7 +81,7 @@ class Mode:
 
 @dataclass
 class ModalEstimate:
-    """The modes identified in one window, sorted by frequency (contracts section 3)."""
+    """The modes identified in one window, sorted by frequency (docs/interfaces.md §3)."""
 
     window_id: str
     start_ns: int

@@ -31,7 +31,7 @@ def stamp_ns(stamp: Any) -> int:
 
 
 class BagWriter:
-    """Writes contract topics (and any registered type) into a new rosbag2 bag.
+    """Writes recording topics (docs/interfaces.md §1; and any registered type) into a new rosbag2 bag.
 
     ``storage`` is ``"mcap"`` (default, what ``ros2 bag record`` writes) or ``"sqlite3"``;
     ``compress=True`` zstd-compresses MCAP chunks (``--storage-preset-profile zstd_fast``).

@@ -1,5 +1,5 @@
 """Write a simulated campaign: the bag, the NOMINAL structure file, ``truth.json`` and the true
-modes as a tracked-modes table ``truth_modes.csv`` (contracts section 4).
+modes as a tracked-modes table ``truth_modes.csv`` (docs/interfaces.md §4).
 
 ``write_campaign(campaign, out_dir)`` streams windows into ``OUT/bag`` (rosbag2, MCAP by default with
 zstd chunk compression, or sqlite3), writes ``OUT/structure.yaml`` (the nominal structure file, which
@@ -134,7 +134,7 @@ def write_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
 
 
 def write_truth_table(entries: list[dict], sensor_ids: list[str], path: str | Path) -> Path:
-    """The true modes as a tracked-modes table (contracts section 4): one row per window, ``time``
+    """The true modes as a tracked-modes table (docs/interfaces.md §4): one row per window, ``time``
     (window start, ISO 8601), ``mode<k>_hz``, ``mode<k>_damping``, ``mode<k>_shape_<sensor>``, and
     covariates ``temperature_c`` (the recorded mean, as ``ingest`` computes it), ``temperature_true_c``,
     ``rms_accel`` (mean over sensors, m/s^2) and ``pga`` (m/s^2, earthquakes; 0 otherwise)."""

@@ -1,4 +1,4 @@
-"""Recordings from other tools -> contract bags (``shm-ros import``).
+"""Recordings from other tools -> bags of the recording layout (docs/interfaces.md §1; ``shm-ros import``).
 
 Readers return :class:`ImportedRecord` (samples in m/s^2, a start time, a rate or per-sample stamps);
 :func:`write_bag` writes any number of them as ``AccelBlock`` messages (default) or per-sample
@@ -408,7 +408,7 @@ def _pick(opts: dict[str, Any], *keys: str) -> dict[str, Any]:
 def write_bag(records: Sequence[ImportedRecord], out: str | Path, *, layout: str = "block",
               prefix: str = "", storage: str = "mcap", compress: bool = True, block_s: float = 1.0,
               axis: str = "z") -> dict[str, Any]:
-    """Write records as a contract bag; returns a summary (topics, messages, samples, span).
+    """Write records as a bag of the recording layout; returns a summary (topics, messages, samples, span).
 
     ``layout="block"``: ``<prefix>/accel_block`` AccelBlocks of ``block_s`` seconds (records with
     per-sample stamps must be evenly sampled); ``layout="imu"``: one ``sensor_msgs/Imu`` per sample

@@ -24,7 +24,7 @@ def _finite(x: float) -> float | None:
 
 
 def estimate_record(e: ModalEstimate, window: Window | None = None) -> dict[str, Any]:
-    """One window of the contract's JSON (section 3); ``window`` adds its event flag and PGA."""
+    """One window of the modes JSON (docs/interfaces.md §3); ``window`` adds its event flag and PGA."""
     modes = sorted(e.modes, key=lambda m: m.frequency_hz)
     record: dict[str, Any] = {
         "start": iso(e.start_ns),

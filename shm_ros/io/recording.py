@@ -133,7 +133,7 @@ class _BagFeeder:
                                    "were ingested)", code="bag_damaged")
         if self.ignored:
             self.core.report_error(source, "ignored topics (not accelerometer/temperature "
-                                   "contract topics): " + ", ".join(sorted(self.ignored)),
+                                   "recording topics): " + ", ".join(sorted(self.ignored)),
                                    level=Level.OK, code="ignored_topics")
 
     def feed(self, batch: Batch) -> None:

@@ -1,4 +1,4 @@
-"""The tracked-modes table (contracts section 4): CSV <-> :class:`ModalObservations`.
+"""The tracked-modes table (docs/interfaces.md §4): CSV <-> :class:`ModalObservations`.
 
 One row per window; a ``time`` column (ISO 8601 or seconds); ``mode<k>_hz`` columns (k = 1, 2, ...);
 optional ``mode<k>_damping`` and ``mode<k>_shape_<sensor_id>``; every other column is a covariate.

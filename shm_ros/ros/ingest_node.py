@@ -104,7 +104,7 @@ class IngestNode(Node):
 
         return ChannelMap.from_structure(load_structure(structure))
 
-    # -- topics appear while the graph runs: subscribe to the contract ones ----------------------
+    # -- topics appear while the graph runs: subscribe to the recording topics ----------------------
     def _discover(self) -> None:
         qos = recording_qos(reliable=self.reliable)
         for topic, types in self.get_topic_names_and_types():

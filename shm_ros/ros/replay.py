@@ -90,7 +90,7 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
 
     ``rate``: 1.0 = real time, N = N x real time, 0 = as fast as the graph acknowledges.
-    ``recording_only``: replay only contract recording topics (accelerometers, blocks, temperature).
+    ``recording_only``: replay only recording topics (docs/interfaces.md §1: accelerometers, blocks, temperature).
     ``stall_s``: with flow control, give up (``result.error``) when no acknowledgement arrives for
     this long (the ingest node is gone or stuck) instead of waiting forever.
     """

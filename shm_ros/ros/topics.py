@@ -1,4 +1,4 @@
-"""Names and types of the pipeline's own topics (recording topics follow contracts section 1)."""
+"""Names and types of the pipeline's own topics (recording topics follow docs/interfaces.md §1)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Modal data as the updating core sees it: one row per tracked window (contracts section 4)."""
+"""Modal data as the updating core sees it: one row per tracked window (docs/interfaces.md §4)."""
 
 from __future__ import annotations
 

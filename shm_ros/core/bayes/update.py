@@ -167,7 +167,7 @@ class Posterior:
         }
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``posterior.json`` payload of contracts section 6 (without schema/provenance)."""
+        """The ``posterior.json`` payload of docs/interfaces.md §6 (without schema/provenance)."""
         return {
             "parameters": {n: s.to_dict() for n, s in self.parameters.items()},
             "diagnostics": self.diagnostics,
