@@ -183,7 +183,7 @@ def test_cli_ingest_writes_json_and_npz(tmp_path):
     assert main(["ingest", str(tmp_path / "bag"), "--structure", str(tmp_path / "s.yaml"), "--out", str(out),
                  "--window", "10", "--quiet"]) == 0
     doc = json.loads((out / "windows.json").read_text())
-    assert doc["schema_version"] and doc["provenance"]["configuration"]["window_s"] == 10.0
+    assert doc["schema_version"] and doc["provenance"]["configuration"]["ingest"]["window_s"] == 10.0
     assert [w["n_samples"] for w in doc["windows"]] == [2000, 2000]
     w1 = load_window(out / doc["windows"][1]["file"])
     assert np.array_equal(w1.samples, x[2000:]) and w1.channel_names == ["s1", "s2"]
