@@ -2,7 +2,8 @@
 
 Writes ``DIR/bag`` (bag of docs/interfaces.md §1: AccelBlock or per-sample Imu, temperature), ``DIR/structure.yaml``
 (the NOMINAL structure file), ``DIR/truth.json`` (true modal properties per window, hidden effects,
-faults, seed) and ``DIR/truth_modes.csv`` (the true modes as a tracked-modes table). Scenarios: girder, building, building-earthquake, or a YAML file (--scenario-file).
+faults, seed) and ``DIR/truth_modes.csv`` (the true modes as a tracked-modes table). Scenarios: girder, building,
+building-earthquake, or a YAML file (--scenario-file).
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", nargs="?", default=None,
                    help="girder | building | building-earthquake (default: girder, or the scenario file's)")
     p.add_argument("--out", required=True, help="output directory (bag/, structure.yaml, truth.json, truth_modes.csv)")
-    p.add_argument("--scenario-file", help="YAML scenario: {scenario: NAME, <option>: value, effects: [...], faults: [...]}")
+    p.add_argument("--scenario-file",
+                   help="YAML scenario: {scenario: NAME, <option>: value, effects: [...], faults: [...]}")
     p.add_argument("--windows", type=int, help="number of windows (bursts)")
     p.add_argument("--duration", type=float,
                    help="total recorded seconds: one window of that length if shorter than --window-s, "
@@ -27,15 +29,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--pause-s", type=float, help="pause between bursts, s (default 2; must exceed 1)")
     p.add_argument("--fs", type=float, help="sample rate, Hz (default 100)")
     p.add_argument("--floors", type=int, help="building scenarios: number of stories (default 8)")
-    p.add_argument("--start", help="start time, ISO 8601 UTC (girder 2024-03-01T00:00:00Z, building 2024-05-01T00:00:00Z)")
+    p.add_argument("--start",
+                   help="start time, ISO 8601 UTC (girder 2024-03-01T00:00:00Z, building 2024-05-01T00:00:00Z)")
     p.add_argument("--effects", default="",
                    help="hidden effects, comma-separated key[@TIME][:name=value...]: temperature_linear, "
                         "temperature_bilinear, damage, repair, added_mass, support_flexibility, "
-                        "amplitude_stiffness, amplitude_damping, damper (e.g. 'temperature_bilinear:where=bearings,damage@48h:factor=0.9')")
+                        "amplitude_stiffness, amplitude_damping, damper "
+                        "(e.g. 'temperature_bilinear:where=bearings,damage@48h:factor=0.9')")
     p.add_argument("--faults", default="",
                    help="sensor faults, comma-separated kind[@WINDOW][:SENSOR]: dropout, spike, nan, dead, "
                         "clipped, clock_jump, duplicate")
-    p.add_argument("--format", choices=("imu", "block"), help="per-sample sensor_msgs/Imu or AccelBlock (default block)")
+    p.add_argument("--format", choices=("imu", "block"),
+                   help="per-sample sensor_msgs/Imu or AccelBlock (default block)")
     p.add_argument("--storage", choices=("mcap", "sqlite3"), help="bag storage (default mcap)")
     p.add_argument("--no-compress", action="store_true", help="do not zstd-compress MCAP chunks")
     p.add_argument("--unrelated-topics", action="store_true",

@@ -100,7 +100,8 @@ class IdentifyConfig:
     @classmethod
     def from_dict(cls, d: dict) -> IdentifyConfig:
         d = dict(d)
-        sub = {"preprocess": PreprocessConfig, "stability": StabilityConfig, "picking": PickingConfig}
+        sub: dict[str, type[PreprocessConfig | StabilityConfig | PickingConfig]] = {
+            "preprocess": PreprocessConfig, "stability": StabilityConfig, "picking": PickingConfig}
         for key, typ in sub.items():
             if key in d and isinstance(d[key], dict):
                 unknown = set(d[key]) - set(typ.__dataclass_fields__)
@@ -212,6 +213,7 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
     std_z = np.full(len(picked), np.nan)
     if cfg.uncertainty and picked and cfg.method in ("ssi-cov", "ssi-data"):
         nb, nmax = cfg.uncertainty_blocks, model.observability.shape[1]
+        assert refs is not None  # only ssi-io leaves the references unset
         try:
             reps = (_cov_replicates(y, refs, i, nmax, nb) if cfg.method == "ssi-cov" else
                     (m.observability for m in ssi.ssi_data_leave_one_out(
@@ -223,7 +225,7 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
                   mode_shape=real_mode_shape(p.mode_shape_complex), mpc=p.mpc,
                   frequency_std_hz=float(sf), damping_std=float(sz), n_poles=p.n_poles,
                   frequency_spread_hz=p.frequency_spread_hz, damping_spread=p.damping_spread)
-             for p, sf, sz in zip(picked, std_f, std_z)]
+             for p, sf, sz in zip(picked, std_f, std_z, strict=True)]
     est = ModalEstimate(window_id="", start_ns=0, end_ns=int(round(data.shape[0] / fs * 1e9)),
                         sensor_ids=out_names, modes=modes, method=cfg.method)
     diagram = Diagram(poles=poles, flags=flags, picked=picked, singular_values=model.singular_values)
@@ -246,7 +248,7 @@ def _cov_replicates(y: np.ndarray, refs: np.ndarray, i: int, max_order: int, n_b
         yield ssi.observability_from((total - hs[b]) / (n_blocks - 1), max_order)[0]
 
 
-def _jackknife(replicates, n_blocks: int, l: int, fs: float, picked: list[PickedMode]
+def _jackknife(replicates, n_blocks: int, n_out: int, fs: float, picked: list[PickedMode]
                ) -> tuple[np.ndarray, np.ndarray]:
     """Leave-one-block-out jackknife standard deviations of frequency and damping: each replicate
     observability matrix is evaluated at every picked mode's representative order and the pole
@@ -256,7 +258,7 @@ def _jackknife(replicates, n_blocks: int, l: int, fs: float, picked: list[Picked
     for b, o in enumerate(replicates):
         for k, p in enumerate(picked):
             nord = min(p.representative_order, o.shape[1])
-            up, dn = o[:-l, :nord], o[l:, :nord]
+            up, dn = o[:-n_out, :nord], o[n_out:, :nord]
             a = sla.lstsq(up, dn, check_finite=False)[0]
             mu, psi = sla.eig(a, check_finite=False)
             sel = mu.imag > 0
@@ -265,7 +267,7 @@ def _jackknife(replicates, n_blocks: int, l: int, fs: float, picked: list[Picked
             lam = np.log(mu[sel]) * fs
             f = np.abs(lam) / (2 * np.pi)
             z = -lam.real / np.abs(lam)
-            phi = o[:l, :nord] @ psi[:, sel]
+            phi = o[:n_out, :nord] @ psi[:, sel]
             phi /= np.linalg.norm(phi, axis=0)
             mac = mac_matrix(p.mode_shape_complex[None], phi.T)[0]
             score = np.abs(f - p.frequency_hz) / p.frequency_hz + (1 - mac)

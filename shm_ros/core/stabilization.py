@@ -110,7 +110,7 @@ def classify(poles: PoleSet, cfg: StabilityConfig, sample_rate_hz: float) -> Pol
     orders = np.asarray(poles.orders)
     present = [o for o in orders if np.any(poles.order == o)]
     starts = {o: np.flatnonzero(poles.order == o) for o in present}
-    for prev, cur in zip(present[:-1], present[1:]):
+    for prev, cur in zip(present[:-1], present[1:], strict=True):
         i, j = starts[cur], starts[prev]
         df = _rel(poles.frequency_hz[i][:, None], poles.frequency_hz[j][None, :]) < cfg.freq_tol
         dz = _rel(poles.damping_ratio[i][:, None], poles.damping_ratio[j][None, :]) < cfg.damping_tol
@@ -172,11 +172,11 @@ def pick_modes(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig,
             continue
         fmed = np.median(poles.frequency_hz[members])
         # one pole per order: the one nearest the cluster's median frequency
-        keep = []
+        keep_list = []
         for o in np.unique(poles.order[members]):
             at = members[poles.order[members] == o]
-            keep.append(at[np.argmin(np.abs(poles.frequency_hz[at] - fmed))])
-        keep = np.array(keep)
+            keep_list.append(at[np.argmin(np.abs(poles.frequency_hz[at] - fmed))])
+        keep = np.array(keep_list)
         f = poles.frequency_hz[keep]
         z = poles.damping_ratio[keep]
         rep = keep[np.argmin(np.abs(f - np.median(f)))]

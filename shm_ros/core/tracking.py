@@ -121,17 +121,19 @@ def _shapes_on(est: ModalEstimate, sensors: list[str]) -> np.ndarray:
 
 def _reference(estimates: list[ModalEstimate], sensors: list[str], cfg: TrackingConfig
                ) -> list[ReferenceMode]:
-    f, shp, win = [], [], []
+    f_list: list[float] = []
+    shp_list: list[np.ndarray] = []
+    win_list: list[int] = []
     for w, est in enumerate(estimates):
         s = _shapes_on(est, sensors)
         for k, m in enumerate(est.modes):
             if np.isfinite(m.frequency_hz) and m.frequency_hz > 0:
-                f.append(m.frequency_hz)
-                shp.append(s[k])
-                win.append(w)
-    if not f:
+                f_list.append(m.frequency_hz)
+                shp_list.append(s[k])
+                win_list.append(w)
+    if not f_list:
         return []
-    f, shp, win = np.array(f), np.array(shp), np.array(win)
+    f, shp, win = np.array(f_list), np.array(shp_list), np.array(win_list)
     if f.size == 1:
         labels = np.zeros(1, int)
     else:
@@ -183,7 +185,7 @@ def _assign(est: ModalEstimate, sensors: list[str], ref_f: np.ndarray, ref_s: np
     rows, cols = linear_sum_assignment(np.nan_to_num(cost, nan=1e6))
     ok = gate[rows, cols]
     rows, cols = rows[ok], cols[ok]
-    for i, k in zip(rows, cols):
+    for i, k in zip(rows, cols, strict=True):
         freq[k] = f[i]
         damp[k] = est.modes[i].damping_ratio
         shapes[k] = _aligned(s[i], ref_s[k])

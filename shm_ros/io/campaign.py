@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -40,7 +41,11 @@ class CampaignFiles:
     seconds: float
 
 
-def _limit_threads() -> object | None:
+class _ThreadLimits(Protocol):
+    def restore_original_limits(self) -> None: ...
+
+
+def _limit_threads() -> _ThreadLimits | None:
     """One BLAS thread per process: many small eigenproblems are slower with a thread pool."""
     try:
         from threadpoolctl import threadpool_limits
@@ -179,6 +184,7 @@ def _write_imu(writer: BagWriter, prefix: str, w: SimulatedWindow) -> None:
         stamps = rec.stamps_ns
         recv = stamps + RECEIVE_LATENCY_NS
         if rec.keep is not None:
+            assert rec.shift_ns is not None and rec.repeat is not None  # faults fill the masks together
             keep = rec.keep[:, c]
             counts = keep.astype(np.int64) * (1 + rec.repeat[:, c].astype(np.int64))
             stamps = np.repeat(stamps + rec.shift_ns[:, c], counts)
@@ -195,7 +201,8 @@ def _write_blocks(writer: BagWriter, topic: str, w: SimulatedWindow, block_s: fl
         runs = [(0, n, 0)]
         rep = None
     else:
-        keep = rec.keep.all(axis=1)
+        assert rec.shift_ns is not None and rec.repeat is not None  # faults fill the masks together
+        keep = np.all(rec.keep, axis=1)
         shift = rec.shift_ns[:, 0]
         rep = rec.repeat.max(axis=1)
         runs = []

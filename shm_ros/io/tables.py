@@ -100,7 +100,8 @@ def read_tracked_modes(path: str | Path) -> ModalObservations:
                      "are ignored")
     numbers = sorted(modes)
     t_col = header.index("time")
-    times, freqs, dmps, shps, covs = [], [], [], [], {c: [] for c in cov_cols}
+    times, freqs, dmps, shps = [], [], [], []
+    covs: dict[str, list[float]] = {c: [] for c in cov_cols}
     kinds = set()
     for r_i, row in enumerate(rows[1:], start=2):
         row = row + [""] * (len(header) - len(row))
@@ -114,7 +115,7 @@ def read_tracked_modes(path: str | Path) -> ModalObservations:
             continue
         kinds.add(kind)
 
-        def num(j: int, col: str) -> float:
+        def num(j: int, col: str, row: list[str] = row, r_i: int = r_i) -> float:
             try:
                 v = _number(row[j])
             except ValueError:

@@ -35,11 +35,15 @@ def match_to_truth(estimates: list[ModalEstimate], truth: dict[str, Any], n_mode
             continue
         true_f = list(tw["frequencies_hz"][:n_modes])
         shapes = tw.get("mode_shapes", {})
-        found, err, macs = [], [], []
+        found: list[float | None] = []
+        err: list[float | None] = []
+        macs: list[float | None] = []
         for k, f in enumerate(true_f):
             cands = [m for m in e.modes if abs(m.frequency_hz - f) <= tolerance * f]
             if not cands:
-                found.append(None), err.append(None), macs.append(None)
+                found.append(None)
+                err.append(None)
+                macs.append(None)
                 continue
             best = min(cands, key=lambda m: abs(m.frequency_hz - f))
             found.append(best.frequency_hz)
@@ -99,7 +103,7 @@ def write_report(path: str | Path, estimates: list[ModalEstimate], truth: dict |
         cells = "".join(
             f"<td>{t:.3f}</td><td>{'-' if f is None else f'{f:.3f}'}</td>"
             f"<td>{'-' if e is None else f'{e:+.2f}'}</td><td>{'-' if c is None else f'{c:.3f}'}</td>"
-            for t, f, e, c in zip(m.true_hz, m.found_hz, m.error_pct, m.mac))
+            for t, f, e, c in zip(m.true_hz, m.found_hz, m.error_pct, m.mac, strict=True))
         truth_rows.append(f"<tr><td>{html.escape(m.window_id)}</td>{cells}</tr>")
     n_true = max((len(m.true_hz) for m in matches), default=0)
     head = "".join(f"<th>mode {k + 1} truth [Hz]</th><th>found</th><th>error [%]</th><th>MAC</th>"

@@ -4,6 +4,7 @@ the picked modes, and the mean spectrum of the outputs behind them."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TypedDict
 
 import matplotlib
 
@@ -17,18 +18,28 @@ from shm_ros.report.figures import save_figure  # noqa: E402
 __all__ = ["plot_stabilization"]
 
 
+class _ScatterStyle(TypedDict, total=False):
+    """Keyword arguments of ``Axes.scatter`` for one group of poles."""
+
+    marker: str
+    s: float
+    c: str
+    facecolors: str
+    edgecolors: str
+
+
 def plot_stabilization(diagram: Diagram, path: str | Path, title: str = "",
                        freq_max_hz: float | None = None) -> Path:
     """Write the diagram of one window to ``path`` (PNG/SVG/PDF by suffix); returns the path."""
     p, fl = diagram.poles, diagram.flags
     fig, ax = plt.subplots(figsize=(9, 5.5), dpi=110)
-    groups = [
-        ("all poles", np.ones(len(p), bool), dict(marker=".", s=6, c="0.75")),
-        ("stable in frequency", fl.stable_freq & ~fl.stable, dict(marker="x", s=14, c="tab:orange")),
+    groups: list[tuple[str, np.ndarray, _ScatterStyle]] = [
+        ("all poles", np.ones(len(p), bool), _ScatterStyle(marker=".", s=6, c="0.75")),
+        ("stable in frequency", fl.stable_freq & ~fl.stable, _ScatterStyle(marker="x", s=14, c="tab:orange")),
         ("stable (f, damping, MAC)", fl.stable & ~fl.candidates(True),
-         dict(marker="o", s=14, facecolors="none", edgecolors="tab:blue")),
+         _ScatterStyle(marker="o", s=14, facecolors="none", edgecolors="tab:blue")),
         ("stable + two-A + MPC + physical", fl.candidates(True),
-         dict(marker="o", s=16, c="tab:green")),
+         _ScatterStyle(marker="o", s=16, c="tab:green")),
     ]
     for label, mask, style in groups:
         if np.any(mask):

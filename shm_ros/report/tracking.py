@@ -30,7 +30,7 @@ def plot_tracking(res: TrackingResult, path: str | Path, covariate: str = "tempe
     if x is not None:
         unit = "°C" if covariate == "temperature_c" else "unit"
         ax = axes[1]
-        for k, (n, fit) in enumerate(zip(obs.mode_numbers, res.environment)):
+        for k, (n, fit) in enumerate(zip(obs.mode_numbers, res.environment, strict=False)):
             f = obs.frequencies_hz[:, k]
             ax.plot(x, f / np.nanmedian(f), ".", ms=2, label=f"mode {n}: "
                     f"{fit.slope_pct_per_unit:+.3f} %/{unit}, R² {fit.r2:.2f}")

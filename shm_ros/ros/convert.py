@@ -30,8 +30,10 @@ def ns_to_time(t_ns: int, cls: type | None = None) -> Any:
 
 
 def _set_temperature(msg: Any, temperature_c: float | None) -> None:
-    msg.has_temperature = temperature_c is not None and math.isfinite(temperature_c)
-    msg.temperature_c = float(temperature_c) if msg.has_temperature else float("nan")
+    if temperature_c is not None and math.isfinite(temperature_c):
+        msg.has_temperature, msg.temperature_c = True, float(temperature_c)
+    else:
+        msg.has_temperature, msg.temperature_c = False, float("nan")
 
 
 def _get_temperature(msg: Any) -> float | None:
@@ -133,7 +135,8 @@ def estimate_from_msg(msg: Any) -> ModalEstimate:
         window_id=msg.window_id, start_ns=time_to_ns(msg.start), end_ns=time_to_ns(msg.end),
         sensor_ids=list(msg.sensor_ids), modes=[mode_from_msg(m) for m in msg.modes],
         method=msg.method, temperature_c=_get_temperature(msg),
-        covariates=dict(zip(msg.covariate_names, (float(v) for v in msg.covariate_values))),
+        # a message from another publisher may be malformed: extra names or values are dropped
+        covariates=dict(zip(msg.covariate_names, (float(v) for v in msg.covariate_values), strict=False)),
     )
 
 

@@ -13,6 +13,8 @@ Model modes are paired with the data's modes by MAC (see :mod:`.pairing`).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from shm_ros.core.modal import mac
@@ -31,9 +33,10 @@ def modal_fit(predictor: ModalPredictor, obs: ModalObservations, theta: np.ndarr
     fp = f_model[0, idx]
     rel = (obs.frequencies_hz - fp[None]) / obs.frequencies_hz
     per_mode_rmse = np.sqrt(np.nanmean(rel**2, axis=0))
-    out = {
+    modes: list[dict[str, Any]] = []
+    out: dict[str, Any] = {
         "frequency_rmse_pct": float(100 * np.sqrt(np.nanmean(rel**2))),
-        "modes": [],
+        "modes": modes,
     }
     macs = np.full(obs.n_modes, np.nan)
     if shapes:
@@ -47,7 +50,7 @@ def modal_fit(predictor: ModalPredictor, obs: ModalObservations, theta: np.ndarr
     else:
         out["mac_mean"] = None
     for k, mnum in enumerate(obs.mode_numbers):
-        out["modes"].append({
+        modes.append({
             "mode": int(mnum),
             "frequency_obs_hz": float(f_ref[k]),
             "frequency_model_hz": float(fp[k]),

@@ -167,6 +167,7 @@ class _ModalLikelihoodBase:
         ss_f = np.maximum(ss_f, 0.0)
         if not st.uses_shapes:
             return ss_f, None
+        assert st.scatter is not None  # uses_shapes implies the scatter matrices exist
         proj = np.einsum("bsk,kst,btk->bk", u, st.scatter, u)
         return ss_f, np.maximum(st.norm2 - proj, 0.0)
 
@@ -225,7 +226,7 @@ class GaussianModalLikelihood(_ModalLikelihoodBase):
         vals = list(ig_posterior_mean(ss_f[0], self.stats.n_freq, self.freq_prior))
         if ss_s is not None:
             vals += list(ig_posterior_mean(ss_s[0], self.shape_dof, self.shape_prior))
-        return dict(zip(self.variance_names, (float(v) for v in vals)))
+        return dict(zip(self.variance_names, (float(v) for v in vals), strict=True))
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         x = np.atleast_2d(x)
@@ -266,6 +267,7 @@ class FitnessLikelihood(_ModalLikelihoodBase):
         j_f = (st.n_freq - 2.0 * fp * st.inv1 + fp * fp * st.inv2).sum(axis=1)
         J = self.alpha * j_f
         if self.beta > 0 and st.uses_shapes:
+            assert st.scatter_unit is not None  # built together with scatter
             mac_sum = np.einsum("bsk,kst,btk->bk", u, st.scatter_unit, u)
             J = J + self.beta * (st.n_shape - mac_sum).sum(axis=1)
         return J

@@ -97,7 +97,7 @@ def observations_from_estimates(estimates, f_ref: np.ndarray, phi_ref: np.ndarra
         from scipy.optimize import linear_sum_assignment
 
         r, c = linear_sum_assignment(-np.where(np.isfinite(score), score, -1e6))
-        for i, k in zip(r, c):
+        for i, k in zip(r, c, strict=True):
             macv = float(mac(pw0[i], phi_ref[k]))
             if macv >= mac_min and abs(fw[i] / f_ref[k] - 1.0) <= max_rel_shift:
                 F[w, k] = fw[i]

@@ -200,7 +200,7 @@ class JointPrior:
         """Unit cube -> parameter space (the prior transform of nested sampling)."""
         u = np.asarray(u, dtype=float)
         if u.ndim == 1:
-            return np.array([float(p.ppf(ui)) for p, ui in zip(self.priors, u)])
+            return np.array([float(p.ppf(ui)) for p, ui in zip(self.priors, u, strict=True)])
         return np.column_stack([p.ppf(u[:, i]) for i, p in enumerate(self.priors)])
 
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:

@@ -126,7 +126,7 @@ class TimeDomainLikelihood:
                 continue
             ss = self.residual_ss(theta)
             if self.variance == "marginal":
-                out[b] = sum(float(ig_marginal_loglik(s, N, p)) for s, p in zip(ss, self.priors))
+                out[b] = sum(float(ig_marginal_loglik(s, N, p)) for s, p in zip(ss, self.priors, strict=True))
             else:
                 s2 = np.exp(x[b, self.n_theta:])
                 out[b] = float(np.sum(-0.5 * N * np.log(2 * np.pi * s2) - 0.5 * ss / s2))
@@ -135,12 +135,13 @@ class TimeDomainLikelihood:
     def variance_estimates(self, theta: np.ndarray) -> dict[str, float]:
         ss = self.residual_ss(np.asarray(theta, dtype=float))
         N = self.record.outputs.shape[0]
-        return {n: float(ig_posterior_mean(s, N, p)) for n, s, p in zip(self.variance_names, ss, self.priors)}
+        return {n: float(ig_posterior_mean(s, N, p))
+                for n, s, p in zip(self.variance_names, ss, self.priors, strict=True)}
 
     def fit(self, theta: np.ndarray) -> dict:
         """NRMS = ||y - y_hat|| / ||y|| per channel (the building paper's eq. 28)."""
         y = self.record.outputs
         yh = self.predict(theta)
         nrms = np.linalg.norm(y - yh, axis=0) / np.maximum(np.linalg.norm(y, axis=0), 1e-300)
-        return {"nrms": dict(zip(self.record.channel_ids, map(float, nrms))),
+        return {"nrms": dict(zip(self.record.channel_ids, map(float, nrms), strict=True)),
                 "nrms_mean": float(np.mean(nrms))}

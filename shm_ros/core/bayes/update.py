@@ -145,6 +145,7 @@ class Posterior:
         items), by name, for the one place that converts to messages (``shm_ros.ros.convert``)."""
         d = self.diagnostics
         nan = float("nan")
+        mac_mean = self.fit.get("mac_mean")
         return {
             "structure_name": structure_name,
             "sampler": str(d.get("sampler", "")),
@@ -160,7 +161,7 @@ class Posterior:
             "ess_min": float(d.get("ess_min", nan)),
             "acceptance": float(d.get("acceptance", nan)),
             "frequency_rmse_pct": float(self.fit.get("frequency_rmse_pct", nan) or nan),
-            "mac_mean": float(self.fit.get("mac_mean") if self.fit.get("mac_mean") is not None else nan),
+            "mac_mean": float(mac_mean) if mac_mean is not None else nan,
             "log_evidence": nan if self.log_evidence is None else float(self.log_evidence),
             "converged": bool(d.get("converged", False)),
             "warnings": list(self.warnings),
@@ -231,15 +232,16 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
     sensors = list(data.sensor_ids) if (config.use_shapes and data.has_shapes) else []
     n_modes = config.n_modes or data.n_modes + 2
     predictor = build_predictor(model, sensors, n_modes, config.reduction, n_required=data.n_modes)
+    modal: GaussianModalLikelihood | FitnessLikelihood
     if config.likelihood == "gaussian":
-        lik = GaussianModalLikelihood(
+        modal = GaussianModalLikelihood(
             predictor, data, use_shapes=bool(sensors), variance=config.variance,
             freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
             shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape))
     else:
-        lik = FitnessLikelihood(predictor, data, alpha=config.alpha, beta=config.beta, k=config.k)
-    lik.n_theta = model.n_parameters
-    return lik, predictor
+        modal = FitnessLikelihood(predictor, data, alpha=config.alpha, beta=config.beta, k=config.k)
+    modal.n_theta = model.n_parameters
+    return modal, predictor
 
 
 def update(model: AffineModel, observations: Any, config: UpdateConfig | None = None,
@@ -334,8 +336,8 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         "burn_in": int(chains.burn_in),
         "n_steps": int(chains.n_steps),
         "n_evaluations": int(chains.n_evaluations),
-        "rhat": dict(zip(names, map(float, chains.diagnostics.rhat))),
-        "ess_bulk": dict(zip(names, map(float, chains.diagnostics.ess_bulk))),
+        "rhat": dict(zip(names, map(float, chains.diagnostics.rhat), strict=True)),
+        "ess_bulk": dict(zip(names, map(float, chains.diagnostics.ess_bulk), strict=True)),
         "likelihood": config.likelihood,
         "n_windows": int(getattr(observations, "n_windows", 1)),
         "predictor": ritz_note or type(predictor).__name__ if predictor is not None else "time-domain",

@@ -107,7 +107,7 @@ class AffineModel:
     def stiffness(self, theta: np.ndarray | None = None) -> np.ndarray:
         theta = self.nominal_theta() if theta is None else theta
         K = self.K0.copy()
-        for t, Ki in zip(theta, self.K_terms):
+        for t, Ki in zip(theta, self.K_terms, strict=True):
             if Ki is not None:
                 K += t * Ki
         return K
@@ -115,7 +115,7 @@ class AffineModel:
     def mass(self, theta: np.ndarray | None = None) -> np.ndarray:
         theta = self.nominal_theta() if theta is None else theta
         M = self.M0.copy()
-        for t, Mi in zip(theta, self.M_terms):
+        for t, Mi in zip(theta, self.M_terms, strict=True):
             if Mi is not None:
                 M += t * Mi
         return M
@@ -173,7 +173,7 @@ class AffineModel:
         """The nominal damping ratios with the factors of damping parameters applied."""
         theta = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
         r = np.asarray(self.damping_ratios, dtype=float).copy()
-        for t, idx in zip(theta, self.damping_factors):
+        for t, idx in zip(theta, self.damping_factors, strict=True):
             for i in idx:
                 r[i] *= t
         return r

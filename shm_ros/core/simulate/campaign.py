@@ -150,7 +150,8 @@ class Campaign:
         rec = Recording(sensor_ids=self.sensor_ids, axes=[s.axis for s in self.sensors], stamps_ns=stamps,
                         values=values, idle=idle)
         faults = [f for f in sc.faults if f.window == i]
-        done = apply_faults(rec, faults, sc.fs, rng_for(sc.seed, 5, i), block_level=sc.output == "block") if faults else []
+        done = (apply_faults(rec, faults, sc.fs, rng_for(sc.seed, 5, i), block_level=sc.output == "block")
+                if faults else [])
         truth = self._truth_entry(i, start, end, cond, factors, modal, accel, event, done, extra)
         return SimulatedWindow(index=i, start_ns=start, fs=sc.fs, sensor_ids=self.sensor_ids, accel=accel,
                                recording=rec, truth=truth)

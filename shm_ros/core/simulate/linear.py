@@ -154,11 +154,11 @@ def from_state_space(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray,
     Bm = solve(V, B.astype(complex))
     keep, conj = [], []
     scale = max(1.0, float(np.max(np.abs(lam))))
-    for j, l in enumerate(lam):
-        if abs(l.imag) <= tol * scale:
+    for j, lam_j in enumerate(lam):
+        if abs(lam_j.imag) <= tol * scale:
             keep.append(j)
             conj.append(False)
-        elif l.imag > 0:
+        elif lam_j.imag > 0:
             keep.append(j)
             conj.append(True)
     keep_a = np.array(keep, dtype=int)

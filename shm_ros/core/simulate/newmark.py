@@ -12,7 +12,8 @@ cheaper than any general ODE solver, and scipy has no Newmark integrator.
 
 The window's true modal properties are those of the Gaussian equivalent-linear model at the
 response's RMS story drift and drift velocity over the window (after warm-up):
-``k_eq / k = E[g'(d)]`` (d Gaussian with the window's RMS drift) and ``c_eq / c = E[h'(v)] = 1 + 2 sqrt(2/pi) sigma_v / v_ref``.
+``k_eq / k = E[g'(d)]`` (d Gaussian with the window's RMS drift) and
+``c_eq / c = E[h'(v)] = 1 + 2 sqrt(2/pi) sigma_v / v_ref``.
 """
 
 from __future__ import annotations
@@ -40,7 +41,8 @@ def equivalent_damping_factor(sigma_v: np.ndarray, v_ref: float) -> np.ndarray:
 
 
 def simulate_building_nonlinear(tm, factors: dict[str, float], effects: list[Effect], u: np.ndarray, dt: float,
-                                n_warm: int, tol: float = 1e-10, max_iter: int = 20) -> tuple[np.ndarray, dict[str, Any]]:
+                                n_warm: int, tol: float = 1e-10, max_iter: int = 20
+                                ) -> tuple[np.ndarray, dict[str, Any]]:
     """Absolute accelerations at the sensors (n, n_sensors) and the equivalent-linear factors.
 
     ``tm``: a shear-building truth model (``BuildingTruth``: ``theta``, ``building_matrices``, ``info``);

@@ -58,13 +58,14 @@ def shear_building_structure(n_floors: int = 8) -> dict[str, Any]:
     return {
         "name": f"{n_floors}-story-building" if n_floors != 8 else "eight-story-building",
         "kind": "shear_building",
-        "shear_building": {"floors": [{"mass": m, "stiffness": k} for m, k in zip(masses, stiff)]},
+        "shear_building": {"floors": [{"mass": m, "stiffness": k} for m, k in zip(masses, stiff, strict=True)]},
         "damping": {"kind": "rayleigh", "ratios": [0.02, 0.02]},
         "sensors": [{"id": "g0", "at": {"floor": 0}, "direction": "x"}]
         + [{"id": f"f{k}", "at": {"floor": k}, "direction": "x"} for k in floors],
         "input": {"sensor": "g0"},
         "parameters": [
-            {"name": "k_lower", "applies_to": f"shear_building.floors[{','.join(str(i) for i in range(half))}].stiffness",
+            {"name": "k_lower",
+             "applies_to": f"shear_building.floors[{','.join(str(i) for i in range(half))}].stiffness",
              "prior": {"dist": "normal", "mean": 1.0, "std": 0.1}},
             {"name": "k_upper",
              "applies_to": f"shear_building.floors[{','.join(str(i) for i in range(half, n_floors))}].stiffness",
@@ -157,7 +158,8 @@ def named_scenario(name: str, n_floors: int | None = None, **options: Any) -> Sc
         base = Scenario()
     elif name in ("building", "building-earthquake"):
         base = Scenario(name=name, kind="shear_building", structure=copy.deepcopy(BUILDING_STRUCTURE),
-                        start="2024-05-01T00:00:00Z", t_mean_c=17.0, t_daily_c=4.0, wind_rms_n=1.5e3, microtremor_rms_m_s2=5e-4,
+                        start="2024-05-01T00:00:00Z", t_mean_c=17.0, t_daily_c=4.0, wind_rms_n=1.5e3,
+                        microtremor_rms_m_s2=5e-4,
                         window_s=600.0 if name == "building" else 300.0, utc_offset_h=9.0,
                         earthquake_every_window=name == "building-earthquake")
     else:

@@ -34,9 +34,9 @@ class SensorModel:
     @staticmethod
     def draw(rng: np.random.Generator, sensor_id: str, axis: str, noise_rms: float = 1e-4,
              gain_std: float = 0.01, offset_std: float = 0.02) -> SensorModel:
-        return SensorModel(sensor_id=sensor_id, axis=axis, gain=float(1.0 + gain_std * rng.standard_normal()),
-                           offsets=tuple(float(v) for v in offset_std * rng.standard_normal(3)),
-                           noise_rms=noise_rms)
+        gain = float(1.0 + gain_std * rng.standard_normal())
+        ox, oy, oz = (float(v) for v in offset_std * rng.standard_normal(3))
+        return SensorModel(sensor_id=sensor_id, axis=axis, gain=gain, offsets=(ox, oy, oz), noise_rms=noise_rms)
 
     def static(self, axis: str) -> float:
         """Static reading of ``axis``: its offset plus gravity on the vertical axis."""
@@ -81,12 +81,16 @@ class Recording:
     def n(self) -> int:
         return int(self.stamps_ns.size)
 
-    def _masks(self) -> None:
+    def _masks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``keep``, ``shift_ns`` and ``repeat``, created (no fault yet) on first use."""
         shape = self.values.shape
         if self.keep is None:
             self.keep = np.ones(shape, bool)
+        if self.shift_ns is None:
             self.shift_ns = np.zeros(shape, np.int64)
+        if self.repeat is None:
             self.repeat = np.zeros(shape, np.uint8)
+        return self.keep, self.shift_ns, self.repeat
 
     def imu_xyz(self, c: int) -> np.ndarray:
         """(n, 3) IMU readings of channel ``c`` (signal axis from ``values``)."""
@@ -150,12 +154,12 @@ def apply_faults(rec: Recording, faults: list[FaultSpec], fs: float, rng: np.ran
             k0 = n // 3
         k1 = int(np.clip(k0 + max(1, round(f.duration_s * fs)), k0 + 1, n))
         cols = slice(None) if block_level else slice(c, c + 1)
-        rec._masks()
+        keep, shift_ns, repeat = rec._masks()
         entry: dict = {"kind": f.kind, "window": f.window, "sensor": sid if not (
             block_level and f.kind in ("dropout", "clock_jump", "duplicate")) else "*",
             "start_ns": int(rec.stamps_ns[k0])}
         if f.kind == "dropout":
-            rec.keep[k0:k1, cols] = False
+            keep[k0:k1, cols] = False
             entry["end_ns"] = int(rec.stamps_ns[k1 - 1]) + int(round(1e9 / fs))
             entry["n_samples"] = k1 - k0
         elif f.kind == "spike":
@@ -184,11 +188,11 @@ def apply_faults(rec: Recording, faults: list[FaultSpec], fs: float, rng: np.ran
             entry["fraction_clipped"] = float(np.mean(np.abs(x - centre) > level))
         elif f.kind == "clock_jump":
             jump = f.value if f.value is not None else 0.25
-            rec.shift_ns[k0:, cols] += int(round(jump * 1e9))
+            shift_ns[k0:, cols] += int(round(jump * 1e9))
             entry["jump_s"] = jump
         elif f.kind == "duplicate":
             ks = np.sort(rng.choice(np.arange(k0, n), size=min(f.count, n - k0), replace=False))
-            rec.repeat[ks, cols] += 1
+            repeat[ks, cols] += 1
             entry["stamps_ns"] = [int(rec.stamps_ns[k]) for k in ks]
         done.append(entry)
     return done
