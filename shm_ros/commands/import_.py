@@ -1,4 +1,5 @@
-"""`shm-ros import FILE... --out BAG`: recordings from other tools -> a bag of the recording layout (docs/interfaces.md §1).
+"""`shm-ros import FILE... --out BAG`: recordings from other tools -> a bag of the recording layout
+(docs/interfaces.md §1).
 
 Formats (from the file name unless --format): CSV (.csv/.txt/.tsv; a header row of channel names or
 --channels; --rate or a --time-column), NPY (.npy, (n_samples, n_channels); --rate, --channels),
