@@ -4,7 +4,8 @@
     python -m bench.stress_ros --runs 2 --files test/test_dds_smoke.py      # a short trial
 
 The tests that start DDS participants and node processes (``test_dds_smoke``, ``test_interfaces``,
-``test_*_node.py``, ``test_graph_*.py``, ``test_supervisor``, ``test_example``) wait on events, not
+``test_*_node.py``, ``test_graph_*.py``, ``test_supervisor``, ``test_example``, the two-host, params-file,
+sim-time, config-agreement and update-worker tests) wait on events, not
 on the clock; this checks that they also pass when the cores are taken by other work: two Python
 busy loops (``--burners``) run for the whole stress run, and each run is a fresh ``pytest``
 process (so a fresh ROS domain id from ``test/conftest.py``). Prints the pass count of every run
@@ -29,8 +30,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
-PATTERNS = ("test_dds_smoke.py", "test_interfaces.py", "test_*_node.py", "test_graph_*.py",
-            "test_supervisor.py", "test_example.py")
+PATTERNS = ("test_dds_smoke.py", "test_interfaces.py", "test_*_node.py", "test_node_*.py", "test_graph_*.py",
+            "test_supervisor.py", "test_example.py", "test_two_hosts.py", "test_params_file.py",
+            "test_sim_time.py", "test_config_agreement.py", "test_update_node_worker.py")
 BUSY_LOOP = "while True: pass"
 
 
