@@ -14,7 +14,15 @@ TEST_DATA = ROOT / "test" / "data"
 
 # Each test run talks DDS only to itself: a domain of its own (from the process id) and localhost
 # discovery. Subprocesses inherit both.
-os.environ.setdefault("ROS_DOMAIN_ID", str(100 + os.getpid() % 100))
+# With pytest-xdist (`-n 2`, what ./dev test runs) every worker gets a domain of its own: the
+# controller picks an even base and worker gwK takes base + K, so parallel graph tests never meet.
+if "PYTEST_XDIST_WORKER" in os.environ:
+    _worker = int(os.environ["PYTEST_XDIST_WORKER"].removeprefix("gw") or 0)
+    _base = os.environ.get("SHM_TEST_DOMAIN_BASE") or str(100 + 2 * (os.getppid() % 50))
+    os.environ["ROS_DOMAIN_ID"] = str(int(_base) + _worker)
+else:
+    os.environ.setdefault("ROS_DOMAIN_ID", str(100 + 2 * (os.getpid() % 50)))
+    os.environ["SHM_TEST_DOMAIN_BASE"] = os.environ["ROS_DOMAIN_ID"]
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("MPLBACKEND", "Agg")
 # The science works on many small matrices, where a multi-threaded BLAS only contends (and on a

@@ -17,10 +17,12 @@ from __future__ import annotations
 
 import os
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
 from std_msgs.msg import String, UInt64
 
@@ -38,6 +40,8 @@ from shm_ros.ros.qos import WINDOW_HISTORY, latched_qos, pipeline_qos, recording
 from shm_ros.ros.timers import steady_timer
 
 IMU_BATCH = 512  # Imu messages decoded together (also every 0.05 s)
+MAX_HELD_WINDOWS = 64  # windows held for a slow reader before they go out regardless
+CLOSE_WAIT_S = 10.0  # on shutdown, how long held windows wait for a slow reader
 
 
 @dataclass
@@ -73,6 +77,8 @@ class IngestNode(Node):
             topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, stream_qos(WINDOW_HISTORY))
         self.ack_pub = self.create_publisher(UInt64, topics.INGEST_RECEIVED, pipeline_qos())
         self.create_subscription(String, topics.REPLAY_DONE, self._on_replay_done, latched_qos())
+        self.pending: deque[Any] = deque()  # windows held until the readers took the previous one
+        self.ack_hold = 0
         self.subscribed: set[str] = set()
         self.accel_topics: set[str] = set()
         self.temperature_topics: set[str] = set()
@@ -229,12 +235,27 @@ class IngestNode(Node):
 
     # -- outputs -------------------------------------------------------------------------------
     def _emit(self, windows: list | None = None) -> None:
-        for window in self.core.pop_windows() if windows is None else windows:
+        self.pending.extend(self.core.pop_windows() if windows is None else windows)
+        self._release_windows()
+        self._publish_diagnostics(self.core.pop_diagnostics())
+
+    def _release_windows(self, wait_s: float = 0.0) -> None:
+        """Publish held windows one at a time, each once every reliable reader has acknowledged
+        the previous one. The publisher keeps only the last few windows (they are large), so a
+        reader that falls behind (identify on a busy machine) would otherwise lose windows; while
+        windows are held, the replay's acknowledgements are held too (back-pressure to the bag)."""
+        while self.pending:
+            if not self.window_pub.wait_for_all_acked(Duration(nanoseconds=int(wait_s * 1e9))):
+                if len(self.pending) <= MAX_HELD_WINDOWS:
+                    return
+                self.diag.report("warn", f"{len(self.pending)} windows waiting for a slow reader: "
+                                 "publishing without waiting (the slowest reader may miss some)",
+                                 topics.WINDOWS)
+            window = self.pending.popleft()
             self.window_pub.publish(window_to_msg(window, self.frame_id))
             self.windows_out += 1
             self.get_logger().info(f"window {window.window_id}: {window.n_samples} samples x "
                                    f"{len(window.channel_names)} channels")
-        self._publish_diagnostics(self.core.pop_diagnostics())
 
     def _publish_diagnostics(self, diagnostics: list[Diagnostic]) -> None:
         for d in diagnostics:
@@ -243,16 +264,26 @@ class IngestNode(Node):
 
     def _on_ack_timer(self) -> None:
         self._feed_imu()
+        self._release_windows()
         self._ack()
 
+    def _ack_count(self) -> int:
+        """Messages acknowledged to the replay: all received, unless windows are held for a slow
+        reader (then the count stands still, and a flow-controlled replay waits)."""
+        if not self.pending:
+            self.ack_hold = self.received
+        return self.ack_hold
+
     def _ack(self) -> None:
-        if self.received != self.acked:
-            self.ack_pub.publish(UInt64(data=self.received))
-            self.acked = self.received
+        count = self._ack_count()
+        if count != self.acked:
+            self.ack_pub.publish(UInt64(data=count))
+            self.acked = count
 
     def _heartbeat(self) -> None:
-        self.ack_pub.publish(UInt64(data=self.received))
-        self.acked = self.received
+        count = self._ack_count()
+        self.ack_pub.publish(UInt64(data=count))
+        self.acked = count
 
     def _idle(self) -> None:
         """No data for a while: let time advance on the stamp clock so finished bursts go out."""
@@ -270,7 +301,14 @@ class IngestNode(Node):
 
     def close(self) -> None:
         self._feed_imu()
-        self._emit(self.core.flush())
+        self.pending.extend(self.core.flush())
+        end = time.monotonic() + CLOSE_WAIT_S
+        while self.pending and time.monotonic() < end:  # give a slow reader its last windows
+            self._release_windows(wait_s=0.5)
+        while self.pending:  # the rest without waiting: the node is going
+            window = self.pending.popleft()
+            self.window_pub.publish(window_to_msg(window, self.frame_id))
+            self.windows_out += 1
 
 
 def make_node(name: str, parameters: dict[str, Any]) -> IngestNode:
