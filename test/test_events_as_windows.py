@@ -162,3 +162,22 @@ def test_a_rate_change_inside_a_burst_is_still_a_fault():
     assert [w.sample_rate_hz for w in ws] == [200.0]
     assert any(d.code == "rejected" and d.level == Level.ERROR and "inside a burst" in d.message
                for d in core.diagnostics)
+
+
+def test_live_stream_emits_each_short_record_once_it_has_ended():
+    """Streaming (settle_s, max_latency_s as in the node): a record shorter than a window comes out
+    as soon as the pause after it is seen, at its own rate."""
+    rng = np.random.default_rng(5)
+    core = IngestCore(ChannelMap.simple(["a", "b"]), IngestConfig())
+    for k in range(30):  # 30 s at 100 Hz, one block per second
+        core.add_block(T0 + k * 10**9, 100.0, ["a", "b"], _noise(rng, 100))
+    assert core.pop_windows() == []  # the record may still go on
+    t1 = T0 + 600 * 10**9
+    for k in range(25):  # ten minutes later, 25 s at 200 Hz
+        core.add_block(t1 + k * 10**9, 200.0, ["a", "b"], _noise(rng, 200))
+    (w,) = core.pop_windows()
+    assert (w.start_ns, w.sample_rate_hz, w.n_samples) == (T0, 100.0, 3000)
+    core.tick(t1 + 25 * 10**9 + 130 * 10**9)  # past the latency bound: the second record has ended
+    (w2,) = core.pop_windows()
+    assert (w2.start_ns, w2.sample_rate_hz, w2.n_samples) == (t1, 200.0, 5000)
+    assert not core.dropped
