@@ -17,6 +17,7 @@ import scipy.signal as sig
 
 from shm_ros.core import ssi
 from shm_ros.core.config import check_choice, option
+from shm_ros.core.ingest.covariates import window_covariates
 from shm_ros.core.modal import mac_matrix
 from shm_ros.core.preprocess import Prepared, PreprocessConfig, preprocess
 from shm_ros.core.stabilization import (
@@ -162,8 +163,7 @@ def identify_window_detailed(window: Window, config: IdentifyConfig | None = Non
     est.start_ns = window.start_ns
     est.end_ns = window.end_ns
     est.temperature_c = window.temperature_c
-    if window.is_event or window.pga_m_s2:
-        est.covariates["pga_m_s2"] = float(window.pga_m_s2)
+    est.covariates.update(window_covariates(window))
     return result
 
 

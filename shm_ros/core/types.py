@@ -45,6 +45,8 @@ class Window:
     pga_m_s2: float = 0.0
     input_channel: str | None = None
     notes: list[str] = field(default_factory=list)
+    # amplitude covariates (docs/interfaces.md §3), e.g. rms_accel_m_s2; identify copies them
+    covariates: dict[str, float] = field(default_factory=dict)
 
     @property
     def n_samples(self) -> int:

@@ -24,7 +24,9 @@ def _finite(x: float) -> float | None:
 
 
 def estimate_record(e: ModalEstimate, window: Window | None = None) -> dict[str, Any]:
-    """One window of the modes JSON (docs/interfaces.md §3); ``window`` adds its event flag and PGA."""
+    """One window of the modes JSON (docs/interfaces.md §3); ``window`` adds its event flag and PGA.
+    ``covariates`` are the estimate's (identify copies the window's ``rms_accel_m_s2`` and, for an
+    event, ``pga_m_s2``)."""
     modes = sorted(e.modes, key=lambda m: m.frequency_hz)
     record: dict[str, Any] = {
         "start": iso(e.start_ns),
@@ -88,5 +90,7 @@ def read_modes_json(path: str | Path) -> list[ModalEstimate]:
                  for m in w.get("modes", [])]
         out.append(ModalEstimate(window_id=w.get("window_id", str(k)), start_ns=ns(w["start"]),
                                  end_ns=ns(w["end"]), sensor_ids=sensors, modes=modes,
-                                 method=w.get("method", ""), temperature_c=w.get("temperature_c")))
+                                 method=w.get("method", ""), temperature_c=w.get("temperature_c"),
+                                 covariates={k: float(v) for k, v in (w.get("covariates") or {}).items()
+                                             if v is not None}))
     return out

@@ -41,13 +41,14 @@ class IngestResult:
     diagnostics: list[Diagnostic]
     stats: IngestStats
     dropped: list[DroppedSpan]
-    sample_rate_hz: float | None
+    sample_rate_hz: float | None  # the first burst's; every window carries its own burst's rate
     ignored_topics: list[str] = field(default_factory=list)
     messages: int = 0
     diagnostic_counts: dict = field(default_factory=dict)  # (code, source) -> occurrences
     # structure sensors that no topic feeds and accelerometer topics/channels that feed no sensor,
     # with the closest names (also among ``diagnostics``): for the terminal, up front
     mismatches: list[Diagnostic] = field(default_factory=list)
+    sample_rates_hz: list[float] = field(default_factory=list)  # distinct burst rates, first seen first
 
 
 def channel_map_of(structure_or_map: Any) -> ChannelMap:
@@ -86,7 +87,7 @@ def ingest_bag(path: str | Path, structure_or_channel_map: Any, window_s: float 
     windows = core.flush()
     return IngestResult(windows, core.diagnostics, core.stats, core.dropped, core.sample_rate_hz,
                         sorted(feeder.ignored), feeder.n_messages, dict(core.diagnostic_counts),
-                        feeder.mismatches)
+                        feeder.mismatches, core.sample_rates_hz)
 
 
 class _BagFeeder:

@@ -27,8 +27,12 @@ class IngestConfig:
     """Settings of :class:`~shm_ros.core.ingest.core.IngestCore`."""
 
     window_s: float = option(600.0, "window length, s; long bursts are split into windows of this length")
+    min_window_s: float = option(
+        20.0, "a burst shorter than window_s is one window of its own length when at least this long "
+        "(or half a window, if that is shorter), s")
     sample_rate_hz: float | None = option(
-        None, "grid sample rate, Hz (default: the first AccelBlock's, or fitted to Imu stamps)")
+        None, "grid sample rate of every burst, Hz (default: per burst, its AccelBlocks' rate or fitted to "
+        "its Imu stamps)")
     burst_pause_s: float = option(1.0, "a pause longer than this (no channel has data) ends a burst, s")
     snap_tolerance: float = option(
         0.5, "a stamp snaps to a grid point strictly closer than this fraction of a period")
@@ -62,6 +66,8 @@ class IngestConfig:
     def __post_init__(self) -> None:
         if not self.window_s > 0:
             raise ValueError(f"window_s must be > 0, got {self.window_s}")
+        if not self.min_window_s >= 0:
+            raise ValueError(f"min_window_s must be >= 0, got {self.min_window_s}")
         if not 0 < self.snap_tolerance <= 0.5:
             raise ValueError(f"snap_tolerance must be in (0, 0.5], got {self.snap_tolerance}")
         check_choice("ingest", "event_detector", self.event_detector, EventDetector)

@@ -5,8 +5,8 @@ node) and emits finished :class:`~shm_ros.core.types.Window` objects and
 :class:`~shm_ros.core.diagnostics.Diagnostic` records. It knows no message type: the adapters
 decode messages and hand it stamps (integer ns) and values per topic or block channel. The rules
 (grid, snapping, bursts, windows, fault policy) are in ``docs/ingest.md`` and in the modules this
-facade drives: ``grid`` (snapping), ``segment`` (bursts and windows), ``span`` (placing and
-splitting), ``window`` (quality and events of a window).
+facade drives: ``grid`` (snapping), ``rates`` (the sample rate of each burst), ``segment`` (bursts
+and windows), ``span`` (placing and splitting), ``window`` (quality and events of a window).
 
 When is a window final? Offline (``max_latency_s = inf``) the reader calls :meth:`advance` with a
 time before which it has fed everything, and :meth:`flush` at the end. Live, a window is cut once
@@ -29,6 +29,7 @@ from shm_ros.core.ingest.channels import ChannelMap
 from shm_ros.core.ingest.config import IngestConfig
 from shm_ros.core.ingest.diagnostics import DiagnosticLog
 from shm_ros.core.ingest.grid import Grid, estimate_rate, fit_clock, follow_clock
+from shm_ros.core.ingest.rates import BlockRates, stamps_rate
 from shm_ros.core.ingest.results import DroppedSpan, IngestStats
 from shm_ros.core.ingest.segment import Bursts
 from shm_ros.core.ingest.span import place_span, split_span
@@ -62,7 +63,9 @@ class IngestCore:
         self._pending: dict[str, tuple[list, list, list, list]] = {}  # per-sample input per topic
         self._pending_n = 0
         self._busy = False  # inside a drain or a cut: no nested processing
-        self._rate: float | None = self.config.sample_rate_hz
+        self._rate: float | None = self.config.sample_rate_hz  # the newest known rate (None: none yet)
+        self._burst_rates: list[float] = []  # the rate of each burst, in order
+        self._block_rates = BlockRates()
         self._rate_probe: dict[str, list[int]] = {}
         self._gravity_checked: set[str] = set()
         self._seq = 0
@@ -87,7 +90,17 @@ class IngestCore:
 
     @property
     def sample_rate_hz(self) -> float | None:
-        return self._rate
+        """The rate of the first burst (each window carries its own burst's rate)."""
+        return self._burst_rates[0] if self._burst_rates else self._rate
+
+    @property
+    def sample_rates_hz(self) -> list[float]:
+        """The distinct rates of the bursts so far, in order of first appearance."""
+        out: list[float] = []
+        for r in self._burst_rates:
+            if r not in out:
+                out.append(r)
+        return out
 
     @property
     def diagnostic_counts(self) -> Counter[tuple[str, str]]:
@@ -188,16 +201,23 @@ class IngestCore:
             self._reject(f"{topic}.units", f"unknown units {units!r} (m/s^2, g, cm/s^2 or mm/s^2): "
                          "block rejected", t0)
             return
+        fixed = self.config.sample_rate_hz
+        if fixed is not None and abs(rate - fixed) > 1e-6 * fixed:
+            self._reject(f"{topic}.sample_rate_hz", f"block at {rate:g} Hz, grid at {fixed:g} Hz "
+                         "(sample_rate_hz): not resampled, block rejected", t0)
+            return
+        pause_ns = self.config.burst_pause_s * 1e9
+        if not self._block_rates.accepts(t0, rate, self._newest_stamp(), pause_ns):
+            self._reject(f"{topic}.sample_rate_hz", f"block at {rate:g} Hz inside a burst at "
+                         f"{self._block_rates.last_rate:g} Hz: not resampled, block rejected", t0)
+            return
         if self._rate is None:
             self._rate = rate
             self._log.add(Level.OK, "sample_rate", f"{topic}.sample_rate_hz", f"grid rate {rate:g} Hz", t0)
-        elif abs(rate - self._rate) > 1e-6 * self._rate:
-            self._reject(f"{topic}.sample_rate_hz", f"block at {rate:g} Hz, grid at {self._rate:g} Hz: "
-                         "not resampled, block rejected", t0)
-            return
         n = x.shape[0]
         if n == 0:
             return
+        self._block_rates.add(t0, t0 + int(round((n - 1) * 1e9 / rate)), rate)
         t = t0 + np.round(np.arange(n) * (1e9 / rate)).astype(np.int64)
         seq = self._next_seq(n)
         for j, name in enumerate(names):
@@ -422,6 +442,10 @@ class IngestCore:
         cm = self._chan_max[col]
         self._chan_max[col] = tmax if cm is None else max(cm, tmax)
 
+    def _newest_stamp(self) -> int | None:
+        maxima = [m for m in self._chan_max if m is not None]
+        return max(maxima) if maxima else None
+
     def _after_add(self) -> None:
         if self._rate is None or self._busy:
             return
@@ -430,10 +454,6 @@ class IngestCore:
             self._process(final)
 
     # ------------------------------------------------------------------ internals: cutting
-
-    def _window_len(self) -> int:
-        assert self._rate is not None
-        return max(1, int(round(self.config.window_s * self._rate)))
 
     def _process(self, final_ns: int | None) -> None:
         """Cut every window whose data is final (``final_ns`` None = end of stream)."""
@@ -459,14 +479,40 @@ class IngestCore:
             self._temp_t = np.concatenate((self._temp_t, np.asarray(self._temps_t, np.int64)))
             self._temp_v = np.concatenate((self._temp_v, np.asarray(self._temps_v, np.float64)))
             self._temps_t, self._temps_v = [], []
-        self._due_ns = self._bursts.process(self._buf, final_ns, self._window_len(), 1e9 / self._rate,
-                                            self._cut, self._on_burst)
-        if self._temp_t.size and self._committed_ns is not None:
-            keep = self._temp_t >= self._committed_ns
-            self._temp_t, self._temp_v = self._temp_t[keep], self._temp_v[keep]
+        self._due_ns = self._bursts.process(self._buf, final_ns, self._cut, self._on_burst)
+        if self._committed_ns is not None:
+            self._block_rates.prune(self._committed_ns)
+            if self._temp_t.size:
+                keep = self._temp_t >= self._committed_ns
+                self._temp_t, self._temp_v = self._temp_t[keep], self._temp_v[keep]
 
-    def _on_burst(self, origin: int) -> None:
-        self._log.add(Level.OK, "burst", "accel", "burst starts", origin)
+    def _on_burst(self, origin: int, final_ns: int | None) -> tuple[float, int] | None:
+        """A burst starts at ``origin``: its rate (Hz) and window length (grid rows); None: wait
+        for more of its stamps."""
+        rate, how = self.config.sample_rate_hz, "sample_rate_hz"
+        if rate is None:
+            rate, how = self._block_rates.rate_at(origin), "its AccelBlocks' rate"
+        if rate is None:
+            rate, decided = stamps_rate(self._buf, origin, final_ns, self.config.burst_pause_s * 1e9,
+                                        self.config.rate_tolerance)
+            how = "fitted to its stamps"
+            if rate is None and not decided:
+                return None
+            prev = self._burst_rates[-1] if self._burst_rates else self._rate
+            if rate is None:  # too few stamps to tell (the burst is too short to be a window anyway)
+                assert prev is not None  # (nothing is processed before a first rate is known)
+                rate, how = prev, "too few stamps to fit: the previous burst's rate"
+            elif prev is not None and abs(rate - prev) <= self.config.rate_tolerance * prev:
+                rate = prev  # the same clock as before: keep its rate exactly
+        prev = self._burst_rates[-1] if self._burst_rates else None
+        self._burst_rates.append(rate)
+        self._rate = rate
+        self._log.add(Level.OK, "burst", "accel", f"burst starts ({rate:g} Hz, {how})", origin)
+        if prev is not None and rate != prev:
+            self._log.add(Level.OK, "sample_rate", "accel",
+                          f"burst at {rate:g} Hz, the previous one at {prev:g} Hz: its windows are on its "
+                          "own grid at its own rate (nothing resampled)", origin)
+        return rate, max(1, int(round(self.config.window_s * rate)))
 
     def _track(self, grid: Grid, k0: int, k1: int) -> None:
         """Follow the stamps' clock over grid rows [k0, k1): re-anchor the grid from k0 on when it
@@ -491,22 +537,23 @@ class IngestCore:
     def _cut(self, k0: int, k1: int, why: str | None, last_stamp: int | None) -> None:
         """Place the samples of grid rows [k0, k1) and emit the window(s) they make (``last_stamp``:
         the burst's last stamp when it ends here)."""
-        grid = self._bursts.grid
-        assert grid is not None and self._rate is not None
+        grid, rate = self._bursts.grid, self._bursts.rate
+        assert grid is not None
         if k1 <= k0:
             return
         self._track(grid, k0, k1)
         if last_stamp is not None:
             k1 = max(k0 + 1, grid.slot(last_stamp) + 1)  # on the (possibly re-anchored) grid
-        span = place_span(self._buf, grid, k0, k1, self._rate, self.config, self._log, self.stats,
+        span = place_span(self._buf, grid, k0, k1, rate, self.config, self._log, self.stats,
                           self._src, self.channels)
         self._committed_ns = grid.edge(k1)
-        W = self._window_len()
-        dropped, pieces = split_span(span, grid, W, self._rate, why, self.config, self._log, self.stats,
-                                     self._src, self.dropped)
+        # a burst that ends inside its first window is shorter than a window: one window of its own
+        whole_burst = k0 == 0 and why is not None
+        dropped, pieces = split_span(span, grid, self._bursts.window_len, rate, why, self.config, self._log,
+                                     self.stats, self._src, self.dropped, whole_burst=whole_burst)
         for p in pieces:
             w = make_window(self._window_ctx, p.start_ns, span.vals[p.rows], span.flags[p.rows], dropped,
-                            p.notes, 1e9 / grid.period, self._rate, (self._temp_t, self._temp_v))
+                            p.notes, 1e9 / grid.period, rate, (self._temp_t, self._temp_v))
             self.stats.windows += 1
             self._log.window_emitted()
             flags = w.flags if w.flags is not None else np.zeros(w.samples.shape, np.uint8)

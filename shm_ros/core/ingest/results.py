@@ -52,6 +52,7 @@ def windows_summary(windows: Iterable[Window]) -> list[dict[str, Any]]:
             "is_event": bool(w.is_event),
             "pga_m_s2": float(w.pga_m_s2),
             "input_channel": w.input_channel,
+            "covariates": dict(w.covariates),
             "flagged_samples": {} if flags is None else {
                 name: {f.name.lower(): int(((flags[:, c] & f) != 0).sum())
                        for f in SampleFlag if f and f.name and ((flags[:, c] & f) != 0).any()}

@@ -1,11 +1,13 @@
 """Bursts and windows: where the buffered stream is cut.
 
-A burst ends where no channel has a sample for more than ``burst_pause_s``. Inside a burst,
-windows of ``window_s`` are counted from the burst's first sample on the burst's grid
-(:class:`~shm_ros.core.ingest.grid.Grid`, which starts there with the nominal period). A window is
-cut once every stamp that could snap into it is final (before ``final_ns``); a burst that ends
-inside a window is cut at its last sample. :class:`Bursts` keeps the state of the open burst and
-decides the cuts; placing the samples is the caller's ``cut`` callback.
+A burst ends where no channel has a sample for more than ``burst_pause_s``. Every burst has a grid
+of its own (:class:`~shm_ros.core.ingest.grid.Grid`, which starts at the burst's first sample with
+the burst's nominal period; the caller's ``on_open`` says which, see
+:mod:`~shm_ros.core.ingest.rates`). Inside a burst, windows of ``window_s`` are counted from the
+burst's first sample. A window is cut once every stamp that could snap into it is final (before
+``final_ns``); a burst that ends inside a window is cut at its last sample (a burst shorter than a
+window is cut whole). :class:`Bursts` keeps the state of the open burst and decides the cuts;
+placing the samples is the caller's ``cut`` callback.
 """
 
 from __future__ import annotations
@@ -15,11 +17,14 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from shm_ros.core.ingest.buffers import ChannelBuffer
-from shm_ros.core.ingest.grid import Grid, grid_time
+from shm_ros.core.ingest.grid import Grid
 
 #: ``cut(k0, k1, why, last_stamp)``: place grid rows ``[k0, k1)`` of the open burst; ``why`` is
 #: None for a full window, "pause" or "end" when the burst ends there (at ``last_stamp``).
 Cut = Callable[[int, int, str | None, int | None], None]
+#: ``on_open(first_stamp, final_ns)``: a burst starts at ``first_stamp``; returns its rate (Hz) and
+#: window length (grid rows), or None while its rate cannot be told yet (wait for data).
+OnOpen = Callable[[int, int | None], tuple[float, int] | None]
 
 
 def complete_runs(row_ok: np.ndarray) -> list[tuple[int, int]]:
@@ -40,12 +45,16 @@ class Bursts:
         self.pause_ns = pause_ns
         self.check_interval_ns = check_interval_ns
         self.grid: Grid | None = None  # None: no burst open
+        self.window_len = 1  # grid rows of a full window of the open burst
+        self.rate = 0.0  # nominal rate of the open burst, Hz
         self.k = 0  # first grid point of the next window
         self.scan_ns: int | None = None  # stamps below this are scanned for pauses
         self.scan_last: int | None = None  # newest stamp of the open burst seen by the scan
 
-    def open(self, origin: int, period: float) -> None:
-        self.grid = Grid(origin, 0, period)
+    def open(self, origin: int, rate: float, window_len: int) -> None:
+        self.grid = Grid(origin, 0, 1e9 / rate)
+        self.window_len = window_len
+        self.rate = rate
         self.k = 0
         self.scan_ns = None
         self.scan_last = None
@@ -56,21 +65,25 @@ class Bursts:
         self.scan_ns = None
         self.scan_last = None
 
-    def process(self, buffers: Sequence[ChannelBuffer], final_ns: int | None, window_len: int,
-                period: float, cut: Cut, on_open: Callable[[int], None]) -> int | None:
+    def process(self, buffers: Sequence[ChannelBuffer], final_ns: int | None, cut: Cut,
+                on_open: OnOpen) -> int | None:
         """Cut every window whose data is final (``final_ns`` None: end of stream). Returns the stream
         time at which to look again (None: nothing buffered)."""
-        W = window_len
         pause_ns = self.pause_ns
         end_of_stream = final_ns is None
         fin = np.iinfo(np.int64).max if final_ns is None else int(final_ns)
+        waiting = False  # a burst has started whose rate is not known yet
         while True:
             if self.grid is None:
                 first = _first_stamp(buffers)
                 if first is None or first >= fin:
                     break
-                self.open(first, period)
-                on_open(first)
+                opened = on_open(first, final_ns)
+                if opened is None:
+                    waiting = True
+                    break
+                self.open(first, *opened)
+            W = self.window_len
             grid = self.grid
             assert grid is not None
             k0 = self.k
@@ -118,9 +131,13 @@ class Bursts:
         # when to try again: the end of the open window, or a pause after the newest sample; at most
         # every check interval of stream time, so that a long window is not rescanned often
         if self.grid is not None:
-            due = self.grid.time(self.k + W)
+            due = self.grid.time(self.k + self.window_len)
             if self.scan_last is not None:
                 due = min(due, max(self.scan_last + int(pause_ns) + 1, fin + self.check_interval_ns))
             return due
         first = _first_stamp(buffers)
-        return None if first is None else grid_time(first, W, period)
+        if first is None:
+            return None
+        if waiting:  # more stamps of the new burst tell its rate
+            return max(first, fin) + min(self.check_interval_ns, 1_000_000_000)
+        return first  # a burst starts there: open it once the stream is final past it

@@ -5,7 +5,9 @@ buffers and places it (duplicates, collisions, unsnappable and late stamps repor
 mostly absent or at another rate are *dropped* for the span (their samples kept, the rest NaN +
 ``MISSING``) instead of splitting it everywhere. :func:`split_span` cuts the span at every row
 where a kept channel has no sample (a window never spans a gap); pieces shorter than half a
-window are dropped and reported.
+window are dropped and reported. A burst shorter than a window is one span of its own: its pieces
+are kept from ``min_window_s`` on (or half a window, if that is shorter), so that a short record
+(an earthquake of a minute among ten-minute windows) is one window of its own length.
 """
 
 from __future__ import annotations
@@ -107,11 +109,19 @@ def place_span(buffers: Sequence[ChannelBuffer], grid: Grid, k0: int, k1: int, r
     return span
 
 
+def min_piece_rows(window_len: int, rate: float, config: IngestConfig, whole_burst: bool) -> float:
+    """Grid rows a piece needs to become a window: half a window; for the pieces of a burst shorter
+    than a window, ``min_window_s`` (or half a window, if that is shorter)."""
+    half = window_len / 2.0
+    return min(config.min_window_s * rate, half) if whole_burst else half
+
+
 def split_span(span: Span, grid: Grid, window_len: int, rate: float, why: str | None, config: IngestConfig,
                log: DiagnosticLog, stats: IngestStats, src: Callable[[int], str],
-               dropped_spans: list[DroppedSpan]) -> tuple[np.ndarray, list[Piece]]:
+               dropped_spans: list[DroppedSpan], whole_burst: bool = False) -> tuple[np.ndarray, list[Piece]]:
     """Drop channels mostly absent, then cut the span at its gaps. Returns the dropped channels
-    (C,) and the pieces to emit; too short pieces go to ``dropped_spans``."""
+    (C,) and the pieces to emit; too short pieces go to ``dropped_spans``. ``whole_burst``: the span
+    is a whole burst shorter than a window (:func:`min_piece_rows`)."""
     k0, n = span.k0, span.n
     filled, flags = span.filled, span.flags
     cover = filled.mean(axis=0)
@@ -138,18 +148,24 @@ def split_span(span: Span, grid: Grid, window_len: int, rate: float, why: str | 
         lost = int(filled[gap_rows].sum())
         if lost:
             stats.samples_not_windowed["gap_rows"] += lost
-    min_len = window_len / 2.0
+    min_len = min_piece_rows(window_len, rate, config, whole_burst)
+    short_rule = "half a window" if min_len == window_len / 2.0 else "min_window_s"
     pieces = []
     for s, e in complete_runs(row_ok):
         m = e - s
         t_s = grid.time(k0 + s)
         if m < min_len:
-            reason = "remainder of burst" if (e == n and why is not None) else "piece between gaps"
-            dropped_spans.append(DroppedSpan(t_s, grid.time(k0 + e), m, f"{reason} shorter than half a window"))
+            if whole_burst and s == 0 and e == n:
+                reason, code, level = "burst", "burst_dropped", Level.WARN
+            elif e == n and why is not None:
+                reason, code, level = "remainder of burst", "remainder_dropped", Level.OK
+            else:
+                reason, code, level = "piece between gaps", "remainder_dropped", Level.WARN
+            dropped_spans.append(DroppedSpan(t_s, grid.time(k0 + e), m, f"{reason} shorter than {short_rule}"))
             stats.samples_not_windowed["short_piece"] += int(filled[s:e].sum())
-            log.add(Level.OK if reason.startswith("remainder") else Level.WARN, "remainder_dropped", "accel",
+            log.add(level, code, "accel",
                     f"{m} samples ({m / rate:.3g} s, {reason}) shorter than "
-                    f"half a window ({min_len / rate:.3g} s): dropped", t_s, 1)
+                    f"{short_rule} ({min_len / rate:.3g} s): dropped", t_s, 1)
             continue
         notes = list(span.notes)
         if s > 0:

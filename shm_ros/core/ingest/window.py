@@ -1,5 +1,6 @@
 """A piece of complete grid rows -> a :class:`~shm_ros.core.types.Window`: quality checks per
-channel (flags, status, diagnostics, notes), the temperature mean and the event decision."""
+channel (flags, status, diagnostics, notes), the temperature mean, the event decision and the
+amplitude covariates."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from shm_ros.core.diagnostics import Level
 from shm_ros.core.ingest.config import EventDetector, IngestConfig
+from shm_ros.core.ingest.covariates import rms_accel
 from shm_ros.core.ingest.diagnostics import DiagnosticLog
 from shm_ros.core.ingest.events import detect_event
 from shm_ros.core.ingest.quality import assess_channel
@@ -92,6 +94,7 @@ def make_window(ctx: WindowContext, start_ns: int, vals: np.ndarray, flags: np.n
     is_event, pga = detect_event(vals, status, nominal_rate, EventDetector(cfg.event_detector), sta_s=cfg.sta_s,
                                  lta_s=cfg.lta_s, sta_lta_on=cfg.sta_lta_on, pga_threshold=cfg.pga_threshold_m_s2)
     in_ch = ctx.input_channel if ctx.input_channel in ctx.names else None
+    rms = rms_accel(vals, ctx.names, status, in_ch)
     w = Window(
         window_id=ns_to_iso(start_ns),
         start_ns=int(start_ns),
@@ -105,6 +108,7 @@ def make_window(ctx: WindowContext, start_ns: int, vals: np.ndarray, flags: np.n
         pga_m_s2=pga,
         input_channel=in_ch,
         notes=notes,
+        covariates={} if rms is None else {"rms_accel_m_s2": rms},
     )
     if is_event:
         log.add(Level.OK, "event", "accel", f"event detected in {where}, PGA {pga:.3g} m/s^2", start_ns)
