@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         "bag": str(args.bag),
         "structure": str(args.structure),
         "sample_rate_hz": res.sample_rate_hz,
+        "sample_rates_hz": list(res.sample_rates_hz),
         "windows": records,
         "dropped": [{"start_ns": d.start_ns, "end_ns": d.end_ns, "n_samples": d.n_samples, "reason": d.reason}
                     for d in res.dropped],
