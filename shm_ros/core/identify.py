@@ -39,9 +39,10 @@ __all__ = ["Method", "Weighting", "LQ", "IdentifyConfig", "IdentificationResult"
 
 
 class Method(enum.StrEnum):
-    # With a measured input, output-only SSI mistakes the input's colour for the structure's: on
-    # simulated buildings with a base input its modes were 0.8-1.3 % off on average (5 % worst),
-    # input-output SSI's 0.01-0.17 % (test/test_identify_defaults.py). Hence ``auto``.
+    # With a measured input, output-only SSI takes the input's colour for the structure's: on the
+    # simulated building under earthquakes its modes 1-4 were 0.8-1.1 % off on average (4 % worst;
+    # 2.9-3.3 % off the fixed-base modes with the input sensor on a foundation on soil), input-output
+    # SSI's 0.005-0.02 % (0.16 % worst; test/test_identify_defaults.py). Hence ``auto``.
     AUTO = "auto"  # ssi-io when the window has a usable input channel, else ssi-cov
     SSI_COV = "ssi-cov"  # covariance-driven stochastic subspace identification
     SSI_DATA = "ssi-data"  # data-driven
