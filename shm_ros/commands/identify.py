@@ -5,6 +5,9 @@ Reads and windows the bag exactly as ``shm-ros ingest`` does, identifies every w
 start, end, temperature, and the modes sorted by frequency with damping, MPC, real mode shapes
 labelled by sensor id, the spread across model orders and (SSI-cov, SSI-data) jackknife standard
 deviations.
+The default method ``auto`` is input-output SSI (``ssi-io``) when the structure file declares an
+input sensor (``input: {sensor: ...}``) that the window carries, else output-only SSI-cov; each
+record's ``method`` and the provenance's ``methods_used`` say which one ran.
 ``--plots DIR`` saves one stabilization diagram per window. A window that cannot be identified is
 written with an ``error`` and no modes; the other windows are not affected.
 """
@@ -66,6 +69,13 @@ def _num(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(float(x)) else float(x)
 
 
+def _methods_line(requested: str, used: dict[str, int], input_sensor: str | None) -> str:
+    """E.g. ``method auto: ssi-io in 3 windows (input sensor g0)``."""
+    runs = ", ".join(f"{m} in {n} window{'s' * (n != 1)}" for m, n in used.items())
+    io = f" (input sensor {input_sensor})" if "ssi-io" in used else ""
+    return f"method {requested}: {runs or 'no window identified'}{io}"
+
+
 def run(args: argparse.Namespace) -> int:
     from dataclasses import asdict
 
@@ -98,6 +108,7 @@ def run(args: argparse.Namespace) -> int:
     cfg.spectrum = plots is not None
     records: list[dict[str, Any]] = []
     n_ok = 0
+    used: dict[str, int] = {}  # method actually run (auto resolved) -> windows
     from shm_ros.core.progress import Progress
 
     progress = Progress("windows identified", every_s=2.0)
@@ -112,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"shm-ros identify: window {w.window_id}: {exc}", file=sys.stderr)
             continue
         n_ok += 1
+        used[result.estimate.method] = used.get(result.estimate.method, 0) + 1
         rec = estimate_record(result.estimate, w)
         if result.notes or w.notes:
             rec["notes"] = list(w.notes) + list(result.notes)
@@ -121,12 +133,13 @@ def run(args: argparse.Namespace) -> int:
 
             name = f"stabilization_{len(records) - 1:05d}.png"
             plot_stabilization(result.diagram, plots / name,
-                               f"{rec['start']}  {cfg.method}  ({len(rec['modes'])} modes)")
+                               f"{rec['start']}  {result.estimate.method}  ({len(rec['modes'])} modes)")
             rec["plot"] = str(plots / name)
-    config = {"identify": asdict(cfg), "window_s": args.window, "bag": str(args.bag),
-              "structure": str(args.structure)}
+    config = {"identify": asdict(cfg), "methods_used": used, "window_s": args.window,
+              "bag": str(args.bag), "structure": str(args.structure)}
     out = dump(stamp_output({"windows": records}, config), args.out)
     progress(len(res.windows), len(res.windows))
     n_modes = sum(len(r["modes"]) for r in records)
+    print(_methods_line(cfg.method, used, cfg.input_channel or getattr(spec, "input_sensor", None)))
     print(f"{len(records)} windows ({n_ok} identified), {n_modes} modes -> {out}")
     return 0 if (n_ok or not res.windows) else 1

@@ -90,6 +90,9 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
             except (ValueError, np.linalg.LinAlgError) as exc:
                 print(f"shm-ros update: note: window {w.window_id}: not identified ({exc})",
                       file=sys.stderr)
+    if estimates:  # auto: input-output SSI when the structure's input sensor is recorded
+        print(f"shm-ros update: note: windows identified with {', '.join(sorted({e.method for e in estimates}))}",
+              file=sys.stderr)
     try:
         return observations_for_model(model, estimates, observed)
     except ValueError as exc:
