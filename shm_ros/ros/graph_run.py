@@ -142,11 +142,25 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                                     pipeline_qos())
         watcher.create_subscription(topics.message_class(topics.TYPES[topics.POSTERIOR]),
                                     topics.POSTERIOR, on_posterior, latched_qos())
+        window_readers = [0]
+
+        def on_diagnostics(m: Any) -> None:
+            for st in m.status:
+                if st.name == "ingest: status":
+                    values = {kv.key: kv.value for kv in st.values}
+                    window_readers[0] = int(values.get("window_readers", 0))
+
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        watcher.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diagnostics, pipeline_qos())
         # Every node must be up before the first message: windows are not kept for late joiners.
+        # The graph as this process sees it is not enough on a busy machine: ingest's own window
+        # publisher must have matched identify and the recorder (its status says so).
         estimate_readers = 1 + ("track" in kinds) + ("update" in kinds)  # + the watcher's own
         ready_by = time.monotonic() + 120.0
         while time.monotonic() < ready_by and not (
-                watcher.count_subscribers(topics.WINDOWS) >= 2
+                window_readers[0] >= 2
+                and watcher.count_subscribers(topics.WINDOWS) >= 2
                 and watcher.count_publishers(topics.MODAL_ESTIMATES) >= 1
                 and watcher.count_publishers(topics.INGEST_RECEIVED) >= 1
                 and watcher.count_subscribers(topics.MODAL_ESTIMATES) >= estimate_readers + 1

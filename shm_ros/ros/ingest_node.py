@@ -70,9 +70,12 @@ class IngestNode(Node):
         self.frame_id = settings.frame_id
         self.idle_flush_s = settings.idle_flush_s
         self.reliable = settings.reliable_input
+        # window_readers: subscriptions this node's window publisher has matched (a reader that the
+        # graph shows but that is not matched yet would miss the first windows)
         self.diag = Diagnostics(self, "ingest", summary=lambda: (
             "ok", f"{self.received} messages received, {self.windows_out} windows published",
-            {"messages": self.received, "windows": self.windows_out}))
+            {"messages": self.received, "windows": self.windows_out,
+             "window_readers": self.window_pub.get_subscription_count()}))
         self.window_pub: Any = self.create_publisher(
             topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, stream_qos(WINDOW_HISTORY))
         self.ack_pub = self.create_publisher(UInt64, topics.INGEST_RECEIVED, pipeline_qos())

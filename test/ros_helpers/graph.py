@@ -19,13 +19,24 @@ def stop(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, str]:
 _WAIT = r"""
 import json, sys, time
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 subs, pubs, timeout = json.loads(sys.argv[1]), json.loads(sys.argv[2]), float(sys.argv[3])
 rclpy.init()
 node = rclpy.create_node("test_wait_ready")
+# with an ingest node, its window publisher must itself have matched the window readers (what
+# this probe sees of the graph can be ahead of what ingest has matched on a busy machine)
+readers = [0]
+def on_diag(m):
+    for st in m.status:
+        if st.name == "ingest: status":
+            readers[0] = int({kv.key: kv.value for kv in st.values}.get("window_readers", 0))
+node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
+need_readers = subs.get("/shm/windows", 0) if "/shm/ingest/received" in pubs else 0
 end, ok = time.monotonic() + timeout, False
 while time.monotonic() < end and not ok:
     ok = (all(node.count_subscribers(t) >= k for t, k in subs.items())
-          and all(node.count_publishers(t) >= k for t, k in pubs.items()))
+          and all(node.count_publishers(t) >= k for t, k in pubs.items())
+          and readers[0] >= need_readers)
     rclpy.spin_once(node, timeout_sec=0.1)
 node.destroy_node()
 rclpy.shutdown()
