@@ -83,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
 
     from shm_ros.core.identify import identify_window_detailed
     from shm_ros.core.provenance import stamp_output
+    from shm_ros.core.progress import Progress
     from shm_ros.core.timeutil import ns_to_iso as iso_utc
     from shm_ros.io.modes_json import dump, estimate_record
     from shm_ros.io.recording import ingest_bag
@@ -109,8 +110,6 @@ def run(args: argparse.Namespace) -> int:
     records: list[dict[str, Any]] = []
     n_ok = 0
     used: dict[str, int] = {}  # method actually run (auto resolved) -> windows
-    from shm_ros.core.progress import Progress
-
     progress = Progress("windows identified", every_s=2.0)
     for k, w in enumerate(res.windows):
         progress(k, len(res.windows))
@@ -135,10 +134,10 @@ def run(args: argparse.Namespace) -> int:
             plot_stabilization(result.diagram, plots / name,
                                f"{rec['start']}  {result.estimate.method}  ({len(rec['modes'])} modes)")
             rec["plot"] = str(plots / name)
+    progress(len(res.windows), len(res.windows))
     config = {"identify": asdict(cfg), "methods_used": used, "window_s": args.window,
               "bag": str(args.bag), "structure": str(args.structure)}
     out = dump(stamp_output({"windows": records}, config), args.out)
-    progress(len(res.windows), len(res.windows))
     n_modes = sum(len(r["modes"]) for r in records)
     print(_methods_line(cfg.method, used, cfg.input_channel or getattr(spec, "input_sensor", None)))
     print(f"{len(records)} windows ({n_ok} identified), {n_modes} modes -> {out}")
