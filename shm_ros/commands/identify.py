@@ -82,8 +82,8 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from shm_ros.core.identify import identify_window_detailed
-    from shm_ros.core.provenance import stamp_output
     from shm_ros.core.progress import Progress
+    from shm_ros.core.provenance import stamp_output
     from shm_ros.core.timeutil import ns_to_iso as iso_utc
     from shm_ros.io.modes_json import dump, estimate_record
     from shm_ros.io.recording import ingest_bag
