@@ -41,6 +41,7 @@ from shm_ros.ros.timers import steady_timer
 
 IMU_BATCH = 512  # Imu messages decoded together (also every 0.05 s)
 MAX_HELD_WINDOWS = 64  # windows held for a slow reader before they go out regardless
+HOLD_ACKS_AT = 2  # more windows held than this: the replay's acknowledgements wait
 CLOSE_WAIT_S = 10.0  # on shutdown, how long held windows wait for a slow reader
 
 
@@ -271,9 +272,11 @@ class IngestNode(Node):
         self._ack()
 
     def _ack_count(self) -> int:
-        """Messages acknowledged to the replay: all received, unless windows are held for a slow
-        reader (then the count stands still, and a flow-controlled replay waits)."""
-        if not self.pending:
+        """Messages acknowledged to the replay: all received, unless more than ``HOLD_ACKS_AT``
+        windows are held for a slow reader (then the count stands still and a flow-controlled
+        replay waits, so that held windows cannot pile up in memory; a window or two in flight
+        does not hold the end of a replay)."""
+        if len(self.pending) <= HOLD_ACKS_AT:
             self.ack_hold = self.received
         return self.ack_hold
 
