@@ -299,7 +299,9 @@ def _jackknife(replicates, n_blocks: int, n_out: int, fs: float, picked: list[Pi
     ok = np.sum(np.isfinite(fr), axis=0)
 
     def jk(v: np.ndarray) -> np.ndarray:
-        mean = np.nanmean(v, axis=0)
+        # a mode found in no replicate has no mean (NaN, then no std) rather than a warning
+        n = np.sum(np.isfinite(v), axis=0)
+        mean = np.nansum(v, axis=0) / np.where(n > 0, n, np.nan)
         var = (ok - 1) / np.maximum(ok, 1) * np.nansum((v - mean) ** 2, axis=0)
         return np.where(ok >= max(3, n_blocks - 2), np.sqrt(var), np.nan)
 
