@@ -57,16 +57,10 @@ DEPENDENCIES: dict[str, tuple[str, str | None]] = {
 
 
 def _repository_files() -> list[str]:
-    git = shutil.which("git")
-    if git and (ROOT / ".git").exists():
-        res = subprocess.run([git, "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
-                             capture_output=True, check=False)
-        if res.returncode == 0:
-            return [n for n in res.stdout.decode().split("\0") if n and (ROOT / n).is_file()]
-    skip = {".git", ".venv", "out", "build", "install", "log", "__pycache__"}
-    return [p.relative_to(ROOT).as_posix() for p in ROOT.rglob("*")
-            if p.is_file() and not skip & set(p.relative_to(ROOT).parts)
-            and not any(s.endswith(".egg-info") for s in p.relative_to(ROOT).parts)]
+    """The repository's files (one definition, shared with the self-contained check)."""
+    from test_self_contained import repository_files
+
+    return [p.relative_to(ROOT).as_posix() for p in repository_files()]
 
 
 @pytest.fixture(scope="module")
