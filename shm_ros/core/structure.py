@@ -18,11 +18,12 @@ import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
 
-from shm_ros.core.bayes.priors import PARAMETER_PRIORS, PRIOR_FIELDS, Prior
+from shm_ros.core.bayes.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS, Prior, PriorError, prior_fields
 from shm_ros.core.models.registry import MODEL_KINDS, ModelKind, kind_names, model_kind
 
 DIRECTIONS = ("vertical", "x", "y")
@@ -90,10 +91,35 @@ class SensorSpec:
         return None if v is None else int(v)
 
 
+class InputKind(StrEnum):
+    """What a measured input record drives (docs/interfaces.md section 2)."""
+
+    BASE = "base"  # ground acceleration under floor 1 (the support of the whole structure)
+    FLOOR = "floor"  # the measured acceleration of a location, prescribed: it drives the parts it supports
+    FORCE = "force"  # a force [N] = gain x record, applied at ``at``
+
+
+@dataclass
+class InputSpec:
+    """One measured input: the sensor recording it, what it drives, where, and a gain.
+
+    ``at`` is the location (``{floor: k}``, ``{x: m}`` or ``{dof: i|label}``): for ``base`` the
+    sensor's own location, for ``floor`` the location whose motion is prescribed, for ``force``
+    where the force acts. The record (sensor samples x ``gain``) is an acceleration in m/s^2 for
+    ``base`` and ``floor``, a force in N for ``force``. ``direction`` is the sensor's.
+    """
+
+    sensor: str
+    kind: InputKind
+    at: dict[str, Any]
+    direction: str
+    gain: float = 1.0
+
+
 @dataclass
 class PriorSpec:
     """Prior of a multiplicative factor: normal{mean,std}, lognormal{mean,std} (of the factor itself,
-    not of its log), weibull{scale,shape}, uniform{low,high}."""
+    not of its log) or lognormal{mu_ln,sigma_ln} (of its log), weibull{scale,shape}, uniform{low,high}."""
 
     dist: str
     params: dict[str, float]
@@ -128,7 +154,7 @@ class StructureSpec:
     section: Any
     damping: DampingSpec
     sensors: list[SensorSpec]
-    input_sensor: str | None
+    inputs: list[InputSpec]
     parameters: list[ParameterSpec]
     raw: dict = field(default_factory=dict, repr=False)
     source: str = "<structure>"
@@ -157,9 +183,19 @@ class StructureSpec:
         return [s.id for s in self.sensors]
 
     @property
+    def input_sensor(self) -> str | None:
+        """The sensor of the first input (None: no input); see :meth:`input_sensor_ids` for all."""
+        return self.inputs[0].sensor if self.inputs else None
+
+    def input_sensor_ids(self) -> list[str]:
+        """Sensors that record inputs, in the order of the structure file."""
+        return [i.sensor for i in self.inputs]
+
+    @property
     def output_sensor_ids(self) -> list[str]:
-        """Sensors other than the input sensor."""
-        return [s.id for s in self.sensors if s.id != self.input_sensor]
+        """Sensors other than the input sensors."""
+        inputs = set(self.input_sensor_ids())
+        return [s.id for s in self.sensors if s.id not in inputs]
 
     @property
     def parameter_names(self) -> list[str]:
@@ -180,8 +216,10 @@ class StructureSpec:
         out[self.kind] = self.model_kind.section_to_dict(self.section)
         out["damping"] = {"kind": self.damping.kind, "ratios": [float(r) for r in self.damping.ratios]}
         out["sensors"] = [_sensor_dict(s) for s in self.sensors]
-        if self.input_sensor is not None:
-            out["input"] = {"sensor": self.input_sensor}
+        if len(self.inputs) == 1 and _is_plain_input(self, self.inputs[0]):
+            out["input"] = {"sensor": self.inputs[0].sensor}
+        elif self.inputs:
+            out["inputs"] = [_input_dict(i) for i in self.inputs]
         out["parameters"] = [
             {"name": p.name, "applies_to": p.applies_to, "prior": {"dist": p.prior.dist, **p.prior.params}}
             for p in self.parameters
@@ -202,6 +240,20 @@ class StructureSpec:
                 parent = _get(data, loc[:-1])
                 parent[loc[-1]] = float(parent[loc[-1]]) * float(f)
         return structure_from_dict(data, source=self.source, matrices_arrays=self.arrays)
+
+
+def _is_plain_input(spec: StructureSpec, i: InputSpec) -> bool:
+    """Whether ``input: {sensor: ID}`` alone says everything about ``i`` (the defaults hold)."""
+    at = spec.sensor(i.sensor).at
+    return i.gain == 1.0 and i.at == at and i.kind == default_input_kind(at)
+
+
+def _input_dict(i: InputSpec) -> dict[str, Any]:
+    out: dict[str, Any] = {"sensor": i.sensor, "kind": i.kind.value}
+    if i.kind != InputKind.BASE:
+        out["at"] = dict(i.at)
+    out["gain"] = float(i.gain)
+    return out
 
 
 def _sensor_dict(s: SensorSpec) -> dict[str, Any]:
@@ -377,7 +429,8 @@ class FieldReader:
                 raise self.err("missing required field", f"{fld}.{k}" if fld else k)
 
 
-_COMMON = ("name", "kind", "description", "damping", "sensors", "input", "parameters")
+_COMMON = ("name", "kind", "description", "damping", "sensors", "input", "inputs", "parameters")
+INPUT_FIELDS = ("sensor", "kind", "at", "gain")
 
 
 def structure_from_dict(
@@ -403,13 +456,7 @@ def structure_from_dict(
 
     damping = _damping(c, data.get("damping", {"kind": "rayleigh", "ratios": [0.02, 0.02]}))
     sensors = _sensors(c, data["sensors"], mk, section)
-    input_sensor = None
-    if "input" in data and data["input"] is not None:
-        inp = c.mapping(data["input"], "input")
-        c.keys(inp, ("sensor",), ("sensor",), "input")
-        input_sensor = c.string(inp["sensor"], "input.sensor")
-        if input_sensor not in {s.id for s in sensors}:
-            raise c.err(f"names sensor {input_sensor!r}, which is not in sensors", "input.sensor")
+    inputs = _inputs(c, data, sensors, mk, section)
 
     description = data.get("description")
     spec = StructureSpec(
@@ -418,7 +465,7 @@ def structure_from_dict(
         section=section,
         damping=damping,
         sensors=sensors,
-        input_sensor=input_sensor,
+        inputs=inputs,
         parameters=[],
         raw=copy.deepcopy(dict(data)),
         source=source,
@@ -469,6 +516,74 @@ def _sensors(c: FieldReader, v: Any, mk: ModelKind, section: Any) -> list[Sensor
     return out
 
 
+def default_input_kind(at: Mapping[str, Any]) -> InputKind:
+    """``base`` unless the sensor sits on a floor above the ground: a floor sensor cannot record the
+    ground, so its record is that floor's prescribed motion (``floor``)."""
+    fl = at.get("floor")
+    return InputKind.FLOOR if fl is not None and int(fl) >= 1 else InputKind.BASE
+
+
+def _inputs(c: FieldReader, data: Mapping, sensors: list[SensorSpec], mk: ModelKind, section: Any
+            ) -> list[InputSpec]:
+    """``input: {...}`` (one input) or ``inputs: [...]`` (several); both together is an error."""
+    has_one = data.get("input") is not None
+    has_many = data.get("inputs") is not None
+    if has_one and has_many:
+        raise c.err("give either 'input' (one input) or 'inputs' (a list), not both", "inputs")
+    if has_one:
+        entries = [("input", data["input"])]
+    elif has_many:
+        entries = [(f"inputs[{i}]", v) for i, v in enumerate(c.seq(data["inputs"], "inputs"))]
+    else:
+        return []
+    by_id = {s.id: s for s in sensors}
+    out: list[InputSpec] = []
+    for fld, v in entries:
+        m = c.mapping(v, fld)
+        c.keys(m, INPUT_FIELDS, ("sensor",), fld)
+        sid = c.string(str(m["sensor"]) if isinstance(m["sensor"], int) else m["sensor"], f"{fld}.sensor")
+        if sid not in by_id:
+            raise c.err(f"names sensor {sid!r}, which is not in sensors", f"{fld}.sensor")
+        if any(i.sensor == sid for i in out):
+            raise c.err(f"sensor {sid!r} records another input already", f"{fld}.sensor")
+        sensor = by_id[sid]
+        default = default_input_kind(sensor.at)
+        kind_v = m.get("kind", default.value)
+        try:
+            kind = InputKind(kind_v)
+        except ValueError:
+            raise c.err(f"unknown input kind {kind_v!r} (expected one of: "
+                        f"{', '.join(k.value for k in InputKind)})", f"{fld}.kind") from None
+        gain = c.number(m.get("gain", 1.0), f"{fld}.gain")
+        if gain == 0:
+            raise c.err("must not be 0", f"{fld}.gain")
+        if kind == InputKind.BASE:
+            if "at" in m:
+                raise c.err("a base input acts under the whole structure: it takes no 'at'", f"{fld}.at")
+            if default != InputKind.BASE:
+                raise c.err(f"a base input is the ground acceleration, but sensor {sid!r} is at "
+                            f"floor {sensor.floor}: use kind floor (the floor's motion drives the "
+                            "floors above it) or a sensor at floor 0", f"{fld}.kind")
+            at = dict(sensor.at)
+        else:
+            at = sensor.at if "at" not in m else mk.sensor_location(
+                c, section, c.mapping(m["at"], f"{fld}.at"), sensor.direction, fld)
+            at = dict(at)
+            if at.get("floor") == 0:
+                raise c.err(f"floor 0 is the ground: a {kind.value} input acts on a floor >= 1 "
+                            "(use kind base for the ground acceleration)", f"{fld}.at.floor")
+        for other in out:
+            if other.direction != sensor.direction:
+                continue
+            if kind == other.kind == InputKind.BASE:
+                raise c.err(f"a second base input in direction {sensor.direction!r} "
+                            f"(sensor {other.sensor!r} is one already)", f"{fld}.kind")
+            if kind == other.kind == InputKind.FLOOR and at == other.at:
+                raise c.err(f"the motion at {at} is prescribed by input {other.sensor!r} already", f"{fld}.at")
+        out.append(InputSpec(sensor=sid, kind=kind, at=at, direction=sensor.direction, gain=gain))
+    return out
+
+
 def _source(c: FieldReader, v: Any, sid: str, direction: str, fld: str) -> SourceSpec:
     if v is None:
         return SourceSpec(topic=sid, axis=DEFAULT_AXIS[direction], sign=1.0, channel=sid)
@@ -493,12 +608,22 @@ def _prior(c: FieldReader, v: Any, fld: str) -> PriorSpec:
     dist = m["dist"]
     if dist not in PARAMETER_PRIORS:
         raise c.err(f"unknown prior {dist!r} (expected one of: {', '.join(PARAMETER_PRIORS)})", f"{fld}.dist")
-    need = PRIOR_FIELDS[dist]
-    c.keys(m, ("dist", *need), need, fld)
+    alt = PRIOR_ALT_FIELDS.get(dist, ())
+    c.keys(m, ("dist", *PRIOR_FIELDS[dist], *alt), (), fld)
+    try:
+        need = prior_fields(dist, m)
+    except PriorError:
+        both = [k for k in (*PRIOR_FIELDS[dist], *alt) if k in m]
+        raise c.err(f"a {dist} prior is either {{{', '.join(PRIOR_FIELDS[dist])}}} or {{{', '.join(alt)}}}, "
+                    f"not both (found {', '.join(both)})", fld) from None
+    for k in need:
+        if k not in m:
+            raise c.err("missing required field", f"{fld}.{k}")
     p = {k: c.number(m[k], f"{fld}.{k}") for k in need}
-    if dist in ("normal", "lognormal") and p["std"] <= 0:
-        raise c.err(f"must be > 0, got {p['std']}", f"{fld}.std")
-    if dist == "lognormal" and p["mean"] <= 0:
+    for k in ("std", "sigma_ln"):
+        if k in p and p[k] <= 0:
+            raise c.err(f"must be > 0, got {p[k]}", f"{fld}.{k}")
+    if dist == "lognormal" and "mean" in p and p["mean"] <= 0:
         raise c.err(f"must be > 0 for a lognormal prior, got {p['mean']}", f"{fld}.mean")
     if dist == "weibull":
         for k in need:

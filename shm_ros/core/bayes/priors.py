@@ -10,7 +10,8 @@ rather than through ``scipy.stats``, whose per-call overhead dominates for a han
 Parametrisations follow the structure file:
 
 * ``normal {mean, std}``
-* ``lognormal {mean, std}`` - mean and standard deviation of the factor itself (not of its log)
+* ``lognormal {mean, std}`` - mean and standard deviation of the factor itself (not of its log),
+  or ``lognormal {mu_ln, sigma_ln}`` - mean and standard deviation of its logarithm (one form only)
 * ``weibull {scale, shape}`` - lambda and eta of the Weibull density
 * ``uniform {low, high}``
 * ``inverse_gamma {shape, scale}`` - for prediction-error variances
@@ -34,6 +35,8 @@ PRIOR_FIELDS: dict[str, tuple[str, ...]] = {
     "uniform": ("low", "high"),
     "inverse_gamma": ("shape", "scale"),
 }
+# families with a second way of writing them: family -> the alternative fields
+PRIOR_ALT_FIELDS: dict[str, tuple[str, ...]] = {"lognormal": ("mu_ln", "sigma_ln")}
 PRIOR_KINDS = tuple(PRIOR_FIELDS)
 PARAMETER_PRIORS = ("normal", "lognormal", "weibull", "uniform")  # families a structure parameter may use
 
@@ -56,11 +59,11 @@ class Prior:
     def make(kind: str, params: Mapping[str, Any], name: str = "") -> Prior:
         kind = str(kind).lower().replace("-", "_")
         where = f"prior of parameter '{name}'" if name else "prior"
-        required = PRIOR_FIELDS
-        if kind not in required:
+        if kind not in PRIOR_FIELDS:
             raise PriorError(f"{where}: unknown dist '{kind}' (use one of {', '.join(PRIOR_KINDS)})")
+        fields = prior_fields(kind, params, where)
         clean: dict[str, float] = {}
-        for key in required[kind]:
+        for key in fields:
             if key not in params:
                 raise PriorError(f"{where}: '{kind}' needs field '{key}'")
             try:
@@ -69,9 +72,9 @@ class Prior:
                 raise PriorError(f"{where}: field '{key}' must be a number, got {params[key]!r}") from exc
             if not math.isfinite(clean[key]):
                 raise PriorError(f"{where}: field '{key}' must be finite")
-        positive = {"normal": ("std",), "lognormal": ("mean", "std"), "weibull": ("scale", "shape"),
+        positive = {"normal": ("std",), "lognormal": ("mean", "std", "sigma_ln"), "weibull": ("scale", "shape"),
                     "uniform": (), "inverse_gamma": ("shape", "scale")}[kind]
-        for key in positive:
+        for key in (k for k in positive if k in clean):
             if clean[key] <= 0:
                 raise PriorError(f"{where}: field '{key}' must be > 0, got {clean[key]}")
         if kind == "uniform" and not clean["high"] > clean["low"]:
@@ -87,7 +90,7 @@ class Prior:
                 z = (x - p["mean"]) / p["std"]
                 out = -0.5 * z * z - math.log(p["std"]) - 0.5 * math.log(2 * math.pi)
             elif self.kind == "lognormal":
-                mu, sig = _lognormal_mu_sigma(p["mean"], p["std"])
+                mu, sig = lognormal_mu_sigma(p)
                 lx = np.log(np.where(x > 0, x, 1.0))
                 z = (lx - mu) / sig
                 out = np.where(x > 0, -0.5 * z * z - lx - math.log(sig) - 0.5 * math.log(2 * math.pi),
@@ -119,7 +122,7 @@ class Prior:
         if self.kind == "normal":
             return p["mean"] + p["std"] * special.ndtri(u)
         if self.kind == "lognormal":
-            mu, sig = _lognormal_mu_sigma(p["mean"], p["std"])
+            mu, sig = lognormal_mu_sigma(p)
             return np.exp(mu + sig * special.ndtri(u))
         if self.kind == "weibull":
             return p["scale"] * (-np.log1p(-u)) ** (1.0 / p["shape"])
@@ -142,7 +145,25 @@ class Prior:
         return {"dist": self.kind, **{k: float(v) for k, v in self.params.items()}}
 
 
-def _lognormal_mu_sigma(mean: float, std: float) -> tuple[float, float]:
+def prior_fields(kind: str, params: Mapping[str, Any], where: str = "prior") -> tuple[str, ...]:
+    """The fields ``params`` uses for family ``kind``: the usual ones, or the alternative form
+    (:data:`PRIOR_ALT_FIELDS`) when any of its fields is present. Mixing the two forms is an error."""
+    alt = PRIOR_ALT_FIELDS.get(kind, ())
+    used_alt = [k for k in alt if k in params]
+    if not used_alt:
+        return PRIOR_FIELDS[kind]
+    used_main = [k for k in PRIOR_FIELDS[kind] if k in params]
+    if used_main:
+        raise PriorError(f"{where}: give either {{{', '.join(PRIOR_FIELDS[kind])}}} or {{{', '.join(alt)}}}, "
+                         f"not both (found {', '.join(used_main + used_alt)})")
+    return alt
+
+
+def lognormal_mu_sigma(p: Mapping[str, float]) -> tuple[float, float]:
+    """Mean and standard deviation of the logarithm of a lognormal factor, from either form."""
+    if "mu_ln" in p:
+        return float(p["mu_ln"]), float(p["sigma_ln"])
+    mean, std = float(p["mean"]), float(p["std"])
     s2 = math.log1p((std / mean) ** 2)
     return math.log(mean) - 0.5 * s2, math.sqrt(s2)
 
@@ -153,7 +174,7 @@ def _scipy_frozen(kind: str, p: Mapping[str, float]):
     if kind == "normal":
         return stats.norm(loc=p["mean"], scale=p["std"])
     if kind == "lognormal":
-        mu, sig = _lognormal_mu_sigma(p["mean"], p["std"])
+        mu, sig = lognormal_mu_sigma(p)
         return stats.lognorm(s=sig, scale=math.exp(mu))
     if kind == "weibull":
         return stats.weibull_min(c=p["shape"], scale=p["scale"])

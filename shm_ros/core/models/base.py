@@ -16,12 +16,43 @@ of parameter vectors per call.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from shm_ros.core.models.beam import deck_observation
 from shm_ros.core.models.damping import rayleigh_coefficients, rayleigh_ratios
+
+if TYPE_CHECKING:  # annotations only: the structure module imports this package's registry
+    from shm_ros.core.structure import InputSpec
+
+
+@dataclass(frozen=True)
+class Damper:
+    """A discrete viscous damper between two DOFs (None: the ground), acting on their relative motion.
+
+    Without ``k_maxwell`` a Kelvin-Voigt dashpot (force ``c`` x relative velocity, part of
+    :meth:`AffineModel.damping`); with it a Maxwell element, a spring ``k_maxwell`` in series with
+    the dashpot, whose force is a state of its own (``shm_ros.core.response``).
+    """
+
+    nodes: tuple[int | None, int | None]
+    c: float  # N s/m
+    k_maxwell: float | None = None  # N/m
+
+    @property
+    def maxwell(self) -> bool:
+        return self.k_maxwell is not None
+
+    def incidence(self, n_dof: int) -> np.ndarray:
+        """Row b (n_dof,) with b @ u = extension of the element (the ground's motion not included)."""
+        b = np.zeros(n_dof)
+        i, j = self.nodes
+        if i is not None:
+            b[i] += 1.0
+        if j is not None:
+            b[j] -= 1.0
+        return b
 
 
 @dataclass
@@ -73,6 +104,11 @@ class AffineModel:
     kind: str = "matrices"  # name of the structure kind (shm_ros.core.models.registry)
     direction: str | None = None  # direction of motion the DOFs describe ("vertical", "x", "y")
     node_x: np.ndarray | None = None  # girder: node coordinates along the deck (m)
+    # discrete dampers (shear building ``dampers``); Kelvin-Voigt ones are part of ``damping``
+    dampers: list[Damper] = field(default_factory=list)
+    # the structure's inputs that act in this model's direction (docs/interfaces.md section 2)
+    inputs: list[InputSpec] = field(default_factory=list)
+    story_heights: np.ndarray | None = None  # shear building: height of each story (m), when given
 
     def __post_init__(self) -> None:
         if not self.damping_factors:
@@ -208,7 +244,24 @@ class AffineModel:
         return rayleigh_ratios(w, a0, a1)
 
     def damping(self, theta: np.ndarray | None = None) -> np.ndarray:
-        """Viscous damping matrix C(theta).
+        """Viscous damping matrix C(theta): the inherent damping plus the Kelvin-Voigt dampers.
+
+        With dampers the damping is non-classical (the undamped modes do not diagonalise C); Maxwell
+        dampers are not in C: their force is a state (``shm_ros.core.response``).
+        """
+        return self.inherent_damping(theta) + self.damper_damping()
+
+    def damper_damping(self) -> np.ndarray:
+        """The Kelvin-Voigt dampers' dashpots assembled on the DOFs (zero without dampers)."""
+        C = np.zeros((self.n_dof, self.n_dof))
+        for d in self.dampers:
+            if not d.maxwell:
+                b = d.incidence(self.n_dof)
+                C += d.c * np.outer(b, b)
+        return C
+
+    def inherent_damping(self, theta: np.ndarray | None = None) -> np.ndarray:
+        """Viscous damping matrix of the structure itself, without discrete dampers.
 
         ``rayleigh``: C = a0 M + a1 K with the ratios met exactly at the first two modes of the model
         at ``theta``. ``modal``: C = M Phi diag(2 zeta_k omega_k) Phi^T M over all modes (the last
@@ -252,6 +305,29 @@ class AffineModel:
                     + (" (it is the base input)" if sid == self.input_sensor else "")
                 )
         return S
+
+    def location_row(self, at: dict[str, Any]) -> np.ndarray | None:
+        """Row (n_dof,) reading the displacement at a structure-file location (``{floor: k}``,
+        ``{x: m}``, ``{dof: i|label}``); its transpose spreads a point force there. None: the ground
+        (floor 0), which is not a DOF."""
+        row = np.zeros(self.n_dof)
+        if "dof" in at:
+            d = at["dof"]
+            idx = self.dof_labels.index(d) if isinstance(d, str) else int(d)
+            row[idx] = 1.0
+        elif "floor" in at:
+            k = int(at["floor"])
+            if k == 0:
+                return None
+            label = f"floor{k}.{self.direction}"
+            if label not in self.dof_labels:
+                raise KeyError(f"model {self.name!r} has no DOF {label!r}")
+            row[self.dof_labels.index(label)] = 1.0
+        elif "x" in at:
+            row = self.deck_observation([float(at["x"])])[0]
+        else:
+            raise KeyError(f"model {self.name!r} cannot locate {at!r}")
+        return row
 
     def deck_observation(self, xs) -> np.ndarray:
         """Girder only: rows (len(xs), n_dof) reading the vertical displacement at any deck ``x``."""
@@ -307,6 +383,9 @@ def assemble_model(spec: Any, params: list[Any], K0: np.ndarray, M0: np.ndarray,
     """The :class:`AffineModel` of a structure spec once a builder has its matrices: the parts every
     kind shares (names, all-zero terms dropped, damping, input sensor); ``fields`` adds the rest."""
     fields.setdefault("input_dof", sensor_dofs.get(spec.input_sensor) if spec.input_sensor else None)
+    direction = fields.get("direction")
+    fields.setdefault("inputs", [i for i in getattr(spec, "inputs", [])
+                                 if direction is None or i.direction == direction])
     return AffineModel(
         name=spec.name,
         parameter_names=[p.name for p in params],

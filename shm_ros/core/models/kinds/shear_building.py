@@ -9,32 +9,51 @@ a floor sensor reads the absolute acceleration ``u'' + a_g``.
 Structure-file section (``kind: shear_building``, docs/interfaces.md section 2)::
 
     shear_building:
-      floors: [{mass: 2.0e5, stiffness: 3.0e8}, ...]    # kg, N/m; floor 1 first
+      floors: [{mass: 2.0e5, stiffness: 3.0e8, height: 3.5}, ...]   # kg, N/m, m; floor 1 first
+      dampers:                                                        # optional
+        - {between: [0, 1], c: 2.0e6}                     # Kelvin-Voigt dashpot, N s/m
+        - {between: [1, 2], c: 2.0e6, k_maxwell: 4.0e7}   # Maxwell: spring in series, N/m
 
-Sensors sit at ``at: {floor: k}`` (0 = ground) and measure ``x`` or ``y``.
+Sensors sit at ``at: {floor: k}`` (0 = ground) and measure ``x`` or ``y``. ``height`` (optional) is
+the story below the floor, for drift ratios. A damper joins two floors (0 = ground) and acts in the
+model's direction; dampers make the damping non-classical (``AffineModel.damping`` holds the
+Kelvin-Voigt dashpots, a Maxwell element's force is a state of the time-domain response).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from shm_ros.core.models.base import AffineModel, assemble_model, damping_factors_of
+from shm_ros.core.models.base import AffineModel, Damper, assemble_model, damping_factors_of
 from shm_ros.core.models.registry import ModelKind, register
 from shm_ros.core.structure import FieldReader, Location, StructureError, StructureSpec
 
-FLOOR_FIELDS = ("mass", "stiffness")
+FLOOR_FIELDS = ("mass", "stiffness")  # the updatable ones
+DAMPER_FIELDS = ("between", "c", "k_maxwell")
 
 
 @dataclass
 class FloorSpec:
-    """One floor of a shear building: its lumped mass (kg) and the stiffness of the story below (N/m)."""
+    """One floor of a shear building: its lumped mass (kg), the stiffness of the story below (N/m)
+    and, optionally, that story's height (m)."""
 
     mass: float
     stiffness: float
+    height: float | None = None
+
+
+@dataclass
+class DamperSpec:
+    """A damper between floors ``between`` (0 = ground): dashpot ``c`` (N s/m), with ``k_maxwell``
+    (N/m) a Maxwell element (spring in series with the dashpot)."""
+
+    between: tuple[int, int]
+    c: float
+    k_maxwell: float | None = None
 
 
 @dataclass
@@ -42,6 +61,7 @@ class ShearBuildingSpec:
     """Floors bottom-up (floor 1 first); floor 0 is the ground and is not listed."""
 
     floors: list[FloorSpec]
+    dampers: list[DamperSpec] = field(default_factory=list)
 
     @property
     def n_floors(self) -> int:
@@ -55,24 +75,38 @@ class ShearBuilding(ModelKind):
     def parse_section(self, r: FieldReader, value: Any, arrays: Mapping[str, np.ndarray] | None
                       ) -> ShearBuildingSpec:
         b = r.mapping(value, "shear_building")
-        r.keys(b, ("floors",), ("floors",), "shear_building")
+        r.keys(b, ("floors", "dampers"), ("floors",), "shear_building")
         floors = []
         for i, f in enumerate(r.seq(b["floors"], "shear_building.floors")):
             fld = f"shear_building.floors[{i}]"
             f = r.mapping(f, fld)
-            r.keys(f, FLOOR_FIELDS, FLOOR_FIELDS, fld)
+            r.keys(f, (*FLOOR_FIELDS, "height"), FLOOR_FIELDS, fld)
             floors.append(
                 FloorSpec(
                     mass=r.number(f["mass"], f"{fld}.mass", positive=True),
                     stiffness=r.number(f["stiffness"], f"{fld}.stiffness", positive=True),
+                    height=None if f.get("height") is None else r.number(f["height"], f"{fld}.height", positive=True),
                 )
             )
         if not floors:
             raise r.err("needs at least one floor", "shear_building.floors")
-        return ShearBuildingSpec(floors=floors)
+        dampers = [_damper(r, d, f"shear_building.dampers[{i}]", len(floors))
+                   for i, d in enumerate(r.seq(b.get("dampers") or [], "shear_building.dampers"))]
+        return ShearBuildingSpec(floors=floors, dampers=dampers)
 
     def section_to_dict(self, section: ShearBuildingSpec) -> dict[str, Any]:
-        return {"floors": [{"mass": float(f.mass), "stiffness": float(f.stiffness)} for f in section.floors]}
+        floors = []
+        for f in section.floors:
+            d = {"mass": float(f.mass), "stiffness": float(f.stiffness)}
+            if f.height is not None:
+                d["height"] = float(f.height)
+            floors.append(d)
+        out: dict[str, Any] = {"floors": floors}
+        if section.dampers:
+            out["dampers"] = [{"between": list(d.between), "c": float(d.c),
+                               **({} if d.k_maxwell is None else {"k_maxwell": float(d.k_maxwell)})}
+                              for d in section.dampers]
+        return out
 
     def sensor_location(self, r: FieldReader, section: ShearBuildingSpec, at: Mapping[str, Any], direction: str,
                         fld: str) -> dict[str, Any]:
@@ -95,6 +129,24 @@ class ShearBuilding(ModelKind):
     def build(self, spec: StructureSpec, **overrides: Any) -> AffineModel:
         """Overrides: ``direction``, ``include_parameters`` (:func:`build_shear_building`)."""
         return build_shear_building(spec, **overrides)
+
+
+def _damper(r: FieldReader, value: Any, fld: str, n_floors: int) -> DamperSpec:
+    d = r.mapping(value, fld)
+    r.keys(d, DAMPER_FIELDS, ("between", "c"), fld)
+    between = r.seq(d["between"], f"{fld}.between")
+    if len(between) != 2:
+        raise r.err(f"must name two floors [i, j], got {len(between)} entries", f"{fld}.between")
+    ends = tuple(r.integer(v, f"{fld}.between[{k}]", minimum=0) for k, v in enumerate(between))
+    for k, e in enumerate(ends):
+        if e > n_floors:
+            raise r.err(f"floor {e} does not exist (the building has {n_floors} floors; 0 is the ground)",
+                        f"{fld}.between[{k}]")
+    if ends[0] == ends[1]:
+        raise r.err(f"a damper joins two different floors, got [{ends[0]}, {ends[1]}]", f"{fld}.between")
+    c = r.number(d["c"], f"{fld}.c", positive=True)
+    km = None if d.get("k_maxwell") is None else r.number(d["k_maxwell"], f"{fld}.k_maxwell", positive=True)
+    return DamperSpec(between=(ends[0], ends[1]), c=c, k_maxwell=km)
 
 
 def story_stiffness_matrix(n_floors: int, story: int, k: float = 1.0) -> np.ndarray:
@@ -149,7 +201,16 @@ def build_shear_building(
         fl = spec.sensor(spec.input_sensor).floor
         input_dof = None if not fl else fl - 1
 
+    dampers = [Damper(nodes=(_dof(d.between[0]), _dof(d.between[1])), c=d.c, k_maxwell=d.k_maxwell)
+               for d in b.dampers]
+    heights = [f.height for f in b.floors]
     return assemble_model(spec, params, K0, M0, K_terms, M_terms,
                           [f"floor{i + 1}.{direction}" for i in range(n)], sensor_dofs,
                           damping_factors_of(params), input_dof=input_dof, base_influence=np.ones(n),
-                          kind="shear_building", direction=direction)
+                          kind="shear_building", direction=direction, dampers=dampers,
+                          story_heights=None if None in heights else np.asarray(heights, dtype=float))
+
+
+def _dof(floor: int) -> int | None:
+    """DOF index of a floor; None for the ground."""
+    return None if floor == 0 else floor - 1
