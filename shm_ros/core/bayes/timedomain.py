@@ -1,15 +1,16 @@
 """Time-domain likelihood (the building paper's eq. 27): measured vs predicted accelerations.
 
-The structure is driven by a measured base acceleration ``a_g`` (the structure file's ``input``
-sensor); for each theta the model's absolute accelerations at the output sensors are simulated and
+The structure is driven by its measured inputs (the structure file's ``input``/``inputs``: ground
+or floor accelerations, forces); for each theta the model's absolute accelerations at the output
+sensors are simulated and
 
     log p(D | theta, sigma^2) = sum_i [ -N/2 log(2 pi sigma_i^2) - SS_i(theta) / (2 sigma_i^2) ]
 
 with one prediction-error variance per channel, each with an inverse-gamma prior (marginalised in
-closed form by default, or sampled as log-variances). The response comes from the project's exact
-modal simulator (``shm_ros.core.simulate.linear.from_real_modes``: classically damped modes, each an
-exactly discretised filter run by ``scipy.signal.lfilter``), so the likelihood and ``simulate`` share
-one implementation of the dynamics.
+closed form by default, or sampled as log-variances). The response comes from
+:mod:`shm_ros.core.response`: the model's full state space (non-classical damping, dampers, every
+input kind) discretised exactly for inputs linear between samples, so the likelihood and the
+prediction stage share one implementation of the dynamics.
 """
 
 from __future__ import annotations
@@ -26,43 +27,54 @@ from .priors import Prior
 
 @dataclass
 class AccelerationRecord:
-    """A measured base input and the measured output accelerations on one sample grid."""
+    """Measured inputs and the measured output accelerations on one sample grid.
+
+    ``input_accel``: (N,) for one input or (n_inputs, N), one row per input of the model in the
+    order of the structure file (``model.inputs``): accelerations for base and floor inputs, the
+    force sensor's record for force inputs (each input's gain is applied by the model).
+    """
 
     dt: float
-    input_accel: np.ndarray  # (N,) m/s^2, base (ground) acceleration
+    input_accel: np.ndarray  # (N,) or (n_inputs, N): the input sensors' records
     outputs: np.ndarray  # (N, n_channels) m/s^2, absolute accelerations
     channel_ids: list[str]
     notes: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        self.input_accel = np.asarray(self.input_accel, dtype=float).reshape(-1)
+        self.input_accel = np.asarray(self.input_accel, dtype=float)
+        if self.input_accel.ndim != 2 or self.input_accel.shape[0] == 1:
+            self.input_accel = self.input_accel.reshape(-1)
         self.outputs = np.asarray(self.outputs, dtype=float)
         if self.outputs.ndim == 1:
             self.outputs = self.outputs[:, None]
-        if self.outputs.shape != (self.input_accel.size, len(self.channel_ids)):
+        n = self.input_accel.shape[-1]
+        if self.outputs.shape != (n, len(self.channel_ids)):
             raise ValueError(f"outputs must be (samples, channels) = "
-                             f"{(self.input_accel.size, len(self.channel_ids))}, got {self.outputs.shape}")
+                             f"{(n, len(self.channel_ids))}, got {self.outputs.shape}")
         if not (np.all(np.isfinite(self.input_accel)) and np.all(np.isfinite(self.outputs))):
             raise ValueError("acceleration record contains NaN/inf; cut the record to a clean stretch")
         if self.dt <= 0:
             raise ValueError(f"dt must be > 0, got {self.dt}")
 
+    @property
+    def inputs(self) -> np.ndarray:
+        """The input records as (n_inputs, N)."""
+        return np.atleast_2d(self.input_accel)
+
 
 def base_response(model: AffineModel, theta: np.ndarray, record_input: np.ndarray, dt: float,
                   channel_ids: list[str], n_modes: int | None = None) -> np.ndarray:
-    """Absolute accelerations (N, n_channels) of ``model`` at ``theta`` under a base acceleration."""
-    from shm_ros.core.simulate.linear import from_real_modes
+    """Absolute accelerations (N, n_channels) of ``model`` at ``theta`` under its inputs.
 
-    n = model.n_dof if n_modes is None else min(n_modes, model.n_dof)
-    sol = model.modes(theta, n)
-    zeta = model.modal_damping_ratios(theta, n)
-    iota = model.base_influence if model.base_influence is not None else np.ones(model.n_dof)
-    M = model.mass(theta)
-    P = -(sol.shapes.T @ (M @ iota))[:, None]  # modal force per unit base acceleration
-    S = model.sensor_matrix(list(channel_ids))
-    system = from_real_modes(sol.frequencies_hz, zeta, P, S @ sol.shapes,
-                             direct_extra=(S @ iota)[:, None])
-    return system.simulate(record_input[:, None], dt)
+    ``record_input``: (N,) or (n_inputs, N), one row per ``model.inputs`` entry; a model without
+    inputs is driven at its base (ground acceleration). The response is exact in all DOFs
+    (:mod:`shm_ros.core.response`); ``n_modes`` is accepted for compatibility and not used.
+    """
+    from shm_ros.core.response import sensor_accelerations
+    from shm_ros.core.structure import InputKind, InputSpec
+
+    inputs = list(model.inputs) or [InputSpec("base", InputKind.BASE, {}, model.direction or "x")]
+    return sensor_accelerations(model, theta, record_input, dt, list(channel_ids), inputs)
 
 
 class TimeDomainLikelihood:
@@ -94,7 +106,7 @@ class TimeDomainLikelihood:
 
     def predict(self, theta: np.ndarray) -> np.ndarray:
         r = self.record
-        return base_response(self.model, np.asarray(theta, dtype=float), r.input_accel, r.dt,
+        return base_response(self.model, np.asarray(theta, dtype=float), r.inputs, r.dt,
                              r.channel_ids, self.n_modes)
 
     def residual_ss(self, theta: np.ndarray) -> np.ndarray:
