@@ -109,6 +109,7 @@ class AffineModel:
     # the structure's inputs that act in this model's direction (docs/interfaces.md section 2)
     inputs: list[InputSpec] = field(default_factory=list)
     story_heights: np.ndarray | None = None  # shear building: height of each story (m), when given
+    ground_sensors: list[str] = field(default_factory=list)  # sensors on the ground (a building's floor 0)
 
     def __post_init__(self) -> None:
         if not self.damping_factors:

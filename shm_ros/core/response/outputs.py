@@ -44,12 +44,12 @@ def node_row(model: AffineModel, dof_row: np.ndarray | None) -> np.ndarray:
 
 def sensor_outputs(model: AffineModel, sensor_ids: Sequence[str],
                    quantity: Quantity = Quantity.ACCELERATION) -> list[Output]:
-    """``quantity`` at each sensor; the sensor of a base input reads the ground."""
+    """``quantity`` at each sensor; a ground sensor (and a base input's sensor) reads the ground."""
     out = []
     for sid in sensor_ids:
         if sid in model.sensor_rows:
             row = node_row(model, model.sensor_rows[sid])
-        elif any(i.sensor == sid and i.kind == "base" for i in model.inputs):
+        elif sid in model.ground_sensors or any(i.sensor == sid and i.kind == "base" for i in model.inputs):
             row = node_row(model, None)
         else:
             raise KeyError(f"model {model.name!r} does not observe sensor {sid!r}")

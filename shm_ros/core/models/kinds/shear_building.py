@@ -208,6 +208,7 @@ def build_shear_building(
                           [f"floor{i + 1}.{direction}" for i in range(n)], sensor_dofs,
                           damping_factors_of(params), input_dof=input_dof, base_influence=np.ones(n),
                           kind="shear_building", direction=direction, dampers=dampers,
+                          ground_sensors=[s.id for s in spec.sensors if s.direction == direction and s.floor == 0],
                           story_heights=None if None in heights else np.asarray(heights, dtype=float))
 
 
