@@ -37,7 +37,8 @@ def _spec_dict(inputs: list[dict], dampers: list[dict]) -> dict:
         "name": "six-story",
         "kind": "shear_building",
         "shear_building": {
-            "floors": [{"mass": m, "stiffness": k, "height": h} for m, k, h in zip(MASSES, STIFF, HEIGHTS, strict=True)],
+            "floors": [{"mass": m, "stiffness": k, "height": h}
+                       for m, k, h in zip(MASSES, STIFF, HEIGHTS, strict=True)],
             "dampers": dampers,
         },
         "damping": {"kind": "rayleigh", "ratios": RATIOS},
@@ -162,8 +163,8 @@ KV = [{"between": [0, 1], "c": 4.0e6}, {"between": [2, 5], "c": 2.0e6}]
 MAXWELL = [{"between": [1, 2], "c": 3.0e6, "k_maxwell": 6.0e7}, {"between": [4, 6], "c": 2.5e6, "k_maxwell": 9.0e7}]
 ALL = KV + MAXWELL
 
-# name: (inputs, dampers, free nodes, prescribed nodes, ground moves)
-CASES = {
+# name: (inputs, dampers, free nodes, prescribed nodes); the ground is node 0
+CASES: dict[str, tuple[list[dict], list[dict], list[int], list[int]]] = {
     "base_classical": ([{"sensor": "f0"}], [], [1, 2, 3, 4, 5, 6], [0]),
     "base_dampers": ([{"sensor": "f0"}], ALL, [1, 2, 3, 4, 5, 6], [0]),
     "floor_only": ([{"sensor": "f2", "kind": "floor"}], [KV[1], MAXWELL[1], {"between": [2, 3], "c": 1e6}],

@@ -339,3 +339,73 @@ def test_duplicate_yaml_key_is_an_error(tmp_path):
     p.write_text((EXAMPLES / "building.yaml").read_text().replace("damping: {", "damping: {kind: modal, ", 1))
     with pytest.raises(StructureError, match=r"(?s)dup.yaml.*'kind' appears twice.*line 16"):
         load_structure(p)
+
+
+def test_lognormal_log_space_form_equals_factor_form():
+    d = _building_dict()
+    d["parameters"][0]["prior"] = {"dist": "lognormal", "mean": 1.1, "std": 0.2}
+    s2 = np.log1p((0.2 / 1.1) ** 2)
+    d["parameters"][1]["prior"] = {"dist": "lognormal", "mu_ln": float(np.log(1.1) - s2 / 2),
+                                   "sigma_ln": float(np.sqrt(s2))}
+    spec = structure_from_dict(d, source="b.yaml")
+    a, b = spec.parameters[0].prior.frozen(), spec.parameters[1].prior.frozen()
+    x = np.linspace(0.5, 2.0, 31)
+    np.testing.assert_allclose(a.logpdf(x), b.logpdf(x), rtol=1e-12)
+    assert b.mean() == pytest.approx(1.1, rel=1e-12) and b.std() == pytest.approx(0.2, rel=1e-12)
+    assert spec.parameters[1].prior.params == {"mu_ln": pytest.approx(np.log(1.1) - s2 / 2),
+                                               "sigma_ln": pytest.approx(np.sqrt(s2))}
+
+
+def test_input_kinds_defaults_and_round_trip(tmp_path):
+    d = _building_dict()
+    spec = structure_from_dict(d, source="b.yaml")
+    assert [(i.sensor, i.kind, i.gain) for i in spec.inputs] == [("g0", "base", 1.0)]
+    # a sensor on a floor records that floor's motion: kind floor by default, not ground motion
+    d["input"] = {"sensor": "f3"}
+    spec = structure_from_dict(d, source="b.yaml")
+    assert spec.inputs[0].kind == "floor" and spec.inputs[0].at == {"floor": 3}
+    assert spec.input_sensor == "f3" and "f3" not in spec.output_sensor_ids
+    # several inputs, heights and dampers survive dump and load
+    del d["input"]
+    d["sensors"].append({"id": "shaker", "at": {"floor": 8}, "direction": "x"})
+    d["inputs"] = [{"sensor": "g0"}, {"sensor": "f3", "kind": "floor", "gain": 9.81},
+                   {"sensor": "shaker", "kind": "force", "at": {"floor": 7}, "gain": 2.5e3}]
+    for i, f in enumerate(d["shear_building"]["floors"]):
+        f["height"] = 4.5 if i == 0 else 3.5
+    d["shear_building"]["dampers"] = [{"between": [0, 1], "c": 2.0e6},
+                                      {"between": [2, 4], "c": 1.0e6, "k_maxwell": 3.0e7}]
+    spec = structure_from_dict(d, source="b.yaml")
+    assert spec.input_sensor_ids() == ["g0", "f3", "shaker"]
+    assert [i.kind for i in spec.inputs] == ["base", "floor", "force"]
+    assert spec.inputs[2].at == {"floor": 7} and spec.inputs[2].gain == 2.5e3
+    assert spec.output_sensor_ids == ["f1", "f6", "f8"]
+    assert spec.shear_building.floors[0].height == 4.5
+    assert spec.shear_building.dampers[1].between == (2, 4) and spec.shear_building.dampers[1].k_maxwell == 3.0e7
+    out = tmp_path / "again.yaml"
+    dump_structure(spec, out)
+    again = load_structure(out)
+    assert again.to_dict() == spec.to_dict()
+    assert again.inputs == spec.inputs and again.shear_building == spec.shear_building
+    model = build_model(again)
+    assert model.story_heights is not None
+    np.testing.assert_allclose(model.story_heights, np.array([4.5] + [3.5] * 7))
+    assert [dm.nodes for dm in model.dampers] == [(None, 0), (1, 3)]
+    assert [i.sensor for i in model.inputs] == ["g0", "f3", "shaker"]
+
+
+def test_dampers_make_damping_non_classical():
+    d = _building_dict()
+    base = build_model(structure_from_dict(d, source="b.yaml"))
+    d["shear_building"]["dampers"] = [{"between": [0, 1], "c": 5.0e6},
+                                      {"between": [1, 3], "c": 2.0e6},
+                                      {"between": [3, 4], "c": 1.0e6, "k_maxwell": 1.0e8}]
+    model = build_model(structure_from_dict(d, source="b.yaml"))
+    dC = model.damping() - base.damping()
+    expected = np.zeros((8, 8))
+    expected[0, 0] += 5.0e6
+    expected[np.ix_([0, 2], [0, 2])] += 2.0e6 * np.array([[1, -1], [-1, 1]])
+    np.testing.assert_allclose(dC, expected, atol=1e-6)  # the Maxwell dashpot is not in C
+    phi = model.modes(n_modes=8).shapes
+    modal_C = phi.T @ model.damping() @ phi
+    off = modal_C - np.diag(np.diag(modal_C))
+    assert np.max(np.abs(off)) > 0.05 * np.max(np.abs(np.diag(modal_C)))  # not diagonal: non-classical

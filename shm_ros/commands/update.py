@@ -76,7 +76,7 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
         raise ValueError(f"{args.bag}: no usable window in the recording")
     observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
     if args.likelihood == "time":
-        return _acceleration_record(args, spec, windows, observed)
+        return _acceleration_record(args, [i.sensor for i in model.inputs], windows, observed)
     from threadpoolctl import threadpool_limits
 
     from shm_ros.core.bayes.pairing import observations_for_model
@@ -99,17 +99,18 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
         raise ValueError(f"{args.bag}: {exc}") from None
 
 
-def _acceleration_record(args, spec, windows, observed):
+def _acceleration_record(args, inputs, windows, observed):
     from scipy.signal import detrend
 
     from shm_ros.core.bayes.timedomain import AccelerationRecord
 
-    inp = spec.input_sensor
-    if inp is None:
+    if not inputs:
         raise ValueError(f"{args.structure}: --likelihood time needs the structure's 'input' sensor")
-    usable = [w for w in windows if inp in w.channel_names]
+    inp = inputs[0]
+    observed = [s for s in observed if s not in inputs]  # a floor input's sensor is a support, not an output
+    usable = [w for w in windows if all(i in w.channel_names for i in inputs)]
     if not usable:
-        raise ValueError(f"{args.bag}: no window carries the input sensor {inp!r}")
+        raise ValueError(f"{args.bag}: no window carries the input sensor(s) {inputs}")
 
     def strength(w):
         x = w.samples[:, w.channel_names.index(inp)]
@@ -117,7 +118,7 @@ def _acceleration_record(args, spec, windows, observed):
 
     w = max(usable, key=strength)
     outs = [s for s in observed if s in w.channel_names]
-    cols = [w.channel_names.index(s) for s in [inp, *outs]]
+    cols = [w.channel_names.index(s) for s in [*inputs, *outs]]
     data = w.samples[:, cols]
     good = np.all(np.isfinite(data), axis=1)
     if not good.all():  # keep the longest clean stretch: nothing is interpolated
@@ -126,7 +127,8 @@ def _acceleration_record(args, spec, windows, observed):
         a, b = runs[np.argmax(runs[:, 1] - runs[:, 0])]
         data = data[a:b]
     data = detrend(data, axis=0, type="linear")  # gravity offset and drift
-    return AccelerationRecord(1.0 / w.sample_rate_hz, data[:, 0], data[:, 1:], outs,
+    n_in = len(inputs)
+    return AccelerationRecord(1.0 / w.sample_rate_hz, data[:, :n_in].T, data[:, n_in:], outs,
                               notes=[f"window {w.window_id} (strongest input) used"])
 
 

@@ -41,16 +41,16 @@ class StateSpace:
     supports: Supports
 
 
-def build_state_space(model: AffineModel, theta: np.ndarray, outputs: Sequence[Output],
+def build_state_space(model: AffineModel, theta: np.ndarray | None, outputs: Sequence[Output],
                       inputs: Sequence[InputSpec] | None = None) -> StateSpace:
     """The state space of ``model`` at ``theta`` driven by ``inputs`` (default: the model's)."""
-    theta = model.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
+    th = model.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
     inputs = list(model.inputs if inputs is None else inputs)
-    sup = partition(model, theta, inputs)
+    sup = partition(model, th, inputs)
     n, f = model.n_dof, sup.free
     nf, ns, ni = f.size, sup.n_supports, len(inputs)
-    M, K = model.mass(theta), model.stiffness(theta)
-    Cff = model.inherent_damping(theta)[np.ix_(f, f)] + model.damper_damping()[np.ix_(f, f)]
+    M, K = model.mass(th), model.stiffness(th)
+    Cff = model.inherent_damping(th)[np.ix_(f, f)] + model.damper_damping()[np.ix_(f, f)]
     Mff, Kff = M[np.ix_(f, f)], K[np.ix_(f, f)]
     Mi = np.linalg.inv(Mff) if nf else np.zeros((0, 0))
     gains = np.array([i.gain for i in inputs], dtype=float)
@@ -58,7 +58,7 @@ def build_state_space(model: AffineModel, theta: np.ndarray, outputs: Sequence[O
     # support accelerations a_s = Sa u, forces on the free DOFs = L u
     Sa = np.zeros((ns, ni))
     L = np.zeros((nf, ni))
-    for k, inp in enumerate(inputs):
+    for k in range(ni):
         s = sup.input_support[k]
         if s is not None:
             Sa[s, k] = gains[k]
@@ -93,7 +93,7 @@ def build_state_space(model: AffineModel, theta: np.ndarray, outputs: Sequence[O
 
     need_d = np.zeros(ns, dtype=bool)
     need_v = np.any(E != 0, axis=0)
-    for bw, bs, _, _ in maxwell:
+    for _, bs, _, _ in maxwell:
         need_v |= bs != 0
     out_rows = []
     for o in outputs:
@@ -130,25 +130,25 @@ def build_state_space(model: AffineModel, theta: np.ndarray, outputs: Sequence[O
     A[iv_:iv_ + nf] = Aacc
     B[iv_:iv_ + nf] = Bacc
     B[isv:isv + nv] = Sa[vsel]
-    pos_v = {int(s): k for k, s in enumerate(vsel)}
-    for k, s in enumerate(dsel):
-        A[isd + k, isv + pos_v[int(s)]] = 1.0
+    pos_v = {int(v): k for k, v in enumerate(vsel)}
+    for k, v in enumerate(dsel):
+        A[isd + k, isv + pos_v[int(v)]] = 1.0
 
     C = np.zeros((len(out_rows), nz))
     D = np.zeros((len(out_rows), ni))
-    pos_d = {int(s): k for k, s in enumerate(dsel)}
+    pos_d = {int(v): k for k, v in enumerate(dsel)}
     for r, (o, rw, rs) in enumerate(out_rows):
         if o.quantity == Quantity.ACCELERATION:
             C[r] = rw @ Aacc
             D[r] = rw @ Bacc + rs @ Sa
         elif o.quantity == Quantity.VELOCITY:
             C[r, iv_:iv_ + nf] = rw
-            for s in np.flatnonzero(rs):
-                C[r, isv + pos_v[int(s)]] = rs[s]
+            for v in np.flatnonzero(rs):
+                C[r, isv + pos_v[int(v)]] = rs[v]
         else:
             C[r, iw:iw + nf] = rw
-            for s in np.flatnonzero(rs):
-                C[r, isd + pos_d[int(s)]] = rs[s]
+            for v in np.flatnonzero(rs):
+                C[r, isd + pos_d[int(v)]] = rs[v]
     names = ([f"w[{model.dof_labels[i]}]" for i in f] + [f"v[{model.dof_labels[i]}]" for i in f]
              + [f"maxwell{m}" for m in range(nm)] + [f"support_v{s}" for s in vsel] + [f"support_d{s}" for s in dsel])
     return StateSpace(A, B, C, D, [o.name for o in outputs], names, sup)
