@@ -23,8 +23,9 @@ was at most 0.55 sigma, that of spurious stable columns at least 1.7 sigma.
 Picking clusters the stable, physical poles (hierarchical average-linkage clustering on
 ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)``) and keeps the clusters found at enough model
 orders: no hand-picking. The two-A and MPC filters judge a cluster (a stable column) by its
-poles together: it is removed only when fewer than ``column_pass_fraction`` of them pass, so a
-clean column is not lost to the orders where one check scatters, and a spurious one goes whole.
+poles together: it is removed only when it passes at fewer than ``column_pass_fraction`` of its
+orders or at fewer orders than a mode needs, so a clean column is not lost to the orders where
+one check scatters (its statistics use all its orders), and a spurious one goes whole.
 What each check removed is counted in a :class:`FilterReport`.
 """
 
@@ -71,8 +72,9 @@ class PickingConfig:
                                     "clustering of poles")
     min_fraction: float = option(0.10, "a mode is found at least at this fraction of the evaluated orders")
     min_poles: int = option(5, "a mode is found at least at this many orders")
-    column_pass_fraction: float = option(0.5, "the two-A and MPC filters remove a cluster of stable "
-                                         "poles when fewer than this fraction of its poles pass them")
+    column_pass_fraction: float = option(0.2, "the two-A and MPC filters remove a cluster of stable "
+                                         "poles when it passes them at fewer than this fraction of its "
+                                         "orders (or at fewer orders than a mode needs)")
 
 
 @dataclass
@@ -203,8 +205,9 @@ def pick_modes(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig,
 def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, use_filters: bool = True
                         ) -> tuple[list[PickedMode], FilterReport]:
     """Picked modes and the :class:`FilterReport`: stable, physical poles are clustered; a cluster
-    with poles at enough orders is removed by the two-A (then the MPC) filter when fewer than
-    ``column_pass_fraction`` of its poles pass that check."""
+    with poles at enough orders is removed by the two-A (then the MPC) filter when it passes that
+    check at fewer than ``column_pass_fraction`` of its orders or at fewer orders than a mode
+    needs (so a column the pole-by-pole filter kept is kept, with all its orders)."""
     report = FilterReport.empty(len(poles), use_filters)
     stable = np.flatnonzero(flags.stable)
     report.stable = int(stable.size)
@@ -233,11 +236,11 @@ def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, us
             for check, ok in (("two-A", flags.two_a_ok), ("MPC", flags.mpc_ok)):
                 # share of the column's orders with a pole that passes (a second pole at one
                 # order, e.g. a split pair, must not outvote the column)
-                share = float(np.mean([np.any(ok[members[member_orders == o]])
-                                       for o in np.unique(member_orders)]))
+                passed = [np.any(ok[members[member_orders == o]]) for o in np.unique(member_orders)]
+                share = float(np.mean(passed))
                 report.columns.append({"frequency_hz": float(fmed), "poles": int(members.size),
                                        "check": check, "pass_fraction": round(share, 3)})
-                if share < cfg.column_pass_fraction:
+                if share < cfg.column_pass_fraction or int(np.sum(passed)) < need:
                     verdict = check
                     break
             if verdict is not None:
