@@ -22,12 +22,13 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 import scipy.signal as sig
 
 __all__ = ["BandSource", "BandChoice", "band_from_model", "band_from_spectrum", "choose_resolution",
-           "first_singular_spectrum"]
+           "first_singular_spectrum", "nominal_frequencies"]
 
 # decimate's IIR anti-alias filter (Chebyshev I, order 8) cuts at 0.8 x the new Nyquist rate,
 # i.e. 0.4 fs; the band's top is kept below 0.36 fs so it sits inside the flat part
@@ -64,6 +65,12 @@ class BandChoice:
         return f"band {band} ({self.source}), {dec}, {self.block_rows} block rows"
 
 
+def nominal_frequencies(spec: Any, n_modes: int) -> list[float]:
+    """The lowest ``n_modes`` natural frequencies of a structure spec's nominal model (Hz)."""
+    model = spec.model_kind.build(spec)
+    return [float(f) for f in model.modes(n_modes=n_modes).frequencies_hz]
+
+
 def band_from_model(frequencies_hz: list[float] | np.ndarray, modes: int, margin: float
                     ) -> tuple[float, float, str] | None:
     """``(low, high, reason)`` from the nominal model's frequencies (its lowest ``modes``)."""
@@ -77,10 +84,11 @@ def band_from_model(frequencies_hz: list[float] | np.ndarray, modes: int, margin
 def first_singular_spectrum(y: np.ndarray, fs: float, segment: int | None = None
                             ) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies and first singular value of the Welch spectral matrix of the (unit-variance)
-    channels. The segment gives a resolution of about 1/40 s^-1 at most (0.025 Hz)."""
+    channels. Segments of 1/16 of the record (about 30 averages with the half overlap), at most
+    40 s (a resolution of 0.025 Hz)."""
     n, c = y.shape
     z = y / np.where(y.std(axis=0) > 0, y.std(axis=0), 1.0)
-    seg = segment or int(min(max(256, n // 8), 2 ** math.ceil(math.log2(40 * fs))))
+    seg = segment or int(min(max(256, n // 16), 2 ** math.ceil(math.log2(40 * fs))))
     seg = min(seg, n)
     f, _ = sig.welch(z[:, 0], fs=fs, nperseg=seg)
     g = np.zeros((f.size, c, c), complex)
