@@ -57,7 +57,7 @@ def _frame_stiffness(ei_col: np.ndarray, ei_beam: np.ndarray, h: float, span: fl
         c = 2 * ei_col[j] / h**3  # two columns
         ke = c * np.array([[12, 6 * h, -12, 6 * h], [6 * h, 4 * h * h, -6 * h, 2 * h * h],
                            [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h * h, -6 * h, 4 * h * h]])
-        below = [None, None] if j == 0 else [j - 1, n + j - 1]
+        below: list[int | None] = [None, None] if j == 0 else [j - 1, n + j - 1]
         add([*below, j, n + j], ke)
         # the beam bends in double curvature under sway: 6 EI / L at each of its two joints
         k[n + j, n + j] += 2 * 6 * ei_beam[j] / span

@@ -11,8 +11,8 @@ must each be found within 2 % of the truth.
 Thresholds: at full size (``SHM_FULL=1``, 40 seeds) every seed met it (worst errors in the docs);
 a correct method is taken to succeed per window with probability p >= 0.975. CI runs 6 seeds and
 allows one failing seed: P(at most 1 failure of 6 | p = 0.975) = p^6 + 6 p^5 (1 - p) = 0.991, so a
-correct method passes with >= 99 % probability; full size allows 3 failures of 40
-(P(X <= 3 | n = 40, q = 0.025) = 0.981... rounded up: 4 allowed gives 0.995).
+correct method passes with >= 99 % probability; full size allows 4 failures of 40
+(binomial tail: P(X <= 4 | n = 40, q = 0.025) = 0.997).
 The same records with the band off (the previous defaults: 20 block rows at 100 Hz) miss mode 1.
 """
 
