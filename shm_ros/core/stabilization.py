@@ -17,7 +17,7 @@ bandwidth. Both scale with the standard error of a mode's estimates from a recor
 seconds, ``sigma = sqrt(zeta / (2 pi f T))`` (relative frequency and absolute damping alike,
 to first order for a mode under broadband excitation). So the checks also accept differences up
 to ``damping_sigmas`` (between orders) and ``two_a_sigmas`` (two-A) times ``sigma``. On the
-simulated frame (tests/test_identify_band.py) the median two-A damping difference of real modes
+simulated frame (test/test_identify_band.py) the median two-A damping difference of real modes
 was at most 0.55 sigma, that of spurious stable columns at least 1.7 sigma.
 
 Picking clusters the stable, physical poles (hierarchical average-linkage clustering on
