@@ -8,6 +8,9 @@ deviations.
 The default method ``auto`` is input-output SSI (``ssi-io``) when the structure file declares an
 input sensor (``input: {sensor: ...}``) that the window carries, else output-only SSI-cov; each
 record's ``method`` and the provenance's ``methods_used`` say which one ran.
+The band of interest (from the structure's nominal model, else the spectrum) sets the decimation
+and the block rows; each record's ``band`` and the provenance's ``bands_used`` say what was chosen
+and why, each record's ``filters`` how many poles each filter removed.
 ``--plots DIR`` saves one stabilization diagram per window. A window that cannot be identified is
 written with an ``error`` and no modes; the other windows are not affected.
 """
@@ -105,11 +108,20 @@ def run(args: argparse.Namespace) -> int:
     for d in res.diagnostics:
         if d.level >= 2:
             print(str(d), file=sys.stderr)
+    if cfg.band in ("auto", "model") and not cfg.nominal_frequencies_hz:
+        from shm_ros.core.band import nominal_frequencies
+
+        try:  # the band of interest from the structure's nominal model (docs/identify.md)
+            cfg.nominal_frequencies_hz = nominal_frequencies(spec, cfg.band_modes)
+        except Exception as exc:  # a kind without a buildable model: the spectrum decides
+            print(f"shm-ros identify: {args.structure}: no nominal frequencies ({exc}): band from the "
+                  "spectrum", file=sys.stderr)
     plots = Path(args.plots) if args.plots else None
     cfg.spectrum = plots is not None
     records: list[dict[str, Any]] = []
     n_ok = 0
     used: dict[str, int] = {}  # method actually run (auto resolved) -> windows
+    bands: dict[str, int] = {}  # band choice (describe()) -> windows
     progress = Progress("windows identified", every_s=2.0)
     for k, w in enumerate(res.windows):
         progress(k, len(res.windows))
@@ -124,6 +136,11 @@ def run(args: argparse.Namespace) -> int:
         n_ok += 1
         used[result.estimate.method] = used.get(result.estimate.method, 0) + 1
         rec = estimate_record(result.estimate, w)
+        if result.band is not None:
+            rec["band"] = result.band.to_dict()
+            bands[result.band.describe()] = bands.get(result.band.describe(), 0) + 1
+        if result.filters is not None:
+            rec["filters"] = result.filters.to_dict()
         if result.notes or w.notes:
             rec["notes"] = list(w.notes) + list(result.notes)
         records.append(rec)
@@ -135,10 +152,12 @@ def run(args: argparse.Namespace) -> int:
                                f"{rec['start']}  {result.estimate.method}  ({len(rec['modes'])} modes)")
             rec["plot"] = str(plots / name)
     progress(len(res.windows), len(res.windows))
-    config = {"identify": asdict(cfg), "methods_used": used, "window_s": args.window,
+    config = {"identify": asdict(cfg), "methods_used": used, "bands_used": bands, "window_s": args.window,
               "bag": str(args.bag), "structure": str(args.structure)}
     out = dump(stamp_output({"windows": records}, config), args.out)
     n_modes = sum(len(r["modes"]) for r in records)
     print(_methods_line(cfg.method, used, cfg.input_channel or getattr(spec, "input_sensor", None)))
+    for text, n in bands.items():
+        print(f"{text} in {n} window{'s' * (n != 1)}")
     print(f"{len(records)} windows ({n_ok} identified), {n_modes} modes -> {out}")
     return 0 if (n_ok or not res.windows) else 1

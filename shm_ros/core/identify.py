@@ -20,17 +20,19 @@ import scipy.linalg as sla
 import scipy.signal as sig
 
 from shm_ros.core import ssi
+from shm_ros.core.band import BandChoice, BandSource, band_from_model, band_from_spectrum, choose_resolution
 from shm_ros.core.config import check_choice, option
 from shm_ros.core.ingest.covariates import window_covariates
 from shm_ros.core.modal import mac_matrix
-from shm_ros.core.preprocess import Prepared, PreprocessConfig, preprocess
+from shm_ros.core.preprocess import Prepared, PreprocessConfig, decimate, preprocess
 from shm_ros.core.stabilization import (
     Diagram,
+    FilterReport,
     PickedMode,
     PickingConfig,
     StabilityConfig,
     classify,
-    pick_modes,
+    pick_modes_reported,
     real_mode_shape,
 )
 from shm_ros.core.types import ModalEstimate, Mode, Window
@@ -70,8 +72,20 @@ class IdentifyConfig:
     method: str = option(Method.AUTO.value, "identification method: auto (input-output SSI when the "
                          "window has a usable input channel, else covariance-driven), covariance-driven, "
                          "data-driven or input-output SSI (ssi-io needs an input sensor)", choices=Method)
-    block_rows: int | None = option(None, "block rows of the Hankel matrix (unset: "
-                                    "max(20, ceil(max_order / references) + 2))")
+    block_rows: int | None = option(None, "block rows of the Hankel matrix (unset: chosen with the band, "
+                                    "see band; without a band max(20, ceil(max_order / references) + 2))")
+    # A 0.5 Hz mode at 100 Hz needs about 400 samples of Hankel span; 20 block rows hold 20. The
+    # band of interest sets the decimation and the block rows (core/band.py); explicit
+    # block_rows and preprocess.target_rate_hz win.
+    band: str = option(BandSource.AUTO.value, "band of interest that sets decimation and block rows: auto "
+                       "(the structure's nominal model when known, else the prominent peaks of the output "
+                       "spectrum), model, spectrum or off (no decimation, order-based block rows)",
+                       choices=BandSource)
+    band_modes: int = option(6, "modes of interest: the nominal model's lowest N frequencies set the band")
+    band_margin: float = option(1.3, "top of the band = highest mode of interest x this")
+    block_periods: float = option(2.0, "automatic block rows span at least this many periods of the "
+                                  "lowest mode of interest")
+    max_block_rows: int = option(100, "largest automatic number of block rows (cost)")
     max_order: int = option(60, "largest model order")
     min_order: int = option(2, "smallest model order")
     order_step: int = option(1, "model order step")
@@ -95,6 +109,8 @@ class IdentifyConfig:
     uncertainty: bool = option(True, "jackknife standard deviations of frequency and damping over "
                                "data blocks (SSI-cov, SSI-data)")
     uncertainty_blocks: int = option(10, "data blocks of the jackknife")
+    # the structure's nominal natural frequencies (set from the structure file by the command)
+    nominal_frequencies_hz: list[float] | None = None
     spectrum: bool = option(False, "keep the mean output spectrum in the diagram (set by the "
                             "command's --plots)", ros=False, cli=False)
 
@@ -106,6 +122,7 @@ class IdentifyConfig:
         check_choice("identify", "method", self.method, Method)
         check_choice("identify", "weighting", self.weighting, Weighting)
         check_choice("identify", "lq", self.lq, LQ)
+        check_choice("identify", "band", self.band, BandSource)
         self.preprocess.validate()
         return self
 
@@ -133,6 +150,8 @@ class IdentificationResult:
     sample_rate_hz: float
     channel_names: list[str]
     notes: list[str]
+    band: BandChoice | None = None  # what the automatic band chose (identify_window_detailed)
+    filters: FilterReport | None = None  # poles each filter removed
 
 
 def _block_rows(cfg: IdentifyConfig, n_refs: int) -> int:
@@ -160,7 +179,7 @@ def identify_window_detailed(window: Window, config: IdentifyConfig | None = Non
         pcfg = replace(pcfg, channels=[c for c in window.channel_names if c != present])
     prep = preprocess(window.samples, window.sample_rate_hz, window.channel_names, pcfg,
                       window.channel_status)
-    notes = list(prep.notes)
+    notes: list[str] = []
     if cfg.method == Method.AUTO and name is not None and name not in prep.channel_names:
         where = "among the usable channels" if present else "in the window"
         notes.append(f"method auto: input channel {name} is not {where}: output-only ssi-cov")
@@ -174,7 +193,11 @@ def identify_window_detailed(window: Window, config: IdentifyConfig | None = Non
             raise ValueError(f"ssi-io input channel {name!r} is not among the usable channels "
                              f"{prep.channel_names}")
         inp = name
-    result = identify_array(prep, replace(cfg, method=method.value), input_channel=inp)
+    prep, band = _resolution(prep, cfg, inp)
+    notes = list(prep.notes) + notes + [band.describe()]
+    result = identify_array(prep, replace(cfg, method=method.value, block_rows=band.block_rows),
+                            input_channel=inp)
+    result.band = band
     result.notes = notes + result.notes
     est = result.estimate
     est.window_id = window.window_id
@@ -183,6 +206,31 @@ def identify_window_detailed(window: Window, config: IdentifyConfig | None = Non
     est.temperature_c = window.temperature_c
     est.covariates.update(window_covariates(window))
     return result
+
+
+def _resolution(prep: Prepared, cfg: IdentifyConfig, input_channel: str | None
+                ) -> tuple[Prepared, BandChoice]:
+    """Band of interest -> decimation and block rows (core/band.py); explicit options win."""
+    outputs = [k for k, c in enumerate(prep.channel_names) if c != input_channel]
+    n_refs = len(cfg.reference_channels) if cfg.reference_channels and input_channel is None \
+        else max(1, len(outputs))
+    default_rows = max(20, int(np.ceil(cfg.max_order / n_refs)) + 2)
+    source = BandSource(cfg.band)
+    band = None
+    if source in (BandSource.AUTO, BandSource.MODEL) and cfg.nominal_frequencies_hz:
+        band = band_from_model(cfg.nominal_frequencies_hz, cfg.band_modes, cfg.band_margin)
+        source = BandSource.MODEL
+    elif source == BandSource.MODEL:
+        source = BandSource.SPECTRUM  # no nominal model given: the spectrum instead
+    if source in (BandSource.AUTO, BandSource.SPECTRUM) and band is None:
+        source = BandSource.SPECTRUM
+        band = band_from_spectrum(prep.data[:, outputs], prep.sample_rate_hz, cfg.band_margin)
+    choice = choose_resolution(prep.sample_rate_hz, band, source.value, default_rows=default_rows,
+                               rows=cfg.block_rows, decimate=cfg.preprocess.target_rate_hz is None,
+                               periods=cfg.block_periods, max_block_rows=cfg.max_block_rows)
+    if cfg.band == BandSource.MODEL and not cfg.nominal_frequencies_hz:
+        choice.reasons.insert(0, "band: model asked for, but no nominal model given: spectrum")
+    return decimate(prep, choice.decimation, "band of interest"), choice
 
 
 def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | None = None
@@ -228,9 +276,10 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
     st = cfg.stability
     poles = ssi.poles_all_orders(model, orders, two_a=st.two_a, match_scale=(
         st.two_a_freq_tol, st.two_a_damping_tol, st.two_a_mac_min),
-        shapes_for=(st.freq_tol, st.damping_tol))
-    flags = classify(poles, cfg.stability, fs)
-    picked = pick_modes(poles, flags, cfg.picking, use_filters=cfg.use_filters)
+        shapes_for=(st.freq_tol, st.damping_tol),
+        std_scale=max(st.damping_sigmas, st.two_a_sigmas) / np.sqrt(data.shape[0] / fs))
+    flags = classify(poles, cfg.stability, fs, duration_s=data.shape[0] / fs)
+    picked, report = pick_modes_reported(poles, flags, cfg.picking, use_filters=cfg.use_filters)
     std_f = np.full(len(picked), np.nan)
     std_z = np.full(len(picked), np.nan)
     if cfg.uncertainty and picked and method in (Method.SSI_COV, Method.SSI_DATA):
@@ -250,11 +299,12 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
              for p, sf, sz in zip(picked, std_f, std_z, strict=True)]
     est = ModalEstimate(window_id="", start_ns=0, end_ns=int(round(data.shape[0] / fs * 1e9)),
                         sensor_ids=out_names, modes=modes, method=method.value)
-    diagram = Diagram(poles=poles, flags=flags, picked=picked, singular_values=model.singular_values)
+    diagram = Diagram(poles=poles, flags=flags, picked=picked, singular_values=model.singular_values,
+                      report=report)
     if cfg.spectrum:
         f_sp, p_sp = sig.welch(y, fs=fs, nperseg=min(4096, y.shape[0]), axis=0)
         diagram.spectrum_hz, diagram.spectrum = f_sp, p_sp.mean(axis=1)
-    return IdentificationResult(est, diagram, fs, out_names, notes)
+    return IdentificationResult(est, diagram, fs, out_names, notes, filters=report)
 
 
 def _cov_replicates(y: np.ndarray, refs: np.ndarray, i: int, max_order: int, n_blocks: int):

@@ -15,7 +15,7 @@ import scipy.signal as sig
 
 from shm_ros.core.config import check_choice, option
 
-__all__ = ["Detrend", "PreprocessConfig", "Prepared", "preprocess"]
+__all__ = ["Detrend", "PreprocessConfig", "Prepared", "preprocess", "decimate"]
 
 _BAD_STATUS = {"dead", "clipped", "dropped"}
 
@@ -149,3 +149,13 @@ def preprocess(samples: np.ndarray, fs: float, channel_names: list[str],
             fs = fs / factor
             notes.append(f"decimated by {factor} to {fs:g} Hz")
     return Prepared(np.ascontiguousarray(x), float(fs), names, notes)
+
+
+def decimate(prep: Prepared, factor: int, why: str = "") -> Prepared:
+    """``prep`` decimated by ``factor`` (anti-alias filter as in :func:`preprocess`), with a note."""
+    if factor <= 1:
+        return prep
+    x = _decimate(prep.data, factor)
+    fs = prep.sample_rate_hz / factor
+    note = f"decimated by {factor} to {fs:g} Hz" + (f" ({why})" if why else "")
+    return Prepared(np.ascontiguousarray(x), float(fs), list(prep.channel_names), [*prep.notes, note])

@@ -434,12 +434,14 @@ def _leading_block_form(m: np.ndarray, c: np.ndarray, r: np.ndarray, n: int):
     return a, cc
 
 
-def _near(f1, z1, f2, z2, tf: float, tz: float) -> np.ndarray:
+def _near(f1, z1, f2, z2, tf: float, tz: float, std_scale: float = 0.0) -> np.ndarray:
     """(len(f1), len(f2)) bool: frequency within ``tf`` and damping within ``tz`` (relative to
-    the first set), the usual frequency/damping criteria."""
+    the first set), the usual frequency/damping criteria; ``std_scale`` s widens both to
+    ``s sqrt(zeta / (2 pi f))`` (relative frequency, absolute damping) where that is larger."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        return ((np.abs(f1[:, None] - f2[None, :]) < tf * f1[:, None])
-                & (np.abs(z1[:, None] - z2[None, :]) < tz * np.abs(z1[:, None])))
+        w = std_scale * np.sqrt(np.abs(z1[:, None]) / (2 * np.pi * f1[:, None]))
+        return ((np.abs(f1[:, None] - f2[None, :]) < np.maximum(tf, w) * f1[:, None])
+                & (np.abs(z1[:, None] - z2[None, :]) < np.maximum(tz * np.abs(z1[:, None]), w)))
 
 
 def _unit_shapes(c: np.ndarray, vectors: np.ndarray) -> np.ndarray:
@@ -452,7 +454,8 @@ def _unit_shapes(c: np.ndarray, vectors: np.ndarray) -> np.ndarray:
 def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None = None,
                      two_a: bool = True,
                      match_scale: tuple[float, float, float] = (0.01, 0.05, 0.9),
-                     shapes_for: tuple[float, float] | None = None) -> PoleSet:
+                     shapes_for: tuple[float, float] | None = None,
+                     std_scale: float = 0.0) -> PoleSet:
     """Poles of every model order from the one observability matrix.
 
     ``O_up = Q1 R1`` and ``O_dn = Q2 R2`` are factorised once at the largest order; for the first
@@ -468,6 +471,9 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
     only poles that can be stable; the others get NaN shapes. ``None``: shapes of every pole.
     Eigenvalues of every order come first, eigenvectors of the chosen poles after
     (:mod:`shm_ros.core.eigen`), which about halves the cost of a diagram.
+
+    ``std_scale`` s widens both sets of tolerances to ``s sqrt(zeta / (2 pi f))`` where larger
+    (a multiple of the standard error of frequency and damping, see ``StabilityConfig``).
     """
     o = model.observability
     n_out = model.n_outputs
@@ -517,7 +523,7 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
         for k in range(1, len(fwd)):
             _, _, _, f0, z0, _ = fwd[k - 1]
             _, _, _, f1, z1, _ = fwd[k]
-            close = _near(f1, z1, f0, z0, tf, tz)
+            close = _near(f1, z1, f0, z0, tf, tz, std_scale)
             need[k] |= close.any(axis=1)
             need[k - 1] |= close.any(axis=0)
     # pass 2: shapes of the chosen poles and the two-A partners
@@ -536,7 +542,7 @@ def poles_all_orders(model: SubspaceModel, orders: np.ndarray | list[int] | None
                     dist = (np.abs(f[:, None] - f2[None, :]) / f[:, None] / tf2
                             + np.abs(z[:, None] - z2[None, :]) / np.abs(z[:, None]) / tz2)
                 dist = np.nan_to_num(dist, nan=np.inf)
-                inside = _near(f, z, f2, z2, tf2, tz2) & sel[:, None]
+                inside = _near(f, z, f2, z2, tf2, tz2, std_scale) & sel[:, None]
                 k = np.argmin(dist, axis=1)
                 fb, zb = f2[k], z2[k]
                 cand = np.flatnonzero(inside.any(axis=0))

@@ -11,9 +11,22 @@ A pole (one model order, one eigenvalue of ``A``) is
 * *physical* when its damping ratio lies in ``(damping_min, damping_max]`` and its frequency in the
   configured band.
 
-Picking clusters the poles that pass (hierarchical average-linkage clustering on
+Relative tolerances alone fail at both ends: 5 % of a 0.5 % damping ratio is 0.025 points, far
+below the scatter of any estimate of it, and a heavily damped mode's frequency scatters with its
+bandwidth. Both scale with the standard error of a mode's estimates from a record of ``T``
+seconds, ``sigma = sqrt(zeta / (2 pi f T))`` (relative frequency and absolute damping alike,
+to first order for a mode under broadband excitation). So the checks also accept differences up
+to ``damping_sigmas`` (between orders) and ``two_a_sigmas`` (two-A) times ``sigma``. On the
+simulated frame (test/test_identify_band.py) the median two-A damping difference of real modes
+was at most 0.55 sigma, that of spurious stable columns at least 1.7 sigma.
+
+Picking clusters the stable, physical poles (hierarchical average-linkage clustering on
 ``|f_i - f_j| / max(f_i, f_j) + (1 - MAC_ij)``) and keeps the clusters found at enough model
-orders: no hand-picking.
+orders: no hand-picking. The two-A and MPC filters judge a cluster (a stable column) by its
+poles together: it is removed only when it passes at fewer than ``column_pass_fraction`` of its
+orders or at fewer orders than a mode needs, so a clean column is not lost to the orders where
+one check scatters (its statistics use all its orders), and a spurious one goes whole.
+What each check removed is counted in a :class:`FilterReport`.
 """
 
 from __future__ import annotations
@@ -28,18 +41,22 @@ from shm_ros.core.modal import mac_matrix
 from shm_ros.core.modal import real_shape as real_mode_shape
 from shm_ros.core.ssi import PoleSet
 
-__all__ = ["StabilityConfig", "PickingConfig", "PoleFlags", "PickedMode", "mpc", "classify",
-           "pick_modes", "real_mode_shape"]
+__all__ = ["StabilityConfig", "PickingConfig", "PoleFlags", "PickedMode", "FilterReport", "mpc",
+           "classify", "standard_error", "pick_modes", "pick_modes_reported", "real_mode_shape"]
 
 
 @dataclass
 class StabilityConfig:
     freq_tol: float = option(0.01, "stable pole: relative frequency change between consecutive orders")
     damping_tol: float = option(0.05, "stable pole: relative damping change between consecutive orders")
+    damping_sigmas: float = option(0.5, "stable pole: a damping change between consecutive orders up to "
+                                   "this many standard errors sqrt(zeta / (2 pi f T)) is accepted too")
     mac_min: float = option(0.98, "stable pole: MAC between consecutive orders")
     two_a: bool = option(True, "require agreement of the forward and backward estimates of A")
     two_a_freq_tol: float = option(0.01, "two-A agreement: relative frequency difference")
     two_a_damping_tol: float = option(0.05, "two-A agreement: relative damping difference")
+    two_a_sigmas: float = option(1.0, "two-A agreement: relative frequency and damping differences up to "
+                                 "this many standard errors sqrt(zeta / (2 pi f T)) are accepted too")
     two_a_mac_min: float = option(0.9, "two-A agreement: MAC")
     mpc_min: float = option(0.5, "smallest modal phase collinearity (0 disables the MPC filter)")
     damping_min: float = option(0.0, "physical pole: damping ratio above this")
@@ -55,6 +72,9 @@ class PickingConfig:
                                     "clustering of poles")
     min_fraction: float = option(0.10, "a mode is found at least at this fraction of the evaluated orders")
     min_poles: int = option(5, "a mode is found at least at this many orders")
+    column_pass_fraction: float = option(0.2, "the two-A and MPC filters remove a cluster of stable "
+                                         "poles when it passes them at fewer than this fraction of its "
+                                         "orders (or at fewer orders than a mode needs)")
 
 
 @dataclass
@@ -101,8 +121,25 @@ def _rel(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.abs(a - b) / np.abs(a)
 
 
-def classify(poles: PoleSet, cfg: StabilityConfig, sample_rate_hz: float) -> PoleFlags:
-    """Evaluate every criterion for every pole."""
+def standard_error(frequency_hz: np.ndarray, damping: np.ndarray, duration_s: float | None) -> np.ndarray:
+    """``sqrt(zeta / (2 pi f T))``: first-order standard error of a mode's damping ratio and
+    relative frequency from a record of ``T`` s (0 where ``T`` is unknown)."""
+    if not duration_s:
+        return np.zeros(np.shape(frequency_hz))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.nan_to_num(np.sqrt(np.abs(damping) / (2 * np.pi * np.abs(frequency_hz) * duration_s)))
+
+
+def _damping_close(z1: np.ndarray, z2: np.ndarray, rel: float, absolute: np.ndarray) -> np.ndarray:
+    with np.errstate(invalid="ignore"):
+        return np.abs(z1 - z2) < np.maximum(rel * np.abs(z1), absolute)
+
+
+def classify(poles: PoleSet, cfg: StabilityConfig, sample_rate_hz: float,
+             duration_s: float | None = None) -> PoleFlags:
+    """Evaluate every criterion for every pole (``duration_s``: the record's length, for the
+    standard-error tolerances; None: relative tolerances only)."""
+    sigma = standard_error(poles.frequency_hz, poles.damping_ratio, duration_s)
     n = len(poles)
     m = mpc(poles.shape)
     stable_f = np.zeros(n, bool)
@@ -113,14 +150,16 @@ def classify(poles: PoleSet, cfg: StabilityConfig, sample_rate_hz: float) -> Pol
     for prev, cur in zip(present[:-1], present[1:], strict=True):
         i, j = starts[cur], starts[prev]
         df = _rel(poles.frequency_hz[i][:, None], poles.frequency_hz[j][None, :]) < cfg.freq_tol
-        dz = _rel(poles.damping_ratio[i][:, None], poles.damping_ratio[j][None, :]) < cfg.damping_tol
+        dz = _damping_close(poles.damping_ratio[i][:, None], poles.damping_ratio[j][None, :],
+                            cfg.damping_tol, cfg.damping_sigmas * sigma[i][:, None])
         mac = mac_matrix(poles.shape[i], poles.shape[j]) >= cfg.mac_min
         stable_f[i] = df.any(axis=1)
         stable[i] = (df & dz & mac).any(axis=1)
     if cfg.two_a:
+        wide = cfg.two_a_sigmas * sigma
         with np.errstate(invalid="ignore"):
-            two_a = ((_rel(poles.frequency_hz, poles.frequency_b_hz) < cfg.two_a_freq_tol)
-                     & (_rel(poles.damping_ratio, poles.damping_b) < cfg.two_a_damping_tol)
+            two_a = ((_rel(poles.frequency_hz, poles.frequency_b_hz) < np.maximum(cfg.two_a_freq_tol, wide))
+                     & _damping_close(poles.damping_ratio, poles.damping_b, cfg.two_a_damping_tol, wide)
                      & (poles.mac_b >= cfg.two_a_mac_min))
     else:
         two_a = np.ones(n, bool)
@@ -158,36 +197,124 @@ def _cluster(freq: np.ndarray, shapes: np.ndarray, cutoff: float) -> np.ndarray:
 
 def pick_modes(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig,
                use_filters: bool = True) -> list[PickedMode]:
-    """Automatic picking: clusters of candidate poles found at enough model orders."""
-    cand = np.flatnonzero(flags.candidates(use_filters))
+    """Automatic picking: clusters of stable poles found at enough model orders (see
+    :func:`pick_modes_reported` for what the filters removed)."""
+    return pick_modes_reported(poles, flags, cfg, use_filters)[0]
+
+
+def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, use_filters: bool = True
+                        ) -> tuple[list[PickedMode], FilterReport]:
+    """Picked modes and the :class:`FilterReport`: stable, physical poles are clustered; a cluster
+    with poles at enough orders is removed by the two-A (then the MPC) filter when it passes that
+    check at fewer than ``column_pass_fraction`` of its orders or at fewer orders than a mode
+    needs (so a column the pole-by-pole filter kept is kept, with all its orders)."""
+    report = FilterReport.empty(len(poles), use_filters)
+    stable = np.flatnonzero(flags.stable)
+    report.stable = int(stable.size)
+    unphysical = stable[~flags.physical_ok[stable]]
+    report.removed_by[unphysical] = "physical"
+    report.removed["physical"] = int(unphysical.size)
+    cand = stable[flags.physical_ok[stable]]
     n_orders = int(np.unique(poles.order).size) if len(poles) else 0
     need = max(cfg.min_poles, int(np.ceil(cfg.min_fraction * n_orders)))
     if cand.size < need:
-        return []
+        report.removed_by[cand] = "too few orders"
+        report.removed["too few orders"] += int(cand.size)
+        return [], report
     labels = _cluster(poles.frequency_hz[cand], poles.shape[cand], cfg.distance_cutoff)
     picked: list[PickedMode] = []
     for lab in np.unique(labels):
         members = cand[labels == lab]
         if np.unique(poles.order[members]).size < need:
+            report.removed_by[members] = "too few orders"
+            report.removed["too few orders"] += int(members.size)
             continue
         fmed = np.median(poles.frequency_hz[members])
+        if use_filters:
+            verdict = None
+            member_orders = poles.order[members]
+            for check, ok in (("two-A", flags.two_a_ok), ("MPC", flags.mpc_ok)):
+                # share of the column's orders with a pole that passes (a second pole at one
+                # order, e.g. a split pair, must not outvote the column)
+                passed = [np.any(ok[members[member_orders == o]]) for o in np.unique(member_orders)]
+                share = float(np.mean(passed))
+                report.columns.append({"frequency_hz": float(fmed), "poles": int(members.size),
+                                       "check": check, "pass_fraction": round(share, 3)})
+                if share < cfg.column_pass_fraction or int(np.sum(passed)) < need:
+                    verdict = check
+                    break
+            if verdict is not None:
+                report.removed_by[members] = verdict
+                report.removed[verdict] += int(members.size)
+                report.columns_removed[verdict] = report.columns_removed.get(verdict, 0) + 1
+                continue
+            for check, ok in (("two-A", flags.two_a_ok), ("MPC", flags.mpc_ok)):
+                report.kept_failing[check] += int(np.count_nonzero(~ok[members]))
         # one pole per order: the one nearest the cluster's median frequency
         keep_list = []
         for o in np.unique(poles.order[members]):
             at = members[poles.order[members] == o]
             keep_list.append(at[np.argmin(np.abs(poles.frequency_hz[at] - fmed))])
         keep = np.array(keep_list)
+        report.removed_by[np.setdiff1d(members, keep)] = "same order"
+        report.removed["same order"] += int(members.size - keep.size)
         f = poles.frequency_hz[keep]
         z = poles.damping_ratio[keep]
         rep = keep[np.argmin(np.abs(f - np.median(f)))]
+        # damping: the median over the orders, robust to the orders where it scatters
         picked.append(PickedMode(
-            frequency_hz=float(f.mean()), damping_ratio=float(z.mean()),
+            frequency_hz=float(f.mean()), damping_ratio=float(np.median(z)),
             frequency_spread_hz=float(f.std(ddof=1)) if f.size > 1 else 0.0,
             damping_spread=float(z.std(ddof=1)) if z.size > 1 else 0.0,
             mode_shape_complex=poles.shape[rep], mpc=float(flags.mpc[keep].mean()),
             n_poles=int(keep.size), pole_index=keep, representative_order=int(poles.order[rep])))
     picked.sort(key=lambda p: p.frequency_hz)
-    return _merge_duplicates(picked, cfg.distance_cutoff)
+    merged = _merge_duplicates(picked, cfg.distance_cutoff)
+    for p in picked:
+        if not any(p is q for q in merged):
+            report.removed_by[p.pole_index] = "duplicate"
+            report.removed["duplicate"] += int(p.pole_index.size)
+    report.removed_by[np.concatenate([p.pole_index for p in merged]) if merged else []] = "picked"
+    return merged, report
+
+
+@dataclass
+class FilterReport:
+    """What happened to the stable poles: how many each check removed (docs/identify.md).
+
+    ``removed``: poles per reason - ``physical`` (damping or frequency out of range), ``two-A``
+    and ``MPC`` (their stable column failed that check), ``too few orders`` (a column at fewer
+    than the required orders), ``same order`` (a second pole of a column at one order),
+    ``duplicate`` (a column merged into a larger one of the same mode). ``kept_failing``: poles of
+    kept columns that fail a check on their own. ``columns``: each column's pass fraction per check.
+    ``removed_by``: per pole of the diagram, the reason ("" = not stable, "picked" = in a mode).
+    """
+
+    stable: int
+    removed: dict[str, int]
+    kept_failing: dict[str, int]
+    columns: list[dict]
+    removed_by: np.ndarray
+    filters: bool = True
+    columns_removed: dict[str, int] = field(default_factory=dict)
+
+    REASONS = ("physical", "two-A", "MPC", "too few orders", "same order", "duplicate")
+
+    @classmethod
+    def empty(cls, n_poles: int, filters: bool = True) -> FilterReport:
+        return cls(0, dict.fromkeys(cls.REASONS, 0), {"two-A": 0, "MPC": 0}, [],
+                   np.full(n_poles, "", dtype=object), filters)
+
+    def to_dict(self) -> dict:
+        """The JSON form (no per-pole array)."""
+        return {"filters": self.filters, "stable_poles": self.stable, "removed": dict(self.removed),
+                "columns_removed": dict(self.columns_removed),
+                "kept_failing": dict(self.kept_failing), "columns": list(self.columns)}
+
+    def legend(self, reason: str) -> str:
+        """A legend entry, e.g. ``removed by two-A: 41 poles (1 column)``."""
+        n, cols = self.removed.get(reason, 0), self.columns_removed.get(reason, 0)
+        return f"removed by {reason}: {n} poles" + (f" ({cols} column{'s' * (cols != 1)})" if cols else "")
 
 
 def _merge_duplicates(picked: list[PickedMode], cutoff: float) -> list[PickedMode]:
@@ -216,3 +343,4 @@ class Diagram:
     singular_values: np.ndarray | None = None
     spectrum_hz: np.ndarray | None = None
     spectrum: np.ndarray | None = None  # e.g. first singular value of the spectral matrix
+    report: FilterReport | None = None  # what the filters removed

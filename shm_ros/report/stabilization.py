@@ -36,11 +36,21 @@ def plot_stabilization(diagram: Diagram, path: str | Path, title: str = "",
     groups: list[tuple[str, np.ndarray, _ScatterStyle]] = [
         ("all poles", np.ones(len(p), bool), _ScatterStyle(marker=".", s=6, c="0.75")),
         ("stable in frequency", fl.stable_freq & ~fl.stable, _ScatterStyle(marker="x", s=14, c="tab:orange")),
-        ("stable (f, damping, MAC)", fl.stable & ~fl.candidates(True),
-         _ScatterStyle(marker="o", s=14, facecolors="none", edgecolors="tab:blue")),
-        ("stable + two-A + MPC + physical", fl.candidates(True),
-         _ScatterStyle(marker="o", s=16, c="tab:green")),
     ]
+    rep = diagram.report
+    if rep is None:  # a diagram made without a filter report: the pole-by-pole view
+        groups += [("stable (f, damping, MAC)", fl.stable & ~fl.candidates(True),
+                    _ScatterStyle(marker="o", s=14, facecolors="none", edgecolors="tab:blue")),
+                   ("stable + two-A + MPC + physical", fl.candidates(True),
+                    _ScatterStyle(marker="o", s=16, c="tab:green"))]
+    else:  # every stable pole under the reason it was removed (legend: how many), or picked
+        colours = {"physical": "tab:purple", "two-A": "tab:blue", "MPC": "tab:cyan",
+                   "too few orders": "tab:olive", "same order": "tab:brown", "duplicate": "tab:pink"}
+        for reason, colour in colours.items():
+            groups.append((rep.legend(reason), rep.removed_by == reason,
+                           _ScatterStyle(marker="o", s=14, facecolors="none", edgecolors=colour)))
+        groups.append(("in a picked mode (stable column)", rep.removed_by == "picked",
+                       _ScatterStyle(marker="o", s=16, c="tab:green")))
     for label, mask, style in groups:
         if np.any(mask):
             ax.scatter(p.frequency_hz[mask], p.order[mask], label=label, **style)
