@@ -141,5 +141,5 @@ def structure_dict(case: FrameCase, with_input: bool = True) -> dict:
                "damping": {"kind": "rayleigh", "ratios": [0.02, 0.02]}, "sensors": sensors}
     if with_input:
         d["sensors"].append({"id": FORCE, "at": {"floor": N_FLOORS}, "direction": "x"})
-        d["input"] = {"sensor": FORCE}
+        d["input"] = {"sensor": FORCE, "kind": "force", "at": {"floor": N_FLOORS}, "gain": 1.0}
     return d
