@@ -8,7 +8,8 @@ of a plane girder model, bought with an absurd bearing stiffness).
 
 :func:`gated_pairing` is the one-to-one (Hungarian) assignment on the cost
 ``|ln(f_model / f_obs)| / ln(1 + frequency_gate) + (1 - MAC) / (1 - mac_gate)`` (the MAC term only
-where the observed mode has a shape). A pair beyond either gate is not made: that observed mode is
+where the observed mode has a shape): a 20 % gate admits model frequencies from f_obs / 1.2 to
+1.2 f_obs. A pair beyond either gate is not made: that observed mode is
 *unmodelled* - left out of the likelihood and reported with its nearest model mode and the reason
 (docs/interfaces.md §6 ``unmodelled_modes``). The default frequency gate follows the prior width
 (:func:`automatic_frequency_gate`). The same gate pairs per-window estimates with the reference
@@ -138,7 +139,7 @@ class UnmodelledMode:
     frequency_hz: float
     nearest_model_mode: int  # 1-based, ascending model frequency
     nearest_model_frequency_hz: float
-    relative_distance: float  # f_model / f_obs - 1 of the nearest model mode
+    frequency_ratio: float  # f_model / f_obs of the nearest model mode
     mac: float | None  # MAC with the nearest model mode (None: no shape)
     reason: str  # "frequency" | "mac" | "one-to-one"
     fraction_of_windows: float | None = None  # recordings: share of windows where it was found
@@ -147,15 +148,16 @@ class UnmodelledMode:
         return {"mode": self.mode, "frequency_hz": self.frequency_hz,
                 "nearest_model_mode": self.nearest_model_mode,
                 "nearest_model_frequency_hz": self.nearest_model_frequency_hz,
-                "relative_distance": self.relative_distance, "mac": self.mac, "reason": self.reason,
+                "frequency_ratio": self.frequency_ratio, "mac": self.mac, "reason": self.reason,
                 "fraction_of_windows": self.fraction_of_windows}
 
     def message(self, gate: PairingGate) -> str:
         who = f"observed mode {self.mode}" if self.mode is not None else "an identified mode"
         near = (f"nearest model mode {self.nearest_model_mode} ({self.nearest_model_frequency_hz:.3f} Hz, "
-                f"{100 * self.relative_distance:+.0f} %" + ("" if self.mac is None else f", MAC {self.mac:.2f}")
+                f"ratio {self.frequency_ratio:.2f}" + ("" if self.mac is None else f", MAC {self.mac:.2f}")
                 + ")")
-        why = {"frequency": f"no model mode within the {100 * gate.frequency:.0f} % frequency gate",
+        why = {"frequency": f"no model mode within a factor {1 + gate.frequency:.2f} of its frequency "
+                            f"(the {100 * gate.frequency:.0f} % gate)",
                "mac": f"no model mode within the frequency gate reaches MAC {gate.mac:.2f}",
                "one-to-one": "every model mode within the gates is paired with an observed mode that "
                              "fits it better"}[self.reason]
@@ -244,7 +246,7 @@ def gated_pairing(f_obs: np.ndarray, phi_obs: np.ndarray | None, f_model: np.nda
             reason = "one-to-one"
             j = int(np.flatnonzero(ok[i])[np.argmin(cost[i, ok[i]])])
         unmodelled.append(UnmodelledMode(
-            numbers[i], float(f_obs[i]), j + 1, float(f_model[j]), float(f_model[j] / f_obs[i] - 1.0),
+            numbers[i], float(f_obs[i]), j + 1, float(f_model[j]), float(f_model[j] / f_obs[i]),
             None if not np.isfinite(macs[i, j]) else float(macs[i, j]), reason))
     keep = np.array(sorted(paired), dtype=int)
     return ModePairing(keep, np.array([paired[i] for i in keep], dtype=int), unmodelled, gate)
@@ -348,7 +350,7 @@ def _recurring(strays: list[tuple[int, UnmodelledMode]], n_windows: int, min_fra
         rep = min((u for _, u in g), key=lambda u: abs(u.frequency_hz - f))
         reasons = [u.reason for _, u in g]
         out.append(UnmodelledMode(None, f, rep.nearest_model_mode, rep.nearest_model_frequency_hz,
-                                  float(rep.nearest_model_frequency_hz / f - 1.0), rep.mac,
+                                  float(rep.nearest_model_frequency_hz / f), rep.mac,
                                   max(set(reasons), key=reasons.count), min(frac, 1.0)))
     return out
 
