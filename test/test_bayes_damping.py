@@ -6,6 +6,8 @@ model modes at each theta); the data are identified ratios scattered by 20 % per
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from bayes_synth import building_dict, spec_and_model, synth_modal
@@ -38,6 +40,7 @@ def test_damping_residuals_match_a_direct_sum(damped):
     lik.n_theta = 4
     theta = np.array([[0.95, 1.0, 1.0, 1.2]])
     _, _, ss_d = lik._residuals(theta)
+    assert ss_d is not None and obs.damping is not None
     z_model = model.modal_damping_ratios(theta[0], 4)
     z_bar = obs.damping.mean(axis=0)
     direct = (((obs.damping - z_model[None]) / z_bar[None]) ** 2).sum(axis=0)
@@ -50,12 +53,12 @@ def test_damping_informs_a_damping_parameter_only_when_enabled(damped):
     over 4 modes: std of the factor ~1 %, so 5 % is 5 sigma); without it the posterior of that
     factor is its prior (lognormal, std 0.5)."""
     spec, model, obs = damped
-    short = {"sampler": "mh", "n_steps": 600, "rhat_target": 1.05, "ess_target": 300.0, "evidence": False}
-    with_d = update(model, obs, UpdateConfig(use_damping=True, **short), priors=spec.parameters)
+    short = UpdateConfig(sampler="mh", n_steps=600, rhat_target=1.05, ess_target=300.0, evidence=False)
+    with_d = update(model, obs, replace(short, use_damping=True), priors=spec.parameters)
     z = with_d.parameters["zeta"]
     assert abs(z.mean / TRUTH[3] - 1) < 0.05 and z.std < 0.05, z
     assert "sigma2_damping_mode1" in with_d.noise
     for name, t in zip(("k_low", "k_mid", "k_top"), TRUTH[:3], strict=True):
         assert abs(with_d.parameters[name].mean - t) < 0.03
-    without = update(model, obs, UpdateConfig(**short), priors=spec.parameters)
+    without = update(model, obs, short, priors=spec.parameters)
     assert without.parameters["zeta"].std > 0.3

@@ -11,6 +11,7 @@ and more than 25 % from both).
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -33,7 +34,7 @@ LATERAL_HZ, TORSION_HZ = 2.6, 5.6
 SCATTER = np.array([0.01, 0.005, 0.01, 0.006])  # per-window relative frequency scatter per mode
 N_WINDOWS = 1152 if FULL else 200
 SEEDS = range(10) if FULL else range(3)
-SHORT = {"n_steps": 600, "rhat_target": 1.05, "ess_target": 300.0, "evidence": False}
+SHORT = UpdateConfig(n_steps=600, rhat_target=1.05, ess_target=300.0, evidence=False)
 
 
 @pytest.fixture(scope="module")
@@ -87,7 +88,7 @@ def test_out_of_class_modes_are_left_out_and_the_posterior_stays_honest(bridge):
     params = [p for p in girder_dict(5)["parameters"]]
     for seed in SEEDS:
         obs = bridge_table(f_true, seed)
-        post = update(model, obs, UpdateConfig(seed=seed, **SHORT), priors=spec.parameters)
+        post = update(model, obs, replace(SHORT, seed=seed), priors=spec.parameters)
         left = {u["mode"]: u for u in post.unmodelled_modes}
         assert sorted(left) == [1, 3], post.unmodelled_modes
         for k, f in ((1, LATERAL_HZ), (3, TORSION_HZ)):
@@ -98,7 +99,7 @@ def test_out_of_class_modes_are_left_out_and_the_posterior_stays_honest(bridge):
         assert [m["mode"] for m in post.fit["modes"]] == [2, 4]
         failures = honest(post, params, best_fit(model, obs))
         assert not failures, (seed, failures)
-    open_gates = UpdateConfig(seed=0, frequency_gate=10.0, mac_gate=0.0, **SHORT)
+    open_gates = replace(SHORT, frequency_gate=10.0, mac_gate=0.0)
     control = update(model, bridge_table(f_true, 0), open_gates, priors=spec.parameters)
     assert not control.unmodelled_modes
     assert honest(control, params, best_fit(model, bridge_table(f_true, 0)))
@@ -184,6 +185,6 @@ def test_recording_estimates_use_the_same_gate(bridge):
     u = obs.unmodelled_modes[0]
     assert abs(u["frequency_hz"] / LATERAL_HZ - 1) < 0.02 and u["fraction_of_windows"] == 1.0
     assert any("left out of the updating" in n for n in obs.notes)
-    post = update(model, obs, UpdateConfig(sampler="mh", **SHORT), priors=spec.parameters)
+    post = update(model, obs, replace(SHORT, sampler="mh"), priors=spec.parameters)
     assert post.unmodelled_modes == obs.unmodelled_modes
     assert any(f"{LATERAL_HZ:.1f}" in w and "left out" in w for w in post.warnings)

@@ -546,6 +546,12 @@ def safe_loglik(lik: Any, x: np.ndarray, d: int) -> np.ndarray:
     return out
 
 
+def _modes_used(lik: Any) -> int:
+    """How many of the model's lowest modes the likelihood reads (its pairing may skip some)."""
+    st = lik.stats
+    return int(st.model_index.max()) + 1 if st.model_index is not None and st.model_index.size else len(st.f_ref)
+
+
 def _try_ritz(model: AffineModel, lik: Any, predictor: Any, x_map: np.ndarray, cov: np.ndarray,
               d: int, config: UpdateConfig, rng: np.random.Generator) -> str | None:
     """Swap in a Rayleigh-Ritz predictor for sampling when the model is large and the projection
@@ -561,7 +567,7 @@ def _try_ritz(model: AffineModel, lik: Any, predictor: Any, x_map: np.ndarray, c
     L = np.linalg.cholesky(cov[:d, :d] + 1e-300 * np.eye(d))
     check = x_map[:d] + 6.0 * rng.standard_normal((64, d)) @ L.T / np.sqrt(d)
     check = np.vstack([x_map[:d], check[np.all(check > 0, axis=1)]])
-    n_req = len(lik.stats.f_ref)
+    n_req = _modes_used(lik)
     ferr, macerr = ritz.max_error(predictor, check, min(n_req + 1, predictor.n_modes))
     if ferr < 1e-7 and macerr < 1e-7:
         lik.predictor = ritz
@@ -585,7 +591,7 @@ def _one_point_predictor(model: AffineModel, lik: Any, theta: np.ndarray, cov: n
     pts = pts[np.all(pts > 0, axis=1)]
     f_r, p_r = pred(pts)
     f_f, p_f = full(pts)
-    n = len(lik.stats.f_ref)
+    n = min(_modes_used(lik), pred.n_modes)
     ok = np.max(np.abs(f_r[:, :n] / f_f[:, :n] - 1)) < 1e-6
     if p_r.shape[1]:
         ok &= np.max(1 - mac(np.swapaxes(p_r[:, :, :n], 1, 2), np.swapaxes(p_f[:, :, :n], 1, 2))) < 1e-6
