@@ -98,8 +98,11 @@ def test_bridge_study_table(tmp_path, capsys):
     study = json.loads((tmp_path / "study" / "study.json").read_text())
     rows = {r["configuration"]: r for r in study["rows"]}
     assert len(study["rows"]) == 7 and study["definitions"]["rmse"]
+    # J averaged over the windows (the paper's Table 1): the prior keeps a pull of a few 0.1 %
+    # on the frequencies (test_update_study_prior.py measures the family's effect)
+    assert study["fitness_j"] == "averaged" and all(r["fitness_j"] == "averaged" for r in study["rows"])
     for label in ("normal", "weibull", "lognormal", "alpha=1, beta=0", "alpha=0.8, beta=0.2"):
-        assert max(rows[label]["rmse"]) < 0.02, (label, rows[label]["rmse"])
+        assert max(rows[label]["rmse"]) < 0.03, (label, rows[label]["rmse"])
     for r in study["rows"]:
         if r["beta"] > 0:
             assert min(r["mac"]) > 0.99

@@ -33,10 +33,12 @@ def ready() -> bool:
 
 
 def run(estimates: list, config: UpdateConfig, warm_start: Posterior | None) -> Posterior:
-    """Pair every estimate's modes with the model's by MAC and update (warm-started)."""
+    """Pair every estimate's modes with the model's (prior mean, the updating's gate) and update
+    (warm-started)."""
     from shm_ros.core.bayes.pairing import observations_for_model
-    from shm_ros.core.bayes.update import update
+    from shm_ros.core.bayes.update import pairing_reference, update
 
     spec, model = _state["spec"], _state["model"]
-    obs = observations_for_model(model, estimates, spec.sensor_ids)
+    theta, gate = pairing_reference(model, config, spec.parameters)
+    obs = observations_for_model(model, estimates, spec.sensor_ids, theta=theta, gate=gate)
     return update(model, obs, config, spec.parameters, warm_start=warm_start)

@@ -8,7 +8,8 @@ Definitions (also in docs/updating.md):
 * per-mode MAC = mean over the windows of MAC(observed shape, model shape at the sensors);
 * overall: RMS over every (window, mode) value, and the mean of the per-mode MACs.
 
-Model modes are paired with the data's modes by MAC (see :mod:`.pairing`).
+The model mode of every data mode is the updating's fixed pairing when given (``pairing``), else the
+optimal assignment at this theta (see :mod:`.pairing`).
 """
 
 from __future__ import annotations
@@ -21,15 +22,21 @@ from shm_ros.core.modal import mac
 
 from .forward import ModalPredictor
 from .observations import ModalObservations
-from .pairing import pair_modes
+from .pairing import pair_modes_optimal
 
 
-def modal_fit(predictor: ModalPredictor, obs: ModalObservations, theta: np.ndarray) -> dict:
+def modal_fit(predictor: ModalPredictor, obs: ModalObservations, theta: np.ndarray,
+              pairing: np.ndarray | None = None) -> dict:
     f_model, phi_model = predictor(np.atleast_2d(theta))
     f_ref = obs.mean_frequencies()
     shapes = obs.has_shapes and list(predictor.sensor_ids) == list(obs.sensor_ids)
     phi_ref = obs.reference_shapes() if shapes else None
-    idx = pair_modes(f_ref, phi_ref, f_model, phi_model if phi_ref is not None else None)[0]
+    if pairing is not None:
+        idx = np.asarray(pairing, dtype=int)
+    else:
+        usable = phi_ref is not None and bool(np.all(np.isfinite(phi_ref)))
+        idx = pair_modes_optimal(f_ref, phi_ref if usable else None, f_model[0],
+                                 phi_model[0] if usable else None)
     fp = f_model[0, idx]
     rel = (obs.frequencies_hz - fp[None]) / obs.frequencies_hz
     per_mode_rmse = np.sqrt(np.nanmean(rel**2, axis=0))

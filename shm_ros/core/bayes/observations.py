@@ -25,6 +25,10 @@ class ModalObservations:
     covariates: dict[str, np.ndarray] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     time_kind: str = "seconds"  # "seconds" | "iso" (how the table wrote its time column)
+    # identified modes that paired with no model mode when the data were built from per-window
+    # estimates (``pairing.observations_from_estimates``): dicts as in posterior.json
+    # ``unmodelled_modes`` (docs/interfaces.md §6)
+    unmodelled_modes: list[dict] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.times = np.asarray(self.times, dtype=float)
@@ -63,7 +67,8 @@ class ModalObservations:
             sensor_ids=list(self.sensor_ids),
             damping=None if self.damping is None else self.damping[windows],
             covariates={k: v[windows] for k, v in self.covariates.items()},
-            notes=list(self.notes), time_kind=self.time_kind)
+            notes=list(self.notes), time_kind=self.time_kind,
+            unmodelled_modes=list(self.unmodelled_modes))
 
     def without_empty_modes(self) -> tuple[ModalObservations, list[int]]:
         """The same data without modes that have no frequency in any window (and their numbers)."""
@@ -78,7 +83,8 @@ class ModalObservations:
             shapes=None if self.shapes is None else self.shapes[:, keep],
             sensor_ids=list(self.sensor_ids),
             damping=None if self.damping is None else self.damping[:, keep],
-            covariates=dict(self.covariates), notes=list(self.notes), time_kind=self.time_kind), dropped
+            covariates=dict(self.covariates), notes=list(self.notes), time_kind=self.time_kind,
+            unmodelled_modes=list(self.unmodelled_modes)), dropped
 
     def mean_frequencies(self) -> np.ndarray:
         return np.nanmean(self.frequencies_hz, axis=0)

@@ -8,7 +8,12 @@ For each configuration the structure is updated with the fitness likelihood
 * the weights (alpha, beta) in {(1, 0), (0.8, 0.2), (0.2, 0.8), (0, 1)} with the normal prior.
 
 Per-mode RMSE = root mean square over the windows of the relative frequency error
-(f_obs - f_model) / f_obs; per-mode MAC = mean over windows of MAC(observed shape, model shape).
+(f_obs - f_model) / f_obs; per-mode MAC = mean over windows of MAC(observed shape, model shape),
+with the updating's own pairing (modes it left out as unmodelled are not scored).
+
+J is averaged over the windows by default here (``fitness_j="averaged"``): summed over many windows
+(the bridge paper had 1,152) J outweighs any prior and the prior family no longer matters, while
+the paper's Table 1 shows that it does (docs/updating.md).
 """
 
 from __future__ import annotations
@@ -17,9 +22,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
+import numpy as np
+
 from shm_ros.core.models.base import AffineModel
 
+from .fit import modal_fit
+from .forward import build_predictor
+from .likelihoods import FitnessJ
 from .observations import ModalObservations
+from .pairing import select_modes
 from .priors import JointPrior, Prior, weibull_matching
 from .update import UpdateConfig, update
 
@@ -39,10 +50,13 @@ class StudyRow:
     parameters: dict[str, float]  # posterior means
     parameter_std: dict[str, float]
     diagnostics: dict[str, Any]
+    fitness_j: str = FitnessJ.AVERAGED.value
+    modes: list[int] | None = None  # the scored (paired) mode numbers
 
     def to_dict(self) -> dict[str, Any]:
         return {"group": self.group, "configuration": self.configuration, "prior": self.prior,
-                "alpha": self.alpha, "beta": self.beta, "rmse": self.rmse, "mac": self.mac,
+                "alpha": self.alpha, "beta": self.beta, "fitness_j": self.fitness_j,
+                "modes": self.modes, "rmse": self.rmse, "mac": self.mac,
                 "parameters": self.parameters, "parameter_std": self.parameter_std,
                 "diagnostics": self.diagnostics}
 
@@ -65,28 +79,29 @@ def family_prior(base: JointPrior, family: str) -> JointPrior:
 
 def bridge_study(model: AffineModel, observations: ModalObservations, base_prior: JointPrior,
                  config: UpdateConfig | None = None, families: Sequence[str] = PRIOR_FAMILIES,
-                 weights: Sequence[tuple[float, float]] = WEIGHTS) -> list[StudyRow]:
+                 weights: Sequence[tuple[float, float]] = WEIGHTS,
+                 fitness_j: str = FitnessJ.AVERAGED.value) -> list[StudyRow]:
+    """The sweep; every run uses ``config`` with the fitness likelihood, J ``fitness_j``."""
     config = config or UpdateConfig(sampler="mh")
-    cfg = replace(config, likelihood="fitness", evidence=False)
+    cfg = replace(config, likelihood="fitness", evidence=False, fitness_j=fitness_j)
     runs: list[tuple[str, str, str, float, float]] = []
     for fam in families:
         runs.append(("prior", fam, fam, 0.5, 0.5))
     for a, b in weights:
         runs.append(("weights", f"alpha={a:g}, beta={b:g}", "normal", a, b))
+    sensors = list(observations.sensor_ids) if observations.has_shapes else []
+    pred = build_predictor(model, sensors, cfg.n_modes or observations.n_modes + 2, cfg.reduction,
+                           n_required=observations.n_modes)
     rows = []
     for group, label, fam, a, b in runs:
         if b > 0 and not observations.has_shapes:
             raise ValueError("the study's shape-weighted configurations need mode shapes in the data")
         post = update(model, observations, replace(cfg, alpha=a, beta=b),
                       priors=family_prior(base_prior, fam))
-        theta = post.theta("mean")
-        from .fit import modal_fit
-        from .forward import build_predictor
-
-        sensors = list(observations.sensor_ids) if observations.has_shapes else []
-        pred = build_predictor(model, sensors, observations.n_modes + 2, cfg.reduction,
-                               n_required=observations.n_modes)
-        fit = modal_fit(pred, observations, theta)
+        paired = post.diagnostics["pairing"]
+        keep = np.array([observations.mode_numbers.index(m) for m in paired["observed_modes"]], dtype=int)
+        idx = np.array([j - 1 for j in paired["model_modes"]], dtype=int)
+        fit = modal_fit(pred, select_modes(observations, keep), post.theta("mean"), idx)
         rows.append(StudyRow(
             group, label, fam, a, b,
             rmse=[m["frequency_rmse"] for m in fit["modes"]],
@@ -94,7 +109,8 @@ def bridge_study(model: AffineModel, observations: ModalObservations, base_prior
             parameters={n: s.mean for n, s in post.parameters.items()},
             parameter_std={n: s.std for n, s in post.parameters.items()},
             diagnostics={k: post.diagnostics[k] for k in ("sampler", "rhat_max", "ess_min",
-                                                          "acceptance", "converged")}))
+                                                          "acceptance", "converged")},
+            fitness_j=fitness_j, modes=list(paired["observed_modes"])))
     return rows
 
 

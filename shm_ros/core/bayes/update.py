@@ -1,8 +1,11 @@
 """One call from a model, data and settings to a posterior: ``update(model, observations, config)``.
 
 The CLI (``shm-ros update``), the ROS node and ``explain`` all call :func:`update`; it assembles a
-predictor (full or IIRS-reduced), a likelihood, the joint prior, finds the MAP, samples with MH or
-emcee until the ArviZ diagnostics are met, estimates the evidence by nested sampling and summarises.
+predictor (full or IIRS-reduced), pairs the data's modes with the model's once behind a gate (at the
+prior mean, again once at the MAP; :mod:`.pairing`), builds the likelihood and the joint prior,
+finds the MAP, samples with MH or emcee until the ArviZ diagnostics are met, estimates the evidence
+by nested sampling and summarises. Observed modes that pair with no model mode are left out and
+reported (``Posterior.unmodelled_modes``, ``warnings``).
 """
 
 from __future__ import annotations
@@ -22,8 +25,9 @@ from shm_ros.core.models.base import AffineModel
 from .evidence import nested_evidence
 from .fit import modal_fit
 from .forward import build_predictor
-from .likelihoods import FitnessLikelihood, GaussianModalLikelihood, InverseGamma
+from .likelihoods import FitnessJ, FitnessLikelihood, GaussianModalLikelihood, InverseGamma, set_pairing
 from .observations import ModalObservations
+from .pairing import DEFAULT_MAC_GATE, ModePairing, PairingGate, UnmodelledMode, pair_with_model, select_modes
 from .priors import JointPrior, Prior, PriorError, priors_from_specs
 from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance, run_sampler
 
@@ -75,9 +79,22 @@ class UpdateConfig:
     ig_shape: float = option(1.0, "shape of the inverse-gamma priors of the error variances")
     frequency_error_guess: float = option(0.01, "prior mode of the relative frequency error std")
     shape_error_guess: float = option(0.05, "prior mode of the shape error std")
+    use_damping: bool = option(False, "gaussian likelihood: damping ratios enter too (model ratios from "
+                               "the structure's damping law, e.g. Rayleigh at the model frequencies)")
+    damping_error_guess: float = option(0.3, "prior mode of the relative damping-ratio error std")
     alpha: float = option(0.5, "fitness likelihood: weight of the frequencies")
     beta: float = option(0.5, "fitness likelihood: weight of 1 - MAC")
     k: float = option(0.05, "fitness likelihood: tolerance k")
+    fitness_j: str = option(FitnessJ.SUMMED.value, "fitness likelihood: J summed over the windows "
+                            "(each window is evidence) or averaged (J of one typical window, as in the "
+                            "bridge paper's Table 1)", choices=FitnessJ)
+    frequency_gate: float = option(0.0, "pairing: largest relative distance between an observed and "
+                                   "its model mode's frequency (0 = automatic: 10 % + 1.5 x the largest "
+                                   "prior coefficient of variation, within 15-25 %)")
+    mac_gate: float = option(DEFAULT_MAC_GATE, "pairing: smallest MAC between an observed mode's "
+                             "shape and its model mode's (when the data have shapes)")
+    pair_at_map: bool = option(True, "pair the observed modes again once at the MAP (same gate) and "
+                               "search the MAP again if the pairing changed")
     n_chains: int = option(0, "walkers / chains (0 = automatic)")
     n_steps: int = option(1500, "first run length before the diagnostics are checked")
     max_steps: int = option(20000, "upper bound on steps")
@@ -99,6 +116,10 @@ class UpdateConfig:
         check_choice("update", "sampler", self.sampler, Sampler)
         check_choice("update", "reduction", self.reduction, Reduction)
         check_choice("update", "variance", self.variance, Variance)
+        check_choice("update", "fitness_j", self.fitness_j, FitnessJ)
+        if self.frequency_gate < 0 or not 0 <= self.mac_gate < 1:
+            raise ValueError(f"update: frequency_gate must be >= 0 (0 = automatic) and mac_gate in "
+                             f"[0, 1), got {self.frequency_gate}, {self.mac_gate}")
 
 
 @dataclass
@@ -136,6 +157,8 @@ class Posterior:
     # modes of the MAP model at every DOF, paired to the data's modes; the data's own (reference)
     # shapes expanded from the sensors to every DOF with the IIRS transformation at the MAP
     map_modes: dict[str, Any] = field(default_factory=dict)
+    # observed modes left out because they pair with no model mode (pairing.UnmodelledMode dicts)
+    unmodelled_modes: list[dict[str, Any]] = field(default_factory=list)
 
     def theta(self, which: str = "mean") -> np.ndarray:
         return np.array([getattr(self.parameters[n], which) for n in self.parameter_names])
@@ -179,6 +202,7 @@ class Posterior:
             "noise": self.noise,
             "priors": self.priors,
             "warnings": self.warnings,
+            "unmodelled_modes": self.unmodelled_modes,
             "timing_s": self.timing_s,
             "map_modes": self.map_modes,
         }
@@ -215,8 +239,36 @@ def joint_prior_for(model: AffineModel, config: UpdateConfig,
     return jp
 
 
-def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
-    """The likelihood object the config asks for (batched call (B, d_total) -> (B,))."""
+def prior_cv(jp: JointPrior) -> float:
+    """Largest coefficient of variation (std / |mean|) over the parameters' priors."""
+    cv = [p.std / abs(p.mean) for p in jp.priors if np.isfinite(p.std) and p.mean != 0]
+    return float(max(cv)) if cv else float("inf")
+
+
+def pairing_reference(model: AffineModel, config: UpdateConfig,
+                      priors: JointPrior | Sequence[Any] | None) -> tuple[np.ndarray, PairingGate]:
+    """The theta at which observed modes are paired (the prior mean) and the gate, resolved from the
+    config and the prior width; recordings use it to pair per-window estimates
+    (``pairing.observations_for_model``) as the updating itself does."""
+    jp = joint_prior_for(model, config, priors)
+    gate = PairingGate.resolve(config.frequency_gate, config.mac_gate, prior_cv(jp))
+    return np.array([p.mean for p in jp.priors], dtype=float), gate
+
+
+def _modal_predictor(model: AffineModel, data: ModalObservations, config: UpdateConfig):
+    sensors = list(data.sensor_ids) if (config.use_shapes and data.has_shapes) else []
+    n_modes = config.n_modes or data.n_modes + 2
+    return build_predictor(model, sensors, n_modes, config.reduction, n_required=data.n_modes)
+
+
+def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig, *, predictor: Any = None,
+                     pairing: np.ndarray | None = None):
+    """The likelihood object the config asks for (batched call (B, d_total) -> (B,)).
+
+    Modal likelihoods: ``predictor`` (default: built for ``data``) and ``pairing``, the model mode
+    of each of the data's modes (default: paired once at the nominal model, ungated; :func:`update`
+    passes its gated pairing and the data restricted to the paired modes).
+    """
     if config.likelihood == "time":
         from .timedomain import AccelerationRecord, TimeDomainLikelihood
 
@@ -229,17 +281,22 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
         return lik, None
     if not isinstance(data, ModalObservations):
         raise TypeError(f"likelihood {config.likelihood!r} needs ModalObservations")
-    sensors = list(data.sensor_ids) if (config.use_shapes and data.has_shapes) else []
-    n_modes = config.n_modes or data.n_modes + 2
-    predictor = build_predictor(model, sensors, n_modes, config.reduction, n_required=data.n_modes)
+    if predictor is None:
+        predictor = _modal_predictor(model, data, config)
+    use_shapes = bool(predictor.sensor_ids) and data.has_shapes
     modal: GaussianModalLikelihood | FitnessLikelihood
     if config.likelihood == "gaussian":
         modal = GaussianModalLikelihood(
-            predictor, data, use_shapes=bool(sensors), variance=config.variance,
+            predictor, data, use_shapes=use_shapes, variance=config.variance,
             freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
-            shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape))
+            shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape),
+            use_damping=config.use_damping,
+            damping_prior=InverseGamma.weak(config.damping_error_guess, config.ig_shape))
     else:
-        modal = FitnessLikelihood(predictor, data, alpha=config.alpha, beta=config.beta, k=config.k)
+        modal = FitnessLikelihood(predictor, data, alpha=config.alpha, beta=config.beta, k=config.k,
+                                  j=config.fitness_j)
+    if pairing is not None:
+        set_pairing(modal, pairing)
     modal.n_theta = model.n_parameters
     return modal, predictor
 
@@ -282,10 +339,20 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         if observations.n_modes == 0:
             raise ValueError("the modal data hold no frequency at all")
     jp = joint_prior_for(model, config, priors)
-    lik, predictor = build_likelihood(model, observations, config)
     d = jp.dim
-    n_extra = lik.n_extra
-    names = list(jp.names) + list(lik.extra_names)
+    full_obs = observations
+    pairing: ModePairing | None = None
+    pairing_at = "prior mean"
+    if isinstance(observations, ModalObservations) and config.likelihood != "time":
+        predictor = _modal_predictor(model, full_obs, config)
+        gate = PairingGate.resolve(config.frequency_gate, config.mac_gate, prior_cv(jp))
+        pairing = _gated(predictor, full_obs, np.array([p.mean for p in jp.priors]), gate)
+        if pairing.observed.size == 0:
+            raise ValueError("no observed mode pairs with a mode of the model at the prior mean: "
+                             + " ".join(u.message(gate) for u in pairing.unmodelled))
+        observations, lik = _paired_likelihood(model, full_obs, config, predictor, pairing)
+    else:
+        lik, predictor = build_likelihood(model, observations, config)
 
     def log_post(x: np.ndarray) -> np.ndarray:
         x = np.atleast_2d(x)
@@ -303,9 +370,35 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
     if warm_start is not None and list(warm_start.parameter_names) == list(jp.names):
         previous = warm_start.samples[rng.permutation(len(warm_start.samples))[:200]]
         starts_theta = np.vstack([warm_start.theta("mean")[None, :], previous, starts_theta])
-    starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
-    scale = np.concatenate([prior_std, np.ones(n_extra)])
-    x_map, lp_map = find_map(log_post, starts, scale, seed=config.seed)
+    for attempt in (0, 1):
+        n_extra = lik.n_extra
+        names = list(jp.names) + list(lik.extra_names)
+        starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
+        scale = np.concatenate([prior_std, np.ones(n_extra)])
+        x_map, lp_map = find_map(log_post, starts, scale, seed=config.seed)
+        if pairing is None or attempt == 1 or not config.pair_at_map:
+            break
+        # once, at the MAP: a nominal model far from the data may have paired a mode wrongly
+        again = _gated(predictor, full_obs, x_map[:d], pairing.gate)
+        if again.same_as(pairing) or again.observed.size == 0:
+            break
+        before = pairing.describe(full_obs.mode_numbers, pairing_at)
+        pairing, pairing_at = again, "MAP"
+        after = pairing.describe(full_obs.mode_numbers, pairing_at)
+        warnings_.append(f"pairing changed at the MAP: observed modes {before['observed_modes']} -> "
+                         f"model modes {before['model_modes']} became {after['observed_modes']} -> "
+                         f"{after['model_modes']}; the MAP was searched again")
+        observations, lik = _paired_likelihood(model, full_obs, config, predictor, pairing)
+        starts_theta = np.vstack([x_map[None, :d], starts_theta])
+    unmodelled: list[dict[str, Any]] = []
+    if pairing is not None:
+        unmodelled = [u.to_dict() for u in pairing.unmodelled]
+        warnings_ += [u.message(pairing.gate) for u in pairing.unmodelled]
+    if isinstance(full_obs, ModalObservations) and full_obs.unmodelled_modes:
+        # modes of a recording's windows that paired with no model mode (observations_for_model)
+        unmodelled += list(full_obs.unmodelled_modes)
+        warnings_ += [UnmodelledMode(**u).message(pairing.gate if pairing else PairingGate())
+                      for u in full_obs.unmodelled_modes]
     cov = laplace_covariance(log_post, x_map, scale)
     timing["map_s"] = time.perf_counter() - t0
     exact_predictor = predictor
@@ -342,6 +435,8 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         "n_windows": int(getattr(observations, "n_windows", 1)),
         "predictor": ritz_note or type(predictor).__name__ if predictor is not None else "time-domain",
     }
+    if pairing is not None:
+        diag["pairing"] = pairing.describe(full_obs.mode_numbers, pairing_at)
 
     noise: dict[str, Any] = {}
     if config.likelihood == "gaussian" or config.likelihood == "time":
@@ -354,8 +449,9 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
 
     if predictor is not None:
         lik.predictor = exact_predictor  # scores and evidence with the exact model
-        fit = modal_fit(predictor, observations, x_map[:d])
-        fit_nominal = modal_fit(predictor, observations, model.nominal_theta())
+        idx = None if pairing is None else pairing.model_index
+        fit = modal_fit(predictor, observations, x_map[:d], idx)
+        fit_nominal = modal_fit(predictor, observations, model.nominal_theta(), idx)
     else:
         fit = lik.fit(x_map[:d])
         fit_nominal = lik.fit(model.nominal_theta())
@@ -366,7 +462,8 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
     if config.evidence:
         t2 = time.perf_counter()
         marginal = lik if getattr(lik, "variance", "marginal") == "marginal" else \
-            _marginal_twin(model, observations, config)
+            _marginal_twin(model, observations, config, predictor,
+                           None if pairing is None else pairing.model_index)
         saved = getattr(marginal, "predictor", None)
         note = _one_point_predictor(model, marginal, x_map[:d], cov[:d, :d])
         try:
@@ -384,7 +481,21 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         log_prob=flat_lp, chains=chains.chains, chain_names=names, diagnostics=diag, fit=fit,
         fit_nominal=fit_nominal, log_evidence=log_z, log_evidence_err=log_z_err, noise=noise,
         priors={p.name: p.describe() for p in jp.priors}, warnings=warnings_, timing_s=timing,
-        map_modes=map_modes)
+        map_modes=map_modes, unmodelled_modes=unmodelled)
+
+
+def _gated(predictor: Any, obs: ModalObservations, theta: np.ndarray, gate: PairingGate) -> ModePairing:
+    """The data's modes (mean frequency, mean shape) paired with the model's at one theta."""
+    phi = obs.reference_shapes() if (predictor.sensor_ids and obs.has_shapes) else None
+    return pair_with_model(predictor, obs.mean_frequencies(), phi, theta, gate, obs.mode_numbers)
+
+
+def _paired_likelihood(model: AffineModel, obs: ModalObservations, config: UpdateConfig, predictor: Any,
+                       pairing: ModePairing) -> tuple[ModalObservations, Any]:
+    """The data restricted to the paired modes and the likelihood with that fixed pairing."""
+    kept = select_modes(obs, pairing.observed)
+    lik, _ = build_likelihood(model, kept, config, predictor=predictor, pairing=pairing.model_index)
+    return kept, lik
 
 
 def _map_modes(model: AffineModel, obs: ModalObservations, theta: np.ndarray, fit: dict) -> dict:
@@ -435,6 +546,12 @@ def safe_loglik(lik: Any, x: np.ndarray, d: int) -> np.ndarray:
     return out
 
 
+def _modes_used(lik: Any) -> int:
+    """How many of the model's lowest modes the likelihood reads (its pairing may skip some)."""
+    st = lik.stats
+    return int(st.model_index.max()) + 1 if st.model_index is not None and st.model_index.size else len(st.f_ref)
+
+
 def _try_ritz(model: AffineModel, lik: Any, predictor: Any, x_map: np.ndarray, cov: np.ndarray,
               d: int, config: UpdateConfig, rng: np.random.Generator) -> str | None:
     """Swap in a Rayleigh-Ritz predictor for sampling when the model is large and the projection
@@ -450,7 +567,7 @@ def _try_ritz(model: AffineModel, lik: Any, predictor: Any, x_map: np.ndarray, c
     L = np.linalg.cholesky(cov[:d, :d] + 1e-300 * np.eye(d))
     check = x_map[:d] + 6.0 * rng.standard_normal((64, d)) @ L.T / np.sqrt(d)
     check = np.vstack([x_map[:d], check[np.all(check > 0, axis=1)]])
-    n_req = len(lik.stats.f_ref)
+    n_req = _modes_used(lik)
     ferr, macerr = ritz.max_error(predictor, check, min(n_req + 1, predictor.n_modes))
     if ferr < 1e-7 and macerr < 1e-7:
         lik.predictor = ritz
@@ -474,7 +591,7 @@ def _one_point_predictor(model: AffineModel, lik: Any, theta: np.ndarray, cov: n
     pts = pts[np.all(pts > 0, axis=1)]
     f_r, p_r = pred(pts)
     f_f, p_f = full(pts)
-    n = len(lik.stats.f_ref)
+    n = min(_modes_used(lik), pred.n_modes)
     ok = np.max(np.abs(f_r[:, :n] / f_f[:, :n] - 1)) < 1e-6
     if p_r.shape[1]:
         ok &= np.max(1 - mac(np.swapaxes(p_r[:, :, :n], 1, 2), np.swapaxes(p_f[:, :, :n], 1, 2))) < 1e-6
@@ -484,10 +601,14 @@ def _one_point_predictor(model: AffineModel, lik: Any, theta: np.ndarray, cov: n
     return "full model (equal to the IIRS model to 1e-6, cheaper per point)"
 
 
-def _marginal_twin(model: AffineModel, data: Any, config: UpdateConfig):
+def _marginal_twin(model: AffineModel, data: Any, config: UpdateConfig, predictor: Any = None,
+                   pairing: np.ndarray | None = None):
     """The same likelihood with the variances integrated out (the evidence needs only theta)."""
     twin = UpdateConfig(**{**asdict(config), "variance": "marginal"})
-    lik, _ = build_likelihood(model, data, twin)
+    if pairing is None:
+        lik, _ = build_likelihood(model, data, twin)
+    else:
+        lik, _ = build_likelihood(model, data, twin, predictor=predictor, pairing=pairing)
     return lik
 
 
@@ -511,4 +632,4 @@ def config_from_mapping(values: Mapping[str, Any]) -> UpdateConfig:
 
 
 __all__ = ["UpdateConfig", "Posterior", "ParameterSummary", "update", "summarise",
-           "config_from_mapping", "priors_from_structure"]
+           "config_from_mapping", "priors_from_structure", "pairing_reference"]
