@@ -45,6 +45,10 @@ def simulate_building_nonlinear(tm, factors: dict[str, float], effects: list[Eff
                                 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Absolute accelerations at the sensors (n, n_sensors) and the equivalent-linear factors.
 
+    The factors are those of the whole window after warm-up; ``story_drift`` / ``story_velocity``
+    (n - n_warm, n_stories) keep the histories for time-resolved equivalent-linear properties
+    (:mod:`shm_ros.core.simulate.equivalent_linear`).
+
     ``tm``: a shear-building truth model (``BuildingTruth``: ``theta``, ``building_matrices``, ``info``);
     ``u`` (n, 1 + n_dof): ground acceleration, then the wind force on every DOF.
     """
@@ -110,4 +114,6 @@ def simulate_building_nonlinear(tm, factors: dict[str, float], effects: list[Eff
     sig_v = dvel.std(axis=0)
     k_scale = np.where(ks > 0, equivalent_stiffness_factor(sig_d, d_ref), 1.0)
     c_scale = np.where(cs > 0, equivalent_damping_factor(sig_v, v_ref), 1.0)
-    return y, {"k_scale": k_scale, "c_scale": c_scale, "drift_rms": sig_d, "velocity_rms": sig_v}
+    return y, {"k_scale": k_scale, "c_scale": c_scale, "drift_rms": sig_d, "velocity_rms": sig_v,
+               "story_drift": drift, "story_velocity": dvel, "stiffness_nonlinear": ks > 0,
+               "damping_nonlinear": cs > 0, "drift_ref_m": d_ref, "velocity_ref_m_s": v_ref}
