@@ -136,34 +136,31 @@ def _spans(start_s: np.ndarray, resp: np.ndarray, sm: StrongMotion, length: floa
 
 
 def _phases(prep: Prepared, base: IdentifyConfig, inp: str | None, spans: dict[str, tuple[float, float]],
-            length: float, f_low: float, cfg: EventConfig, notes: list[str]) -> tuple[list[PhaseEstimate], list[ReferenceMode]]:
+            length: float, f_low: float, cfg: EventConfig, notes: list[str]
+            ) -> tuple[list[PhaseEstimate], list[ReferenceMode]]:
     """Pre-event, strong-motion and post-event estimates, and the reference modes to follow: the
-    lowest ``n_modes`` of the pre-event estimate (else post-event, else the whole record) at or above
-    0.7 x the lowest frequency of interest (a nominal first frequency may be some 10 % off)."""
-
-    def lowest(w: WindowModes) -> list[ReferenceMode]:
-        keep = [k for k in range(w.frequency_hz.size) if w.frequency_hz[k] >= 0.7 * f_low][: cfg.n_modes]
-        return [ReferenceMode(float(w.frequency_hz[k]), float(w.damping_ratio[k]), w.shapes[k]) for k in keep]
-
+    lowest ``n_modes`` at or above 0.7 x the lowest frequency of interest (a nominal first frequency
+    may be some 10 % off) of the pre-event estimate, completed by the post-event and whole-record ones."""
     dur = prep.data.shape[0] / prep.sample_rate_hz
+
     whole: dict[str, WindowModes | None] = {}
     for key, (a, b) in spans.items():
         short = (b - a) < (0.5 if key == "strong" else 2.0) * length
         whole[key] = None if short else _identify_span(prep, a, b, base, inp)
-    refs: list[ReferenceMode] = []
-    for key in ("pre", "post"):
-        w = whole[key]
-        refs = lowest(w) if w is not None else []
-        if refs:
-            if key == "post":
-                notes.append("no pre-event modes: the post-event estimate gives the reference modes")
-            break
+    # pre-event modes first; a mode the quiet pre-event data missed comes from the post-event
+    # estimate, then from the whole record (a first mode may hide in ambient noise)
+    pool: list[ReferenceMode] = []
+    for w in (whole["pre"], whole["post"], "whole"):
+        if w == "whole":
+            if len(pool) >= cfg.n_modes and pool[0].frequency_hz <= 1.3 * f_low:
+                break
+            notes.append("reference modes completed from the whole record")
+            w = _identify_span(prep, 0.0, dur, base, inp)
+        if isinstance(w, WindowModes):
+            pool = _merge(pool, w, f_low, cfg.mac_min)
+    refs = pool[: cfg.n_modes]
     if not refs:
-        w = _identify_span(prep, 0.0, dur, base, inp)
-        refs = lowest(w) if w is not None else []
-        if not refs:
-            raise ValueError("no mode identified before, after or over the whole record")
-        notes.append("no pre- or post-event modes: the whole record gives the reference modes")
+        raise ValueError("no mode identified before, after or over the whole record")
     phases = []
     for key, (a, b) in spans.items():
         w = whole[key]
@@ -173,6 +170,18 @@ def _phases(prep: Prepared, base: IdentifyConfig, inp: str | None, spans: dict[s
             continue
         phases.append(_phase_estimate(prep, key, a, b, w, refs, base, inp, length, cfg))
     return phases, refs
+
+
+def _merge(pool: list[ReferenceMode], w: WindowModes, f_low: float, mac_min: float) -> list[ReferenceMode]:
+    """``pool`` plus the modes of ``w`` at or above 0.7 f_low that match none of it, by frequency."""
+    cand = [ReferenceMode(float(w.frequency_hz[j]), float(w.damping_ratio[j]), w.shapes[j])
+            for j in range(w.frequency_hz.size) if w.frequency_hz[j] >= 0.7 * f_low]
+    if pool and cand:
+        found = WindowModes(np.array([c.frequency_hz for c in cand]), np.zeros(len(cand)), np.zeros(len(cand)),
+                            np.array([c.shape for c in cand]), "")
+        taken = match_modes(found, pool, 0.1, mac_min, max_rise=0.1)
+        cand = [c for j, c in enumerate(cand) if j not in taken]
+    return sorted(pool + cand, key=lambda r: r.frequency_hz)
 
 
 def _identify_span(prep: Prepared, a_s: float, b_s: float, cfg: IdentifyConfig, inp: str | None
@@ -242,6 +251,6 @@ def _tracks(found: list[WindowModes | None], refs: list[ReferenceMode], cfg: Eve
     tracks = []
     for r, ref in enumerate(refs):
         sm = running_median(f[:, r], cfg.smooth_windows)
-        k = int(np.nanargmin(sm)) if np.any(np.isfinite(sm)) else None
-        tracks.append(ModeTrack(r + 1, ref.frequency_hz, ref.damping_ratio, f[:, r], z[:, r], sp[:, r], sm, k))
+        low = int(np.nanargmin(sm)) if np.any(np.isfinite(sm)) else None
+        tracks.append(ModeTrack(r + 1, ref.frequency_hz, ref.damping_ratio, f[:, r], z[:, r], sp[:, r], sm, low))
     return tracks

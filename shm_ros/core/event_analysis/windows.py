@@ -57,7 +57,7 @@ def identify_segment(prep: Prepared, a: int, b: int, cfg: IdentifyConfig, input_
 
 
 def match_modes(found: WindowModes, refs: list[ReferenceMode], max_drop: float, mac_min: float,
-                max_rise: float = 0.1) -> list[int | None]:
+                max_rise: float = 0.25) -> list[int | None]:
     """For every reference, the index of the found mode that matches it (or None).
 
     A found mode is a candidate for a reference when its frequency lies within
