@@ -30,9 +30,9 @@ def plot_event(result: EventResult, path: str | Path, title: str = "") -> Path:
     else:
         ax_u.plot(t, result.response_rms_m_s2, color="0.3", lw=0.8)
         ax_u.set_ylabel(f"window RMS {result.amplitude_channel} (m/s$^2$)")
+    label = f"strong motion (Arias {100 * sm.arias_low:.0f}-{100 * sm.arias_high:.0f} % of the {sm.source})"
     for ax in (ax_u, ax_t):
-        ax.axvspan(sm.start_s, sm.end_s, color="tab:red", alpha=0.12,
-                   label=f"strong motion (Arias {100 * sm.arias_low:.0f}-{100 * sm.arias_high:.0f} % of the {sm.source})")
+        ax.axvspan(sm.start_s, sm.end_s, color="tab:red", alpha=0.12, label=label)
     for p in result.phases:
         if p.modes and p.name != "strong":
             ax_t.axvspan(p.start_s, p.end_s, color="tab:blue", alpha=0.06)
