@@ -42,7 +42,7 @@ class EventConfig:
     arias_low: float = option(0.05, "strong motion starts at this fraction of the Arias intensity")
     arias_high: float = option(0.95, "strong motion ends at this fraction of the Arias intensity")
     intensity_source: str = option(IntensitySource.AUTO.value, "record whose Arias intensity bounds the "
-                                   "strong motion: auto (the input when there is one), input or response",
+                                   "strong motion: auto (the input when input-output SSI runs), input or response",
                                    choices=IntensitySource)
     recovery_ratio: float = option(2.0, "the post-event phase starts once the moving-window response RMS "
                                    "is back below this multiple of the pre-event median (without a "
