@@ -59,36 +59,45 @@ def _truth_mode(ev, res, r: int) -> int:
     return j
 
 
+def allowed_failures(n: int, p: float = 0.95, level: float = 0.99) -> int:
+    """Fewest failures f such that a method passing each seed with probability ``p`` has at least
+    ``n - f`` passes with probability >= ``level`` (binomial tail)."""
+    return next(f for f in range(n + 1) if stats.binom.sf(n - f - 1, n, p) >= level)
+
+
 def test_moving_window_minimum_follows_the_equivalent_linear_truth(events):
     """The moving-window minimum of mode 1 is within 3 % of the truth's equivalent-linear frequency
-    of the same window and within 5 s of the truth's own minimum.
+    of the same window and within 5 s of the truth's own minimum, on every seed whose truth drops by
+    at least 15 % (the claim's domain; at PGA 1.5 m/s^2 11 of 12 seeds did, 13.9 % the least).
 
     Criterion: on 17 preliminary seeds (PGA 1.2 and 1.5) the error at the minimum had mean 0.0 %
     and standard deviation 1.45 % (largest 2.4 %), the time offset at most one step (0.9 s); a
-    normal error with that spread passes 3 % with probability p >= 0.95 per seed. Requiring at
-    least 2 of 3 seeds (CI; 10 of 12 with SHM_FULL) a correct method passes with probability
-    1 - binom.cdf(1, 3, 0.95) = 0.993 (0.980 for 10 of 12 at p = 0.95, 0.997 at the observed p)."""
-    passed, lines = 0, []
+    normal error with that spread passes 3 % with probability p >= 0.95 per seed. Allowed failures
+    among n qualifying seeds: the fewest f with P(Binomial(n, 0.95) >= n - f) >= 0.99, i.e. 1 of 3
+    (probability 0.993), 3 of 10-12."""
+    passed, lines, n = 0, [], 0
     for seed, ev, res in events:
         m = res.tracks[0]
         j = _truth_mode(ev, res, 0)
         truth = ev.track(res.window_start_s, res.window_s)
         kt = int(np.argmin(truth.frequencies_hz[:, j]))
         drop = 1 - truth.frequencies_hz[kt, j] / ev.small_amplitude_frequencies_hz[j]
-        assert drop >= 0.15, f"seed {seed}: the truth's frequency drops only {100 * drop:.1f} %"
+        # the track recovers: the last windows are back within 3 % of the reference
+        assert np.nanmedian(m.frequency_hz[-20:]) / m.reference_frequency_hz > 0.97, seed
+        if drop < 0.15:
+            lines.append(f"seed {seed}: drop {100 * drop:.1f} %, outside the claim")
+            continue
+        n += 1
         k = m.min_index
         assert k is not None
         err = m.smoothed_frequency_hz[k] / truth.frequencies_hz[k, j] - 1
         dt = res.time_s[k] - res.time_s[kt]
-        ok = abs(err) <= 0.03 and abs(dt) <= 5.0
-        passed += ok
+        passed += abs(err) <= 0.03 and abs(dt) <= 5.0
         lines.append(f"seed {seed}: drop {100 * drop:.1f} %, error at the minimum {100 * err:+.2f} %, "
                      f"time {dt:+.1f} s")
-        # the track recovers: the last windows are back within 3 % of the reference
-        tail = m.frequency_hz[-20:]
-        assert np.nanmedian(tail) / m.reference_frequency_hz > 0.97, lines[-1]
-    need = 10 if FULL else 2
-    assert passed >= need, "\n".join(lines)
+    print("\n".join(lines))
+    assert n >= (2 * len(SEEDS)) // 3, "the scenario no longer softens the structure enough:\n" + "\n".join(lines)
+    assert passed >= n - allowed_failures(n), "\n".join(lines)
 
 
 def test_pre_and_post_event_estimates_return_to_the_small_amplitude_truth(events):
@@ -124,6 +133,7 @@ def test_pre_and_post_event_estimates_return_to_the_small_amplitude_truth(events
             err = m1[0].frequency_hz / tr.frequencies_hz[0, j] - 1
             lines.append(f"seed {seed} strong mode 1: {100 * err:+.2f} % of the equivalent-linear truth")
             bad += abs(err) > 0.03
+    print("\n".join(lines))
     assert bad == 0, "\n".join(lines)
 
 
@@ -152,6 +162,7 @@ def test_io_ssi_damping_intervals_cover_the_truth(events):
             covered += ok
             total += 1
             lines.append(f"seed {seed} {name}: {pm.damping_ratio:.4f} +- {half:.4f} vs {z_true:.4f}")
+    print("\n".join(lines))
     need = 19 if FULL else 4
     assert total == 2 * len(SEEDS)
     assert covered >= need, "\n".join(lines)

@@ -21,6 +21,7 @@ from shm_ros.core.event_analysis.arias import significant_interval
 from shm_ros.core.event_analysis.config import EventConfig, IntensitySource
 from shm_ros.core.event_analysis.results import EventResult, ModeTrack, PhaseEstimate, PhaseMode, StrongMotion
 from shm_ros.core.event_analysis.windows import (
+    PHASE_STABILITY,
     ReferenceMode,
     WindowModes,
     identify_segment,
@@ -49,7 +50,8 @@ def analyse_event(window: Window, config: EventConfig | None = None,
         raise ValueError("ssi-io needs the window's input channel (structure file 'input: {sensor: ...}')")
     inp = name if method == Method.SSI_IO else None
     channels = None if inp or name is None else [c for c in window.channel_names if c != name]
-    base = IdentifyConfig(method=method.value, uncertainty=False, max_order=cfg.phase_max_order)
+    base = IdentifyConfig(method=method.value, uncertainty=False, max_order=cfg.phase_max_order,
+                          stability=PHASE_STABILITY)
     raw_fs = window.sample_rate_hz
 
     f_low = cfg.lowest_frequency_hz or lowest_frequency_hz
