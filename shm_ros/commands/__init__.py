@@ -13,6 +13,7 @@ COMMANDS = [
     "run",
     "ingest",
     "identify",
+    "event",
     "track",
     "update",
     "batch",

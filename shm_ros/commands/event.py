@@ -1,0 +1,105 @@
+"""`shm-ros event BAG --structure S.yaml --out event.json [--plots DIR] [--window SECONDS] ...`.
+
+How the modes move within each earthquake of a recording. The bag is read and windowed as by
+``shm-ros identify``; every window the ingest flagged as an event (or every window with
+``--all-windows``) is analysed by ``shm_ros.core.event_analysis.analyse_event``: short moving
+windows (10 periods of the structure's first natural frequency by default) identified by
+input-output SSI when the structure file declares an input sensor, else by SSI-cov; frequency and
+damping of the lowest modes against time and response amplitude; the strong-motion interval
+(Arias intensity 5-95 % of the input, else of the response); and pre-event, strong-motion and
+post-event estimates with standard deviations from the spread over sub-windows. Output: one record
+per event (docs/interfaces.md §3, ``events``); ``--plots DIR`` adds one figure per event (input
+acceleration, frequency against time and against amplitude).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.options import add_options
+    from shm_ros.core.event_analysis import EventConfig
+
+    p = sub.add_parser("event", help="frequency and damping within each earthquake (moving-window SSI)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("bag", help="rosbag2 bag (MCAP or sqlite3 directory)")
+    p.add_argument("--structure", required=True, help="structure YAML (sensors, optional input)")
+    p.add_argument("--out", required=True, help="output JSON file (one record per event)")
+    p.add_argument("--window", type=float, default=600.0, help="ingest window length, s (default 600)")
+    p.add_argument("--plots", default=None, help="directory for one figure per event (PNG)")
+    p.add_argument("--all-windows", action="store_true",
+                   help="analyse every window, not only those the ingest flagged as events")
+    add_options(p.add_argument_group("within-event analysis (EventConfig)"), EventConfig)
+    p.set_defaults(func=run)
+
+
+def _first_frequency(spec: Any) -> float | None:
+    """The nominal model's first natural frequency (None when the model cannot be built)."""
+    from shm_ros.core.models import build_model
+
+    try:
+        return float(build_model(spec).modes(n_modes=1).frequencies_hz[0])
+    except Exception:  # any kind without a model builder: the record's own lowest mode is used
+        return None
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
+    import numpy as np
+
+    from shm_ros.commands.options import config_from_args
+    from shm_ros.core.event_analysis import EventConfig, analyse_event
+    from shm_ros.core.provenance import stamp_output
+    from shm_ros.core.timeutil import ns_to_iso
+    from shm_ros.io.modes_json import dump
+    from shm_ros.io.recording import ingest_bag
+    from shm_ros.io.structure import load_structure
+
+    try:
+        spec = load_structure(args.structure)
+        cfg = config_from_args(EventConfig, args).validate()
+    except Exception as exc:  # StructureError / ValueError name the file and field
+        print(f"shm-ros event: {exc}", file=sys.stderr)
+        return 2
+    res = ingest_bag(args.bag, spec, window_s=args.window)
+    for d in res.mismatches:
+        print(f"shm-ros event: {args.bag}: warning: {d.message}", file=sys.stderr)
+    f1 = _first_frequency(spec)
+    plots = Path(args.plots) if args.plots else None
+    records: list[dict[str, Any]] = []
+    n_ok = 0
+    for w in res.windows:
+        if not (w.is_event or args.all_windows):
+            continue
+        rec: dict[str, Any] = {"start": ns_to_iso(w.start_ns), "end": ns_to_iso(w.end_ns), "pga_m_s2": w.pga_m_s2}
+        try:
+            result = analyse_event(w, cfg, lowest_frequency_hz=f1)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            rec.update({"window_id": w.window_id, "error": str(exc)})
+            print(f"shm-ros event: window {w.window_id}: {exc}", file=sys.stderr)
+            records.append(rec)
+            continue
+        n_ok += 1
+        rec.update(result.to_record())
+        if plots is not None:
+            from shm_ros.report.event import plot_event
+
+            rec["plot"] = str(plot_event(result, plots / f"event_{len(records):05d}.png",
+                                         f"{rec['start']}  {result.method}"))
+        records.append(rec)
+    config = {"event": asdict(cfg), "window_s": args.window, "bag": str(args.bag), "structure": str(args.structure),
+              "lowest_frequency_hz": f1}
+    out = dump(stamp_output({"events": records}, config), args.out)
+    print(f"{len(records)} event windows ({n_ok} analysed) -> {out}")
+    for r in records:
+        for m in r.get("modes", []):
+            mn = m.get("minimum")
+            if mn:
+                print(f"  {r['start']} mode {m['mode']}: {m['reference_frequency_hz']:.4g} Hz, lowest "
+                      f"{mn['frequency_hz']:.4g} Hz ({100 * mn['drop']:.1f} % down) at {mn['time_s']:.1f} s")
+    return 0 if (n_ok or not records) else 1
