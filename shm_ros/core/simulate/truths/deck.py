@@ -40,8 +40,8 @@ class DeckForm:
     shear_area_ratio: float = 0.6  # shear area / A (webs and part of the slabs)
     poisson: float = 0.2
     k_lateral_n_m: float = 1.5e8  # lateral restraint per support (elastomeric bearings on piers)
-    # partial rotational restraint per support (nominal file: 0): the bearings' footprint (a 1 m long
-    # pair under 5 GN/m gives k_v l^2 / 12 ~ 4e8), aged elastomer, backwalls; ~ EI / (3 L)
+    # partial rotational restraint per support beyond the elastomer's (nominal file: 0): the bearings'
+    # footprint (a 1 m long pair under 5 GN/m gives k_v l^2 / 12 ~ 4e8), backwalls; ~ EI / (3 L)
     k_rotation_n_m_rad: float = 1.0e9
     bearing_spacing_m: float = 5.0  # two bearings per support: torsional restraint k_v s^2 / 4
     sensor_offset_m: float = 3.0  # vertical sensors alternate +-offset from the centre line

@@ -86,14 +86,13 @@ class GirderTruth(TruthModel):
         g["elements_per_span"] = int(g["elements_per_span"]) * int(o.refine)
         soil = next((e for e in effects if e.key == "support_flexibility"), None)
         form = DeckForm() if o.model_form else None
-        k_rot = form.k_rotation_n_m_rad if form is not None else 2.0e7
         for b in g["bearings"]:
             kv = float(b["k_vertical"]) * float(np.exp(2 * scatter * rng.standard_normal()))
             if soil is not None:  # soil spring in series under the bearing
                 kv = 1.0 / (1.0 / kv + 1.0 / float(soil.params["k_soil_n_m"]))
             b["k_vertical"] = kv
-            # bearings, backwalls and the piers' footprint restrain rotation (the nominal file says 0)
-            b["k_rotation"] = float(b.get("k_rotation", 0.0)) + k_rot * float(np.exp(0.3 * rng.standard_normal()))
+            # elastomeric bearings restrain rotation a little (the nominal file says 0); they freeze
+            b["k_rotation"] = float(b.get("k_rotation", 0.0)) + 2.0e7 * float(np.exp(0.3 * rng.standard_normal()))
         length = float(sum(g["spans"]))
         sensor_ids = [s["id"] for s in d["sensors"]]
         for s in d["sensors"]:
@@ -145,6 +144,13 @@ class GirderTruth(TruthModel):
         names_in = [f"load@{node_x[i]:.2f}" for i in load_nodes]
         if form is not None:
             timoshenko_terms(model, g["spans"], secs, form, groups["EI"], groups["mass"])
+            # the bearings' footprint and the backwalls restrain rotation more (and do not freeze)
+            k_fixed = []
+            for b in g["bearings"]:
+                k_fixed.append(form.k_rotation_n_m_rad * float(np.exp(0.3 * rng.standard_normal())))
+                node = int(np.argmin(np.abs(node_x - float(b["x"]))))
+                model.K0[2 * node + 1, 2 * node + 1] += k_fixed[-1]
+            info["k_rotation_fixed"] = k_fixed
             k_lat = [form.k_lateral_n_m * float(np.exp(0.3 * rng.standard_normal())) for _ in g["bearings"]]
             if soil is not None:  # the soil under a pier gives way sideways too
                 k_lat = [1.0 / (1.0 / k + 1.0 / float(soil.params["k_soil_n_m"])) for k in k_lat]
@@ -211,9 +217,10 @@ class GirderTruth(TruthModel):
         fam_all = [fams[j] for j in order]
         sys = from_real_modes(f, z, np.vstack(parts)[order], np.hstack(outs)[:, order])
         pick = report_modes(f, fam_all, "vertical", self.info["n_truth_modes"])
-        signal = sys.shapes[2::3].real  # vertical sensors: the z rows
-        shapes = (np.column_stack([real_shape(signal[:, j]) for j in pick]) if pick.size
-                  else np.zeros((n_s, 0)))
+        # shapes along the sensors' direction (z); a lateral mode has none (the sensors see it only
+        # through their cross-axis sensitivity), so its shape is the lateral one (y rows)
+        shapes = (np.column_stack([real_shape(sys.shapes[1 if fam_all[j] == "lateral" else 2::3, j].real)
+                                   for j in pick]) if pick.size else np.zeros((n_s, 0)))
         return sys, ModalTruth(f[pick].copy(), z[pick].copy(), shapes, list(self.sensor_ids),
                                [fam_all[j] for j in pick], "vertical")
 
@@ -313,6 +320,7 @@ class GirderTruth(TruthModel):
                 "beam": "Timoshenko (shear deformation, rotary inertia)",
                 "sensor_y_m": self.info["sensor_y"],
                 "k_lateral_n_m": self.info["k_lateral"],
+                "k_rotation_fixed_n_m_rad": self.info["k_rotation_fixed"],
                 "damping_ratios": {k: [float(z) for z in v[:6]] for k, v in self.family_damping.items()},
             }
         return out

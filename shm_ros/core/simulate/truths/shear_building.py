@@ -288,16 +288,21 @@ class BuildingTruth(TruthModel):
     def respond(self, run: WindowRun) -> tuple[np.ndarray, ModalTruth, dict[str, Any]]:
         if not run.amplitude_effects:
             return run.system.simulate(run.inputs, run.dt), run.modal, {}
-        view = _NewmarkView(self, run.factors)
-        y, eq = simulate_building_nonlinear(view, run.factors, run.amplitude_effects, view.inputs(run.inputs),
-                                            run.dt, run.n_warm)
-        y = view.outputs(y, run.inputs)
+        y, eq = self.nonlinear_response(run.factors, run.amplitude_effects, run.inputs, run.dt, run.n_warm)
         _, modal = self.system(run.factors, k_scale=eq["k_scale"], c_scale=eq["c_scale"])
         extra = {"equivalent_linear": {"story_drift_rms_m": eq["drift_rms"].tolist(),
                                        "story_velocity_rms_m_s": eq["velocity_rms"].tolist(),
                                        "stiffness_factor": eq["k_scale"].tolist(),
                                        "damping_factor": eq["c_scale"].tolist()}}
         return y, modal, extra
+
+    def nonlinear_response(self, factors: dict[str, float], effects: list[Effect], u: np.ndarray, dt: float,
+                           n_warm: int) -> tuple[np.ndarray, dict[str, Any]]:
+        """Outputs (n, 3 n_sensors) for inputs ``u`` (:meth:`loads`) with amplitude-dependent story
+        springs and dashpots (:func:`simulate_building_nonlinear`), and its equivalent-linear factors."""
+        view = _NewmarkView(self, factors)
+        y, eq = simulate_building_nonlinear(view, factors, effects, view.inputs(u), dt, n_warm)
+        return view.outputs(y, u), eq
 
     def summary(self) -> dict[str, Any]:
         out: dict[str, Any] = {"rayleigh_a0_a1": list(self.rayleigh), "in_plane_family": self.in_plane_family}
