@@ -271,7 +271,13 @@ class BuildingTruth(TruthModel):
         u[:, 0] = ex.microtremor(rng, n, fs, sc.microtremor_rms_m_s2 * float(rng.lognormal(0.0, 0.3)))
         heights = np.arange(1, nf - shift + 1) / (nf - shift)
         wind = sc.wind_rms_n * float(rng.lognormal(0.0, 0.4))
-        fx = ex.wind_loads(rng, n, fs, nf - shift, wind) * heights ** 0.3
+        nw = nf - shift
+        if self.form is None:
+            fx = ex.wind_loads(rng, n, fs, nw, wind) * heights ** 0.3
+        else:  # one gust field loads both faces (wind across a diagonal), the long one more
+            h = np.diag(heights ** 0.3)
+            fxy = ex.wind_loads(rng, n, fs, nw, wind, projection=np.hstack([h, self.form.wind_y_ratio * h]))
+            fx, fy = fxy[:, :nw], fxy[:, nw:]
         u[:, 2 + dpf * shift::dpf] = fx
         if event is not None:
             n_warm = n - int(round(sc.window_s * fs))
@@ -280,7 +286,6 @@ class BuildingTruth(TruthModel):
         if self.form is not None:
             lx, ly = self.form.plan_m
             u[:, 1] = ex.microtremor(rng, n, fs, sc.microtremor_rms_m_s2 * float(rng.lognormal(0.0, 0.3)))
-            fy = ex.wind_loads(rng, n, fs, nf - shift, self.form.wind_y_ratio * wind) * heights ** 0.3
             u[:, 3 + 3 * shift::3] = fy
             u[:, 4 + 3 * shift::3] = self.form.wind_arm * (lx * fy - ly * fx)
         return u, event
