@@ -53,7 +53,7 @@ def _dense_frequencies(tm, theta):
     if tm.kind == "girder":
         Kv, Kt = tm.model.stiffness(theta), tm.torsion.stiffness(theta)
         Mv, Mt = tm.model.mass(theta), tm.torsion.mass(theta)
-        Cvt = sum(t * c for t, c in zip(theta, tm.coupling) if c is not None)
+        Cvt = sum(t * c for t, c in zip(theta, tm.coupling, strict=True) if c is not None)
         K = np.block([[Kv, np.zeros((Kv.shape[0], Kt.shape[0]))], [np.zeros((Kt.shape[0], Kv.shape[0])), Kt]])
         M = np.block([[Mv, Cvt], [Cvt.T, Mt]])
         lam = np.concatenate([eigh(K, M, eigvals_only=True),
@@ -69,7 +69,7 @@ def _dense_frequencies(tm, theta):
 def _in_plane(entry, key="frequencies_hz"):
     fam = entry["mode_families"]
     inplane = "vertical" if "vertical" in fam else "x"
-    return [v for v, f in zip(entry[key], fam) if f == inplane]
+    return [v for v, f in zip(entry[key], fam, strict=True) if f == inplane]
 
 
 def _psd_peak(freqs, psd, f0, half_band=0.04, context=0.15):

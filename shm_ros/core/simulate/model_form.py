@@ -94,7 +94,7 @@ def model_form_report(tm: TruthModel, modal: ModalTruth | None = None) -> ModelF
     ids = [s for s in tm.nominal.output_sensor_ids if s in modal.sensor_ids]
     rows = [modal.sensor_ids.index(s) for s in ids]
     f_t = modal.frequencies_hz[ip]
-    phi_t = modal.shapes[np.ix_(rows, ip)]
+    phi_t = modal.shapes[np.ix_(np.asarray(rows, dtype=int), ip)]
     model: AffineModel = build_model(tm.nominal)
     S = model.sensor_matrix(ids)
     n_m = min(model.n_dof, ip.size + 3)

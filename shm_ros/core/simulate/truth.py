@@ -145,8 +145,8 @@ class TruthModel(ABC):
     @abstractmethod
     def respond(self, run: WindowRun) -> tuple[np.ndarray, ModalTruth, dict[str, Any]]:
         """True absolute accelerations (n, 3 n_sensors) along x, y, z of the structure at every
-        sensor (column ``3 c + a``: sensors read a little of the axes they should not) incl. warm-up, the window's modal truth and extra entries of the
-        window's truth record."""
+        sensor (column ``3 c + a``: sensors read a little of the axes they should not) incl.
+        warm-up, the window's modal truth and extra entries of the window's truth record."""
 
     @abstractmethod
     def summary(self) -> dict[str, Any]:

@@ -130,10 +130,10 @@ def torsion_model(vertical: AffineModel, truth_structure: dict[str, Any], form: 
         K_terms[names.index(f"bearing{i + 1}_kv")] = Kb
     rows = {}
     for sid, sx in ((s["id"], float(s["at"]["x"])) for s in truth_structure["sensors"]):
-        e = int(np.clip(np.searchsorted(x, sx) - 1, 0, n - 2))
-        a = (sx - x[e]) / (x[e + 1] - x[e])
+        el = int(np.clip(np.searchsorted(x, sx) - 1, 0, n - 2))
+        a = (sx - x[el]) / (x[el + 1] - x[el])
         r = np.zeros(n)
-        r[e], r[e + 1] = 1 - a, a
+        r[el], r[el + 1] = 1 - a, a
         rows[sid] = r
     return AffineModel(name="deck torsion", parameter_names=list(names), K0=np.zeros((n, n)), M0=np.zeros((n, n)),
                        K_terms=K_terms, M_terms=M_terms, dof_labels=[f"t@{v:.6g}" for v in x], sensor_rows=rows,

@@ -24,9 +24,9 @@ import numpy as np
 import shm_ros.core.simulate.excitation as ex
 from shm_ros.core.modal import real_shape
 from shm_ros.core.models import build_model
+from shm_ros.core.models.base import AffineModel
 from shm_ros.core.simulate.effects import Conditions, Effect
 from shm_ros.core.simulate.linear import ModalSystem, from_real_modes
-from shm_ros.core.models.base import AffineModel
 from shm_ros.core.simulate.truth import FLAT_PRIOR, ModalTruth, TruthModel, TruthOptions, WindowRun, report_modes
 from shm_ros.core.simulate.truth_kinds import register
 from shm_ros.core.simulate.truths.deck import (DeckForm, eccentric_mass_terms, lateral_model, timoshenko_terms,
@@ -164,7 +164,8 @@ class GirderTruth(TruthModel):
             offsets[:, 1] = form.sensor_height_m
             info["sensor_y"] = {sid: float(v) for sid, v in zip(sensor_ids, offsets[:, 0], strict=True)}
             info["k_lateral"] = k_lat
-            names_in += [f"lateral@{node_x[i]:.2f}" for i in load_nodes] + [f"torque@{node_x[i]:.2f}" for i in load_nodes]
+            names_in += [f"lateral@{node_x[i]:.2f}" for i in load_nodes]
+            names_in += [f"torque@{node_x[i]:.2f}" for i in load_nodes]
         return cls(nominal=nominal, spec=spec, model=model, groups=groups, sensor_ids=sensor_ids,
                    input_names=names_in, modal_damping=damping,
                    load_dofs=2 * load_nodes, load_x=node_x[load_nodes], info=info,

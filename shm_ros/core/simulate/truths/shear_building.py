@@ -178,7 +178,7 @@ class BuildingTruth(TruthModel):
             M_terms.append(Mi)
         names = [p["name"] for p in d["parameters"]]
         K_terms += [None] * nf
-        M_terms = [None] * nf + M_terms
+        M_terms[:0] = [None] * nf
         if form is not None:  # a flexural cantilever beside the shear frame (one factor: the EI group)
             names.append("flexure")
             K_terms.append(_flexure(kx[shift:], form, nf, shift))
@@ -211,7 +211,8 @@ class BuildingTruth(TruthModel):
                 raise EffectError(f"effect damper: model={p['model']!r} (kelvin_voigt or maxwell)")
             # braces in both directions, laid out like the frames (same share of every row's stiffness)
             kd = np.where(np.repeat(sel, dpf), float(p["k_rel"]) * k_rows, 0.0)
-            dampers = {"model": p["model"], "k_d": kd, "c_d": np.where(np.repeat(sel, dpf), float(p["c_rel_s"]) * kd, 0.0)}
+            cd = np.where(np.repeat(sel, dpf), float(p["c_rel_s"]) * kd, 0.0)
+            dampers = {"model": p["model"], "k_d": kd, "c_d": cd}
         if soil is not None:
             # soil dashpot: damping ratio of the foundation on its spring alone
             c_s = 2 * soil.params["soil_damping_ratio"] * np.sqrt(soil_info["stiffness"] * soil_info["mass"])
@@ -353,7 +354,9 @@ class BuildingTruth(TruthModel):
         K = E.T @ (k_story[:, None] * E)
         if "flexure" in m.parameter_names:
             j = m.parameter_names.index("flexure")
-            K = K + theta[j] * m.K_terms[j]  # type: ignore[operator]  # set by build (not None)
+            Kf = m.K_terms[j]
+            assert Kf is not None  # set by build
+            K = K + theta[j] * Kf
         M = m.mass(theta)
         a0, a1 = self.rayleigh
         c_story = a1 * self.info["k_story"] * self.info["story_weights"] * (c_scale if c_scale is not None else 1.0)
