@@ -29,8 +29,13 @@ from shm_ros.core.simulate.effects import Conditions, Effect
 from shm_ros.core.simulate.linear import ModalSystem, from_real_modes
 from shm_ros.core.simulate.truth import FLAT_PRIOR, ModalTruth, TruthModel, TruthOptions, WindowRun, report_modes
 from shm_ros.core.simulate.truth_kinds import register
-from shm_ros.core.simulate.truths.deck import (DeckForm, eccentric_mass_terms, lateral_model, timoshenko_terms,
-                                               torsion_model)
+from shm_ros.core.simulate.truths.deck import (
+    DeckForm,
+    eccentric_mass_terms,
+    lateral_model,
+    timoshenko_terms,
+    torsion_model,
+)
 from shm_ros.core.structure import StructureSpec, structure_from_dict
 
 FAMILIES = ("vertical", "lateral", "torsion")
