@@ -38,8 +38,6 @@ from shm_ros.core.simulate.truths.deck import (
 )
 from shm_ros.core.structure import StructureSpec, structure_from_dict
 
-FAMILIES = ("vertical", "lateral", "torsion")
-
 
 @register("girder")
 @dataclass
