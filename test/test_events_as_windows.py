@@ -97,7 +97,8 @@ def test_identify_and_update_with_defaults_use_every_record(quake_bag, tmp_path,
     # the first mode of the building is found in every record, 100 Hz and 200 Hz alike (a record
     # of under a minute gives a rough estimate: 10 %); the nearest identified mode, since the x
     # sensors also see the building's first y-sway (10 % lower) and torsion modes
-    err = np.array([min(abs(m["frequency_hz"] / f - 1) for m in r["modes"]) for r, f in zip(records, f1_true, strict=True)])
+    err = np.array([min(abs(m["frequency_hz"] / f - 1) for m in r["modes"])
+                    for r, f in zip(records, f1_true, strict=True)])
     assert np.all(err < 0.1) and err[4] < 0.03, err
     upd = tmp_path / "upd"
     assert main(["update", "--structure", str(structure), "--bag", str(bag), "--out", str(upd),
