@@ -44,7 +44,8 @@ def quake_bag(tmp_path_factory):
                                 seed=10 + i, temperature_period_s=dur)
             campaign = simulate_campaign(sc)
             w = campaign.window(0)
-            f1_true.append(float(w.truth["frequencies_hz"][0]))
+            # the first x (in-plane) mode: the truth also lists the y and torsion modes among them
+            f1_true.append(float(w.truth["frequencies_hz"][w.truth["mode_families"].index("x")]))
             rec, per = w.recording, int(fs)
             for b0 in range(0, rec.n, per):
                 writer.accel_block("/site/accel_block", int(rec.stamps_ns[b0]), fs, list(rec.sensor_ids),
@@ -94,8 +95,10 @@ def test_identify_and_update_with_defaults_use_every_record(quake_bag, tmp_path,
         assert r["is_event"] and r["covariates"]["pga_m_s2"] == r["pga_m_s2"]
         assert r["covariates"]["rms_accel_m_s2"] > 0
     # the first mode of the building is found in every record, 100 Hz and 200 Hz alike (a record
-    # of under a minute gives a rough estimate: 10 %)
-    err = np.abs(np.array([min(m["frequency_hz"] for m in r["modes"]) for r in records]) / f1_true - 1)
+    # of under a minute gives a rough estimate: 10 %); the nearest identified mode, since the x
+    # sensors also see the building's first y-sway (10 % lower) and torsion modes
+    err = np.array([min(abs(m["frequency_hz"] / f - 1) for m in r["modes"])
+                    for r, f in zip(records, f1_true, strict=True)])
     assert np.all(err < 0.1) and err[4] < 0.03, err
     upd = tmp_path / "upd"
     assert main(["update", "--structure", str(structure), "--bag", str(bag), "--out", str(upd),

@@ -23,8 +23,15 @@ def _truth(c, i=0):
     return c.window(i).truth
 
 
+def _in_plane(t, key="frequencies_hz", n=6):
+    """The in-plane modes of a truth entry (the out-of-plane ones come in between)."""
+    fam = t["mode_families"]
+    inplane = "vertical" if "vertical" in fam else "x"
+    return np.array([v for v, f in zip(t[key], fam, strict=True) if f == inplane][:n])
+
+
 def _ratios(a, b, n=3):
-    return np.array(a["frequencies_hz"][:n]) / np.array(b["frequencies_hz"][:n])
+    return _in_plane(a, n=n) / _in_plane(b, n=n)
 
 
 def _energy_share(c, group, i=0):
@@ -57,9 +64,15 @@ def _assert_hidden(c_effect, c_plain, key):
 ])
 def test_stiffness_effects_follow_the_first_order_energy_share(name, key, params, t_mean):
     """Documented amount: r_j^2 - 1 = s_j (F - 1) to first order, s_j = share of mode j's strain
-    energy in the scaled part, F = stiffness factor (exactly sqrt(F) for a uniformly scaled building)."""
-    plain = _campaign(name, t_mean_c=t_mean)
-    eff = _campaign(name, [(key, params)], t_mean_c=t_mean)
+    energy in the scaled part, F = stiffness factor (exactly sqrt(F) for a uniformly scaled building).
+    The shares are those of the in-plane model, so the amounts are checked on the planar truth (model
+    form off); on the richer truth the in-plane modes move the same way (a deck's vertical modes
+    hybridise with its torsion modes, which the same effect moves too)."""
+    rich = _ratios(_truth(_campaign(name, [(key, params)], t_mean_c=t_mean)), _truth(_campaign(name, t_mean_c=t_mean)))
+    F_rich = _campaign(name, [(key, params)], t_mean_c=t_mean).factors(0)
+    assert np.all(np.sign(rich - 1) == np.sign(list(F_rich.values())[0] - 1)), rich
+    plain = _campaign(name, t_mean_c=t_mean, model_form=False)
+    eff = _campaign(name, [(key, params)], t_mean_c=t_mean, model_form=False)
     _assert_hidden(eff, plain, key)
     te, tp = _truth(eff), _truth(plain)
     (group, F), = te["effect_factors"].items()
@@ -109,7 +122,8 @@ def test_added_mass_lowers_every_frequency_by_one_over_sqrt(name, fraction):
     plain = _campaign(name)
     eff = _campaign(name, [("added_mass", {"fraction": fraction, "when": "always"})])
     _assert_hidden(eff, plain, "added_mass")
-    assert np.allclose(_ratios(_truth(eff), _truth(plain), 6), 1 / np.sqrt(1 + fraction), rtol=1e-7)
+    # |lambda| of complex (non-classically damped) modes is not exactly the undamped frequency: 1e-4
+    assert np.allclose(_ratios(_truth(eff), _truth(plain), 6), 1 / np.sqrt(1 + fraction), rtol=1e-4)
 
 
 def test_added_mass_of_rush_hour_traffic_only_in_rush_hours():
@@ -135,7 +149,7 @@ def test_building_foundation_sway_lowers_frequencies_and_moves_the_ground_sensor
     plain = _campaign("building", window_s=120.0)
     eff = _campaign("building", [("support_flexibility", {})], window_s=120.0)
     _assert_hidden(eff, plain, "support_flexibility")
-    assert eff.truth_model.model.n_dof == plain.truth_model.model.n_dof + 1
+    assert eff.truth_model.model.n_dof == plain.truth_model.model.n_dof + 3  # x, y, twist of the foundation
     te, tp = _truth(eff), _truth(plain)
     r = _ratios(te, tp)
     assert np.all(r < 0.985) and np.all(r > 0.9)
@@ -144,10 +158,12 @@ def test_building_foundation_sway_lowers_frequencies_and_moves_the_ground_sensor
 
 
 def test_kelvin_voigt_dampers_scale_frequencies_and_add_damping_exactly():
+    """Closed-form amounts hold for the planar shear building (model form off: classical damping,
+    no flexural part the braces do not stiffen); the richer truth follows them to a few per cent."""
     k_rel, c_rel = 0.3, 0.02
-    plain = _campaign("building")
+    plain = _campaign("building", model_form=False)
     eff = _campaign("building", [("damper", {"k_rel": k_rel, "c_rel_s": c_rel, "fail_at": "1h"})],
-                    n_windows=2, pause_s=3600.0)
+                    n_windows=2, pause_s=3600.0, model_form=False)
     _assert_hidden(eff, plain, "damper")
     t0, t1, tp = _truth(eff, 0), _truth(eff, 1), _truth(plain)
     assert np.allclose(_ratios(t0, tp, 6), np.sqrt(1 + k_rel), rtol=1e-9)
@@ -158,6 +174,9 @@ def test_kelvin_voigt_dampers_scale_frequencies_and_add_damping_exactly():
     # damper failure (fail_factor 0) at 1 h: back to the bare frame, ~12 % lower as in the paper
     assert np.allclose(t1["frequencies_hz"], tp["frequencies_hz"], rtol=1e-9)
     assert 1 - t1["frequencies_hz"][0] / t0["frequencies_hz"][0] == pytest.approx(1 - 1 / np.sqrt(1.3), rel=1e-6)
+    rich = _ratios(_truth(_campaign("building", [("damper", {"k_rel": k_rel, "c_rel_s": c_rel})])),
+                   _truth(_campaign("building")), 6)
+    assert np.allclose(rich, np.sqrt(1 + k_rel), rtol=0.03), rich
 
 
 def test_maxwell_dampers_stiffen_less_than_kelvin_voigt_and_add_damping():
@@ -166,11 +185,18 @@ def test_maxwell_dampers_stiffen_less_than_kelvin_voigt_and_add_damping():
     mx = _truth(_campaign("building", [("damper", {"model": "maxwell"})]))
     r_mx, r_kv = _ratios(mx, plain), _ratios(kv, plain)
     assert np.all(r_mx > 1.0) and np.all(r_mx < r_kv + 1e-12)
-    assert np.all(np.array(mx["damping_ratios"][:3]) > 1.5 * np.array(plain["damping_ratios"][:3]))
+    assert np.all(_in_plane(mx, "damping_ratios", 3) > 1.5 * _in_plane(plain, "damping_ratios", 3))
 
 
 def test_amplitude_dependent_stiffness_and_damping_follow_the_equivalent_linear_model():
-    kw = dict(window_s=60.0, seed=3)
+    """Exact eigenvalues are assembled here for the planar building (model form off); the richer
+    truth is checked for the same direction of change."""
+    rich = _campaign("building-earthquake", [("amplitude_stiffness", {"drift_ref_m": 0.005}),
+                                             ("amplitude_damping", {"velocity_ref_m_s": 0.01})], window_s=60.0, seed=3)
+    tr, trp = _truth(rich), _truth(_campaign("building-earthquake", window_s=60.0, seed=3))
+    assert np.all(_ratios(tr, trp) < 0.995)
+    assert _in_plane(tr, "damping_ratios")[0] > 1.05 * _in_plane(trp, "damping_ratios")[0]
+    kw = dict(window_s=60.0, seed=3, model_form=False)
     plain = _campaign("building-earthquake", **kw)
     eff = _campaign("building-earthquake", [("amplitude_stiffness", {"drift_ref_m": 0.005}),
                                             ("amplitude_damping", {"velocity_ref_m_s": 0.01})], **kw)
@@ -223,7 +249,8 @@ def test_story_damage_on_a_building_with_foundation_sway_hits_the_named_story():
     theta = tm.theta(both.factors(0))
     k = tm.building_matrices(theta, both.factors(0))["k_story"]
     k0 = soil.truth_model.building_matrices(soil.truth_model.theta({}), {})["k_story"]
-    assert np.allclose(k / k0, [1.0, 0.85] + [1.0] * (k.size - 2))  # foundation spring untouched
+    # foundation springs (x, y, twist) untouched, story 1 (its x, y and twist rows) at 0.85
+    assert np.allclose(k / k0, [1.0] * 3 + [0.85] * 3 + [1.0] * (k.size - 6))
     assert np.all(_ratios(_truth(both), _truth(soil)) < 1.0)
 
 
@@ -242,7 +269,7 @@ def test_girder_amplitude_effects_follow_the_window_rms_acceleration():
         a = eq["rms_accel_m_s2"]
         assert abs(a - eq["rms_accel_response_m_s2"]) < 0.02 * a  # the fixed point converged
         assert eq["stiffness_factor"] == pytest.approx(1 / (1 + a / 1.0), rel=1e-12)
-        assert np.allclose(np.array(te["damping_ratios"]) / np.array(tp["damping_ratios"]), 1 + a / 0.2, rtol=1e-9)
+        assert np.allclose(_in_plane(te, "damping_ratios") / _in_plane(tp, "damping_ratios"), 1 + a / 0.2, rtol=1e-9)
         r = _ratios(te, tp)
         s = _energy_share(plain, "EI", i)
         F = eq["stiffness_factor"]

@@ -31,15 +31,45 @@ def test_truth_json_frequencies_are_eigenvalues_of_the_truth_model(tmp_path, nam
     tm = c.truth_model
     for i, w in enumerate(truth["windows"]):
         theta = tm.theta(c.factors(i))
-        # independent: full dense generalised eigenproblem of the truth model's K(theta), M(theta)
-        K = tm.model.stiffness(theta) if name == "girder" else tm.building_matrices(theta, {})["K"]
-        lam = eigh(K, tm.model.mass(theta), eigvals_only=True)
-        f = np.sqrt(lam[: len(w["frequencies_hz"])]) / (2 * np.pi)
-        assert np.allclose(w["frequencies_hz"], f, rtol=1e-7), (w["frequencies_hz"], f)
+        f = _dense_frequencies(tm, theta)  # every family, ascending
+        got = np.array(w["frequencies_hz"])
+        # the entry lists the lowest six in-plane modes and every mode below the sixth
+        # 1e-6: a stiff deck swaying on soft lateral bearings is an ill-conditioned eigenproblem
+        # (subset and dense solvers agree to ~3e-7 on those modes)
+        assert np.allclose(got, f[: got.size], rtol=1e-6), (got, f)
+        assert w["mode_families"].count(tm.in_plane_family) == 6
         assert w["temperature_c"] == pytest.approx(c.conditions(i).temperature_c, abs=1e-3)
     # the windows differ because temperature differs, and truth follows
     fr = np.array([w["frequencies_hz"][0] for w in truth["windows"]])
     assert np.ptp(fr) > 0
+
+
+def _dense_frequencies(tm, theta):
+    """Independent: full dense eigenproblems of the truth model's matrices. Girder: vertical bending
+    coupled to torsion by the eccentric mass, and lateral bending; building: the complex modes of
+    the state space of M, K, C (non-classical damping: |lambda| is not the undamped frequency)."""
+    from scipy.linalg import eig
+
+    if tm.kind == "girder":
+        Kv, Kt = tm.model.stiffness(theta), tm.torsion.stiffness(theta)
+        Mv, Mt = tm.model.mass(theta), tm.torsion.mass(theta)
+        Cvt = sum(t * c for t, c in zip(theta, tm.coupling, strict=True) if c is not None)
+        K = np.block([[Kv, np.zeros((Kv.shape[0], Kt.shape[0]))], [np.zeros((Kt.shape[0], Kv.shape[0])), Kt]])
+        M = np.block([[Mv, Cvt], [Cvt.T, Mt]])
+        lam = np.concatenate([eigh(K, M, eigvals_only=True),
+                              eigh(tm.lateral.stiffness(theta), tm.lateral.mass(theta), eigvals_only=True)])
+        return np.sort(np.sqrt(lam)) / (2 * np.pi)
+    m = tm.building_matrices(theta, {})
+    n = m["M"].shape[0]
+    Minv = np.linalg.inv(m["M"])
+    lam = eig(np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ m["K"], -Minv @ m["C"]]]))[0]
+    return np.sort(np.abs(lam[lam.imag > 0])) / (2 * np.pi)
+
+
+def _in_plane(entry, key="frequencies_hz"):
+    fam = entry["mode_families"]
+    inplane = "vertical" if "vertical" in fam else "x"
+    return [v for v, f in zip(entry[key], fam, strict=True) if f == inplane]
 
 
 def _psd_peak(freqs, psd, f0, half_band=0.04, context=0.15):
@@ -76,7 +106,7 @@ def test_welch_peaks_of_long_windows_agree_with_truth_within_1pct(name):
         freqs, P = welch(x[:, out], fs=sc.fs, nperseg=2 ** 14, axis=0)
         # normalise each channel so that one loud sensor does not hide a mode
         psd = (P / P.sum(axis=0)).sum(axis=1)
-        for f_true in truth["frequencies_hz"][:3]:
+        for f_true in _in_plane(truth)[:3]:
             f_peak, prominence = _psd_peak(freqs, psd, f_true)
             assert abs(f_peak - f_true) / f_true < 0.01, (name, seed, f_true, f_peak)
             assert prominence > 5.0, (name, seed, f_true, prominence)
@@ -89,7 +119,7 @@ def test_nominal_model_is_not_the_truth_model():
         nominal = build_model(structure_from_dict(c.nominal_structure))
         f_nom = nominal.modes(n_modes=3).frequencies_hz
         w = c.window(0)
-        f_true = np.array(w.truth["frequencies_hz"][:3])
+        f_true = np.array(_in_plane(w.truth)[:3])
         rel = np.abs(f_true - f_nom) / f_nom
         assert rel.max() > 0.005 and rel.max() < 0.25, (name, f_nom, f_true)
         if name == "girder":
@@ -98,7 +128,7 @@ def test_nominal_model_is_not_the_truth_model():
             dx = [abs(tm.info["sensor_x"][s.id] - s.x) for s in tm.nominal.sensors]
             assert 0.0 < max(dx) < 1.0
             # damping is not the nominal Rayleigh 2 %/2 %
-            assert not np.allclose(w.truth["damping_ratios"][:2], 0.02, atol=2e-3)
+            assert not np.allclose(_in_plane(w.truth, "damping_ratios")[:2], 0.02, atol=2e-3)
 
 
 @pytest.mark.parametrize("name", ["girder", "building"])
@@ -119,7 +149,9 @@ def test_truth_mode_shapes_match_the_recorded_deflection_shapes(name):
         for a in range(n):
             for b in range(a, n):
                 f, spectra[a, b] = csd(x[:, a], x[:, b], fs=c.scenario.fs, nperseg=2 ** 13)
-        for k, f_true in enumerate(w.truth["frequencies_hz"][:3]):
+        inplane = [k for k, f in enumerate(w.truth["mode_families"]) if f == c.truth_model.in_plane_family]
+        for k in inplane[:3]:
+            f_true = w.truth["frequencies_hz"][k]
             j = int(np.argmin(np.abs(f - f_true)))
             G = np.empty((n, n), complex)
             for (a, b), s_ab in spectra.items():

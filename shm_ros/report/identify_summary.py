@@ -33,7 +33,11 @@ def match_to_truth(estimates: list[ModalEstimate], truth: dict[str, Any], n_mode
         tw = by_start.get(e.start_ns)
         if tw is None:
             continue
-        true_f = list(tw["frequencies_hz"][:n_modes])
+        # the in-plane modes (the simulator also lists out-of-plane ones, marked in mode_families)
+        fams, plane = tw.get("mode_families") or [], (truth.get("truth_model") or {}).get("in_plane_family")
+        idx = ([k for k, f in enumerate(fams) if f == plane] if fams and plane
+               else list(range(len(tw["frequencies_hz"]))))
+        true_f = [tw["frequencies_hz"][k] for k in idx[:n_modes]]
         shapes = tw.get("mode_shapes", {})
         found: list[float | None] = []
         err: list[float | None] = []
@@ -48,7 +52,7 @@ def match_to_truth(estimates: list[ModalEstimate], truth: dict[str, Any], n_mode
             best = min(cands, key=lambda m: abs(m.frequency_hz - f))
             found.append(best.frequency_hz)
             err.append(100.0 * (best.frequency_hz - f) / f)
-            true_shape = _true_shape(shapes, k, e.sensor_ids)
+            true_shape = _true_shape(shapes, idx[k], e.sensor_ids)
             macs.append(None if true_shape is None else float(mac(np.asarray(best.mode_shape), true_shape)))
         out.append(TruthMatch(e.window_id, true_f, found, err, macs))
     return out

@@ -23,7 +23,7 @@ import shm_ros.core.simulate.excitation as ex
 from shm_ros.core.simulate.effects import Conditions, Effect, EffectError, make_effect
 from shm_ros.core.simulate.linear import ModalSystem
 from shm_ros.core.simulate.scenario import Scenario, named_scenario
-from shm_ros.core.simulate.sensors import Recording, SensorModel, apply_faults
+from shm_ros.core.simulate.sensors import AXES, Recording, SensorModel, apply_faults
 from shm_ros.core.simulate.truth import ModalTruth, TruthModel, WindowRun, build_truth
 from shm_ros.core.simulate.truth_kinds import TRUTH_KINDS
 from shm_ros.core.types import Window
@@ -69,6 +69,7 @@ class Campaign:
     temperature_measured_c: np.ndarray
     window_starts_ns: np.ndarray
     earthquakes: dict[int, dict[str, float]] = field(default_factory=dict)
+    _model_form: dict[str, Any] | None = field(default=None, repr=False)
 
     @property
     def n_windows(self) -> int:
@@ -139,11 +140,13 @@ class Campaign:
         y, modal, extra = self.truth_model.respond(WindowRun(factors=factors, amplitude_effects=amp, system=sys,
                                                              modal=modal, inputs=u, dt=dt, n_warm=n_warm,
                                                              inputs_for=inputs_for))
-        accel = np.ascontiguousarray(y[n_warm:])
+        xyz = y[n_warm:].reshape(n, len(self.sensors), 3)  # x, y, z of the structure at every sensor
+        accel = np.ascontiguousarray(np.column_stack([xyz[:, c, AXES.index(s.frame_axis)]
+                                                      for c, s in enumerate(self.sensors)]))
         start, end = self.window_bounds_ns(i)
         stamps = start + np.round(np.arange(n) * (1e9 / sc.fs)).astype(np.int64)
         nrng = rng_for(sc.seed, 4, i)
-        values = np.column_stack([s.measure(nrng, accel[:, c]) for c, s in enumerate(self.sensors)])
+        values = np.column_stack([s.measure(nrng, xyz[:, c]) for c, s in enumerate(self.sensors)])
         idle = None
         if with_idle_axes if with_idle_axes is not None else sc.output == "imu":
             idle = np.stack([s.idle_axes(nrng, n) for s in self.sensors], axis=1)
@@ -174,6 +177,7 @@ class Campaign:
             "temperature_measured_c": _r(self.measured_temperature(i), 4),
             "local_hour": round(cond.local_hour, 4),
             "frequencies_hz": [float(f) for f in modal.frequencies_hz],
+            "mode_families": list(modal.families),
             "damping_ratios": [float(z) for z in modal.damping_ratios],
             "mode_shapes": shapes,
             "effect_factors": {k: float(v) for k, v in sorted(factors.items())},
@@ -202,12 +206,25 @@ class Campaign:
             "hidden_effects": [e.describe() for e in self.effects],
             "faults": [vars(f) for f in sc.faults],
             "truth_model": self.truth_model_summary(),
+            "model_form": self.model_form_report(),
             "sensors": [{"id": s.sensor_id, "axis": s.axis, "gain": s.gain, "offsets_m_s2": list(s.offsets),
                          "gravity_axis": s.gravity_axis, "noise_rms_m_s2": s.noise_rms, "lsb_m_s2": s.lsb,
-                         "full_scale_m_s2": s.full_scale} for s in self.sensors],
+                         "full_scale_m_s2": s.full_scale, "misalignment_deg": s.misalignment_deg,
+                         "cross_axis": list(s.cross_axis),
+                         "sensitivity_xyz": None if s.sensitivity is None else list(s.sensitivity)}
+                        for s in self.sensors],
             "temperature_sensor": {"id": "t1", "period_s": sc.temperature_period_s},
             "earthquakes": {str(k): v for k, v in sorted(self.earthquakes.items())},
         }
+
+    def model_form_report(self) -> dict[str, Any]:
+        """What the best-fitting analysis model misses of the truth at reference conditions
+        (:func:`shm_ros.core.simulate.model_form.model_form_report`), computed once."""
+        if self._model_form is None:
+            from shm_ros.core.simulate.model_form import model_form_report
+
+            self._model_form = model_form_report(self.truth_model).to_dict()
+        return self._model_form
 
     def truth_model_summary(self) -> dict[str, Any]:
         tm = self.truth_model
@@ -257,12 +274,14 @@ def simulate_campaign(scenario: Scenario) -> Campaign:
             raise EffectError("scenario: amplitude-dependent effects work with kelvin_voigt dampers only")
     truth = build_truth(sc.structure, effects, rng_for(sc.seed, 0), refine=sc.refine, scatter=sc.property_scatter,
                         misplacement_std_m=sc.misplacement_std_m, damping_range=sc.truth_damping,
-                        n_truth_modes=sc.n_truth_modes, fs=sc.fs)
+                        n_truth_modes=sc.n_truth_modes, fs=sc.fs, model_form=sc.model_form)
     srng = rng_for(sc.seed, 1)
     sensors = []
     for sid in truth.sensor_ids:
         s = truth.nominal.sensor(sid)
-        sensors.append(SensorModel.draw(srng, sid, s.source.axis, noise_rms=sc.noise_rms_m_s2))
+        frame = {"vertical": "z", "x": "x", "y": "y"}.get(s.direction, s.source.axis)
+        sensors.append(SensorModel.draw(srng, sid, s.source.axis, noise_rms=sc.noise_rms_m_s2,
+                                        imperfect=sc.model_form, frame_axis=frame))
     interval_ns = int(round(sc.interval_s * 1e9))
     start_ns = int(round(sc.start_epoch_s * 1e9))
     starts = start_ns + interval_ns * np.arange(sc.n_windows, dtype=np.int64)

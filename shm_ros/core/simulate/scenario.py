@@ -116,7 +116,10 @@ class Scenario:
     property_scatter: float = 0.03  # relative std of stiffness / mass of the truth model
     misplacement_std_m: float = 0.15  # girder sensors
     truth_damping: tuple[float, float] = (0.012, 0.025)  # range of the truth's modal damping ratios
-    n_truth_modes: int = 6
+    n_truth_modes: int = 6  # in-plane modes in truth.json; out-of-plane modes among them come in addition
+    # the truth is richer than any analysis model of its kind (out-of-plane modes, shear deformation,
+    # non-classical damping, imperfect sensors; core/simulate/truths/*): off for tests of other things
+    model_form: bool = True
     # climate and loads
     t_mean_c: float = 5.0
     t_daily_c: float = 6.0

@@ -30,21 +30,55 @@ class SensorModel:
     noise_rms: float = 1e-4  # m/s^2 per sample
     lsb: float = 2.0 ** -19  # quantisation step, m/s^2 (about 24 bits over +-2 g)
     full_scale: float = 2.0 * GRAVITY
+    # what the signal axis reads of a unit acceleration along x, y, z of the structure's frame
+    # (z up; None: exactly ``frame_axis``); see :meth:`draw`
+    sensitivity: tuple[float, float, float] | None = None
+    frame_axis: str = "z"  # the structure axis the sensor measures (x, y or z = vertical)
+    misalignment_deg: float = 0.0
+    cross_axis: tuple[float, float] = (0.0, 0.0)  # sensitivity to the two other axes, beyond misalignment
 
     @staticmethod
     def draw(rng: np.random.Generator, sensor_id: str, axis: str, noise_rms: float = 1e-4,
-             gain_std: float = 0.01, offset_std: float = 0.02) -> SensorModel:
+             gain_std: float = 0.01, offset_std: float = 0.02, imperfect: bool = False,
+             frame_axis: str | None = None) -> SensorModel:
+        """A sensor with a drawn gain and offsets; ``imperfect`` adds what a data sheet allows of a
+        real MEMS/force-balance accelerometer mounted by hand: gain error 1-3 %, misalignment 0.5-2
+        degrees (towards a random direction) and cross-axis sensitivity 1-3 %."""
         gain = float(1.0 + gain_std * rng.standard_normal())
         ox, oy, oz = (float(v) for v in offset_std * rng.standard_normal(3))
-        return SensorModel(sensor_id=sensor_id, axis=axis, gain=gain, offsets=(ox, oy, oz), noise_rms=noise_rms)
+        out = SensorModel(sensor_id=sensor_id, axis=axis, gain=gain, offsets=(ox, oy, oz), noise_rms=noise_rms,
+                          frame_axis=frame_axis or axis)
+        if imperfect:
+            out.gain = float(1.0 + rng.choice([-1.0, 1.0]) * rng.uniform(0.01, 0.03))
+            delta = np.deg2rad(rng.uniform(0.5, 2.0))
+            azimuth = rng.uniform(0.0, 2 * np.pi)
+            cross_dir = rng.uniform(0.0, 2 * np.pi)
+            cross = rng.uniform(0.01, 0.03) * np.array([np.cos(cross_dir), np.sin(cross_dir)])
+            i = AXES.index(out.frame_axis)
+            others = [j for j in range(3) if j != i]
+            sens = np.zeros(3)
+            sens[i] = np.cos(delta)
+            sens[others] = np.sin(delta) * np.array([np.cos(azimuth), np.sin(azimuth)]) + cross
+            out.sensitivity = (float(sens[0]), float(sens[1]), float(sens[2]))
+            out.misalignment_deg = float(np.rad2deg(delta))
+            out.cross_axis = (float(cross[0]), float(cross[1]))
+        return out
 
     def static(self, axis: str) -> float:
-        """Static reading of ``axis``: its offset plus gravity on the vertical axis."""
+        """Static reading of ``axis``: its offset plus gravity on the vertical axis (for the signal
+        axis of a misaligned sensor: the share of gravity its sensing direction sees)."""
         i = AXES.index(axis)
+        if axis == self.axis and self.sensitivity is not None:
+            return self.offsets[i] + GRAVITY * self.sensitivity[2]  # gravity is along the structure's z
         return self.offsets[i] + (GRAVITY if axis == self.gravity_axis else 0.0)
 
     def measure(self, rng: np.random.Generator, accel: np.ndarray) -> np.ndarray:
-        """Reading of the signal axis for true acceleration ``accel`` (n,) in m/s^2."""
+        """Reading of the signal axis for true acceleration ``accel``: (n,) along the measured
+        direction, or (n, 3) along x, y, z of the structure (read through :attr:`sensitivity`), m/s^2."""
+        accel = np.asarray(accel, dtype=float)
+        if accel.ndim == 2:
+            s = np.eye(3)[AXES.index(self.frame_axis)] if self.sensitivity is None else np.asarray(self.sensitivity)
+            accel = accel @ s
         y = self.gain * accel + self.static(self.axis) + self.noise_rms * rng.standard_normal(accel.shape)
         return self.quantise(y)
 

@@ -2,7 +2,13 @@
 
 It differs from the nominal structure file the way a real structure differs from its design model
 (finer mesh, scattered properties, misplaced sensors, damping that is not what the file says), plus
-the hidden effects the scenario switches on (:mod:`shm_ros.core.simulate.effects`). Every per-window
+the hidden effects the scenario switches on (:mod:`shm_ros.core.simulate.effects`). With
+``model_form`` (the named scenarios' default) it is also richer than any analysis model of its kind:
+motion the analysis model has no DOF for (a girder's lateral bending and torsion, a building's
+y-sway and torsion from eccentric mass), physics it leaves out (shear deformation, partial rotational
+restraint, non-classical damping); :mod:`shm_ros.core.simulate.model_form` reports what that costs
+the best-fitting analysis model. Every mode carries its family (:attr:`ModalTruth.families`): the
+in-plane family is the motion the analysis model describes. Every per-window
 property change is a multiplicative factor on a parameter of the truth model's affine form
 ``K = K0 + sum theta_i K_i`` (parameters the truth spec declares for itself, e.g. one per span).
 
@@ -36,8 +42,33 @@ class ModalTruth:
 
     frequencies_hz: np.ndarray
     damping_ratios: np.ndarray
-    shapes: np.ndarray  # (n_sensors, n_modes) real, largest |.| = +1 per mode
+    shapes: np.ndarray  # (n_sensors, n_modes) real, largest |.| = +1 per mode (signal axes)
     sensor_ids: list[str]
+    families: list[str] = field(default_factory=list)  # per mode, e.g. "vertical" / "lateral" / "torsion"
+    in_plane_family: str = ""  # the family the analysis model describes ("vertical", "x", ...)
+
+    def in_plane(self) -> np.ndarray:
+        """Indices of the in-plane modes (all modes when no family is marked)."""
+        if not self.families:
+            return np.arange(self.frequencies_hz.size)
+        return np.array([j for j, f in enumerate(self.families) if f == self.in_plane_family], dtype=int)
+
+    def select(self, idx: np.ndarray) -> ModalTruth:
+        fam = [self.families[j] for j in idx] if self.families else []
+        return ModalTruth(self.frequencies_hz[idx], self.damping_ratios[idx], self.shapes[:, idx],
+                          list(self.sensor_ids), fam, self.in_plane_family)
+
+
+def report_modes(f: np.ndarray, families: list[str], in_plane: str, n_in_plane: int) -> np.ndarray:
+    """Indices (ascending frequency) of the modes a truth reports: the lowest ``n_in_plane`` in-plane
+    modes and every out-of-plane mode below the highest of them (the modes a record of that band
+    holds; ``f`` ascending)."""
+    inp = [j for j, fam in enumerate(families) if fam == in_plane][:n_in_plane]
+    if not inp:
+        return np.zeros(0, dtype=int)
+    top = f[inp[-1]]
+    return np.array([j for j, fam in enumerate(families) if j in inp or (fam != in_plane and f[j] <= top)],
+                    dtype=int)
 
 
 @dataclass
@@ -48,8 +79,9 @@ class TruthOptions:
     scatter: float = 0.03  # relative scatter of stiffness and mass properties
     misplacement_std_m: float = 0.15  # sensor misplacement (kinds with continuous sensor positions)
     damping_range: tuple[float, float] = (0.012, 0.025)  # truth damping ratios
-    n_truth_modes: int = 6
+    n_truth_modes: int = 6  # in-plane modes reported; out-of-plane modes among them come in addition
     fs: float = 100.0
+    model_form: bool = True  # richer than the analysis model (see module doc)
 
 
 @dataclass
@@ -86,6 +118,7 @@ class TruthModel(ABC):
     input_names: list[str]
     info: dict[str, Any] = field(default_factory=dict)
     max_frequency_hz: float = 45.0
+    in_plane_family: str = ""  # family of the modes the analysis model describes
 
     @property
     def kind(self) -> str:
@@ -111,8 +144,9 @@ class TruthModel(ABC):
 
     @abstractmethod
     def respond(self, run: WindowRun) -> tuple[np.ndarray, ModalTruth, dict[str, Any]]:
-        """True absolute accelerations (n, n_sensors) incl. warm-up, the window's modal truth and
-        extra entries of the window's truth record."""
+        """True absolute accelerations (n, 3 n_sensors) along x, y, z of the structure at every
+        sensor (column ``3 c + a``: sensors read a little of the axes they should not) incl.
+        warm-up, the window's modal truth and extra entries of the window's truth record."""
 
     @abstractmethod
     def summary(self) -> dict[str, Any]:
@@ -133,7 +167,7 @@ class TruthModel(ABC):
 def build_truth(structure: dict[str, Any], effects: list[Effect], rng: np.random.Generator, *,
                 refine: int = 4, scatter: float = 0.03, misplacement_std_m: float = 0.15,
                 damping_range: tuple[float, float] = (0.012, 0.025), n_truth_modes: int = 6,
-                fs: float = 100.0) -> TruthModel:
+                fs: float = 100.0, model_form: bool = True) -> TruthModel:
     """Truth model of the nominal ``structure`` mapping (see module doc); ``rng`` draws the scatter."""
     nominal = structure_from_dict(copy.deepcopy(structure), source="<nominal>")
     try:
@@ -142,5 +176,6 @@ def build_truth(structure: dict[str, Any], effects: list[Effect], rng: np.random
         raise EffectError(f"cannot simulate a structure of kind {nominal.kind!r} "
                           f"({' or '.join(simulated_kinds())})") from None
     options = TruthOptions(refine=refine, scatter=scatter, misplacement_std_m=misplacement_std_m,
-                           damping_range=damping_range, n_truth_modes=n_truth_modes, fs=fs)
+                           damping_range=damping_range, n_truth_modes=n_truth_modes, fs=fs,
+                           model_form=model_form)
     return cls.build(nominal, structure, effects, rng, options)
