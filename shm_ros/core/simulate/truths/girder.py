@@ -192,7 +192,11 @@ class GirderTruth(TruthModel):
             if fam == "vertical":
                 keep[0] = True  # at least one mode whatever the sample rate
             f, phi = f[keep], phi[:, keep]
-            zs = self.modal_damping if fam == "vertical" else self.family_damping[fam]  # type: ignore[index]
+            if fam == "vertical":
+                zs = self.modal_damping
+            else:
+                assert self.family_damping is not None  # set by build whenever out-of-plane families exist
+                zs = self.family_damping[fam]
             out = np.zeros((n_s, 3, f.size))
             P = np.zeros((f.size, n_in))
             if fam == "lateral":
