@@ -163,6 +163,9 @@ class BuildingTruth(TruthModel):
             k_rows = np.column_stack([kx, ky, kt]).ravel()
             sensor_xy[:] = form.sensor_xy_m
             sensor_xy += 0.3 * rng.standard_normal(sensor_xy.shape)
+            # a base sensor (floor 0) sits near the foundation's centre, as base instruments usually do
+            on_base = np.array([int(s["at"]["floor"]) == shift for s in d["sensors"]], bool)
+            sensor_xy[on_base] -= np.asarray(form.sensor_xy_m)
         n = dpf * nf
         E = _story_vectors(nf, dpf)
         K_terms: list[np.ndarray | None] = []
