@@ -23,13 +23,15 @@ from .evidence import nested_evidence
 from .fit import modal_fit
 from .forward import build_predictor
 from .likelihoods import FitnessLikelihood, GaussianModalLikelihood, InverseGamma
+from .model_error import ModelErrorLikelihood
 from .observations import ModalObservations
 from .priors import JointPrior, Prior, PriorError, priors_from_specs
 from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance, run_sampler
 
 
 class Likelihood(enum.StrEnum):
-    GAUSSIAN = "gaussian"  # Gaussian prediction error on modal data
+    MODEL_ERROR = "model-error"  # modal data with a systematic model error shared by the windows
+    GAUSSIAN = "gaussian"  # Gaussian prediction error on modal data, windows independent
     FITNESS = "fitness"  # the bridge paper's exp(-J / 2k^2)
     TIME = "time"  # accelerations under the measured input
 
@@ -58,9 +60,10 @@ SAMPLERS = tuple(m.value for m in Sampler)
 class UpdateConfig:
     """Settings of one updating run (every field has a default; all are plain data)."""
 
-    likelihood: str = option(Likelihood.GAUSSIAN.value, "gaussian prediction error on modal data, "
-                             "the bridge paper's fitness exp(-J/2k^2), or time: accelerations under "
-                             "the measured input", choices=Likelihood)
+    likelihood: str = option(Likelihood.MODEL_ERROR.value, "model-error: modal data with a systematic "
+                             "model error shared by all windows (docs/updating.md); gaussian: windows "
+                             "independent; the bridge paper's fitness exp(-J/2k^2); or time: "
+                             "accelerations under the measured input", choices=Likelihood)
     sampler: str = option(Sampler.EMCEE.value, "emcee ensemble or adaptive Metropolis-Hastings",
                           choices=Sampler)
     # priors by parameter name: {"dist": "normal", "mean": 1.0, "std": 0.1}; None = from the model
@@ -232,8 +235,13 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
     sensors = list(data.sensor_ids) if (config.use_shapes and data.has_shapes) else []
     n_modes = config.n_modes or data.n_modes + 2
     predictor = build_predictor(model, sensors, n_modes, config.reduction, n_required=data.n_modes)
-    modal: GaussianModalLikelihood | FitnessLikelihood
-    if config.likelihood == "gaussian":
+    modal: GaussianModalLikelihood | FitnessLikelihood | ModelErrorLikelihood
+    if config.likelihood == "model-error":
+        modal = ModelErrorLikelihood(
+            predictor, data, use_shapes=bool(sensors), variance=config.variance,
+            freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
+            shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape))
+    elif config.likelihood == "gaussian":
         modal = GaussianModalLikelihood(
             predictor, data, use_shapes=bool(sensors), variance=config.variance,
             freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
@@ -344,13 +352,13 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
     }
 
     noise: dict[str, Any] = {}
-    if config.likelihood == "gaussian" or config.likelihood == "time":
+    if config.likelihood in ("gaussian", "time", "model-error"):
         if config.variance == "sampled":
             for j, n in enumerate(lik.extra_names):
                 v = np.exp(flat[:, d + j])
                 noise[n.removeprefix("log_")] = {"mean": float(v.mean()), "std": float(v.std(ddof=1))}
-        else:
-            noise = {k: {"mean": v} for k, v in lik.variance_estimates(x_map[:d]).items()}
+        # at the MAP: variances not sampled, and the model-error scales and offsets (model-error)
+        noise.update({k: {"mean": v} for k, v in lik.variance_estimates(x_map[:d]).items() if k not in noise})
 
     if predictor is not None:
         lik.predictor = exact_predictor  # scores and evidence with the exact model
