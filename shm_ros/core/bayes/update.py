@@ -78,6 +78,8 @@ class UpdateConfig:
     ig_shape: float = option(1.0, "shape of the inverse-gamma priors of the error variances")
     frequency_error_guess: float = option(0.01, "prior mode of the relative frequency error std")
     shape_error_guess: float = option(0.05, "prior mode of the shape error std")
+    residual_ar_order: int = option(2, "time likelihood: order of the autoregressive model of the "
+                                    "residuals (0: independent samples)")
     alpha: float = option(0.5, "fitness likelihood: weight of the frequencies")
     beta: float = option(0.5, "fitness likelihood: weight of 1 - MAC")
     k: float = option(0.05, "fitness likelihood: tolerance k")
@@ -227,7 +229,7 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
             raise TypeError("likelihood 'time' needs an AccelerationRecord (input and output "
                             "accelerations), not modal data")
         lik = TimeDomainLikelihood(model, data, variance=config.variance,
-                                   error_prior_shape=config.ig_shape)
+                                   error_prior_shape=config.ig_shape, ar_order=config.residual_ar_order)
         lik.n_theta = model.n_parameters
         return lik, None
     if not isinstance(data, ModalObservations):
