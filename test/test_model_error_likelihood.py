@@ -23,15 +23,17 @@ with a seed-to-seed spread of 0.02, far above 0.5.
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
+import numpy as np
 from bayes_synth import FULL
 from model_form_synth import analysis_model, model_form_table
+
 from shm_ros.core.bayes.update import UpdateConfig, build_likelihood, update
 
 N_SEEDS = 20 if FULL else 2
 N_WINDOWS = 1152
-CONFIG = dict(sampler="emcee", evidence=False, n_chains=24, n_steps=1500 if FULL else 300,
+CONFIG: dict[str, Any] = dict(sampler="emcee", evidence=False, n_chains=24, n_steps=1500 if FULL else 300,
               rhat_target=1.01 if FULL else 1.05, ess_target=1000 if FULL else 300)
 BAND = (0.90, 0.98) if FULL else (0.88, 0.985)
 _cache: dict = {}

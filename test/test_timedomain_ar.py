@@ -22,9 +22,9 @@ white-noise model must cover in at most half of the seeds at each length (it cov
 from __future__ import annotations
 
 import numpy as np
+from bayes_synth import FULL
 from scipy import signal
 
-from bayes_synth import FULL
 from shm_ros.core.bayes.timedomain import AccelerationRecord, TimeDomainLikelihood, base_response
 from shm_ros.core.models import build_model
 from shm_ros.core.structure import structure_from_dict
@@ -74,7 +74,8 @@ def _grid_posterior(lik) -> tuple[float, float, float, float]:
 
     lp = logpost(COARSE)
     i = int(np.clip(np.argmax(lp), 1, COARSE.size - 2))
-    x0 = COARSE[i - 1] + (COARSE[1] - COARSE[0]) * np.argmax(logpost(np.linspace(COARSE[i - 1], COARSE[i + 1], 81))) / 40
+    near = np.linspace(COARSE[i - 1], COARSE[i + 1], 81)
+    x0 = float(near[np.argmax(logpost(near))])
     h = 1e-4
     c = logpost(x0 + np.array([-h, 0.0, h]))
     curv = -(c[0] - 2 * c[1] + c[2]) / h**2
