@@ -23,6 +23,7 @@ correct method is 0.91-0.96 over those seeds, far above 0.5.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -87,3 +88,66 @@ def test_width_does_not_shrink_with_windows_beyond_model_error():
     g = _width(_posterior(0, N_WINDOWS, "gaussian")[0]) / _width(_posterior(0, 144, "gaussian")[0])
     print(f"gaussian likelihood: width ratio {g:.3f}")
     assert g < 0.5, g
+
+
+class _FixedPredictor:
+    """A predictor whose model frequency of the single mode is theta[0] Hz (no shapes)."""
+
+    sensor_ids: list[str] = []
+    n_modes = 1
+
+    def __call__(self, theta):
+        theta = np.atleast_2d(theta)
+        return theta[:, :1].copy(), np.zeros((theta.shape[0], 0, 1))
+
+
+def _one_mode(n: int, seed: int = 0):
+    from shm_ros.core.bayes.observations import ModalObservations
+
+    rng = np.random.default_rng(seed)
+    f = 2.0 * (1.0 + 0.01 + 0.004 * rng.standard_normal(n))
+    return ModalObservations(times=np.arange(n) * 600.0, mode_numbers=[1], frequencies_hz=f[:, None])
+
+
+def test_marginal_equals_joint_gaussian_integrated_numerically():
+    """The closed form (W and mean split, sigma^2 by quadrature, s on its grid) against the joint
+    density N(x | r, sigma^2 I + s^2 11^T) integrated over the IG prior of sigma^2 and the
+    log-uniform prior of s by brute-force quadrature; and the sampled-variance form integrated over
+    log sigma^2 against the marginal."""
+    from scipy.stats import multivariate_normal
+
+    from shm_ros.core.bayes.likelihoods import InverseGamma
+    from shm_ros.core.bayes.model_error import FREQ_SCALE_RANGE, ModelErrorLikelihood
+
+    obs = _one_mode(5)
+    prior = InverseGamma.weak(0.01)
+    kw = dict(use_shapes=False, freq_prior=prior, time_correlation=False, n_grid=200, n_quad=40)
+    lik = ModelErrorLikelihood(_FixedPredictor(), obs, **kw)
+    theta = np.array([[2.01]])
+    x = obs.frequencies_hz[:, 0] / lik.stats.f_ref[0]
+    r = theta[0, 0] / lik.stats.f_ref[0]
+    n = x.size
+    ls = np.linspace(np.log(FREQ_SCALE_RANGE[0]), np.log(FREQ_SCALE_RANGE[1]), 300)
+    lv = np.linspace(np.log(1e-7), np.log(1.0), 600)
+    a, b = prior.shape, prior.scale
+    S, V = np.meshgrid(np.exp(ls), np.exp(lv), indexing="ij")
+    d = x - r
+    # N(d | 0, v I + s^2 11^T) in closed form (Sherman-Morrison), checked against scipy at 3 points
+    logn = (-0.5 * n * np.log(2 * np.pi) - 0.5 * (n - 1) * np.log(V) - 0.5 * np.log(V + n * S * S)
+            - 0.5 * (np.sum(d * d) - n * d.mean() ** 2) / V - 0.5 * n * d.mean() ** 2 / (V + n * S * S))
+    for i, j in ((10, 100), (150, 300), (299, 599)):
+        cov = V[i, j] * np.eye(n) + S[i, j] ** 2 * np.ones((n, n))
+        assert abs(multivariate_normal.logpdf(d, np.zeros(n), cov) - logn[i, j]) < 1e-8
+    ig = a * np.log(b) - math.lgamma(a) - (a + 1) * np.log(V) - b / V
+    dens = logn + ig + np.log(V)
+    m = dens.max()
+    brute = m + np.log(np.trapezoid(np.trapezoid(np.exp(dens - m), lv, axis=1), ls) / np.ptp(ls))
+    brute -= n * np.log(lik.stats.f_ref[0])  # density of Hz, as the likelihood reports
+    assert abs(lik(theta)[0] - brute) < 2e-2, (lik(theta)[0], brute)
+
+    samp = ModelErrorLikelihood(_FixedPredictor(), obs, variance="sampled", **kw)
+    samp.n_theta = lik.n_theta = 1
+    X = np.column_stack([np.full(lv.size, theta[0, 0]), lv])
+    f = samp(X) + samp.extra_logprior(X[:, 1:])
+    num = f.max() + np.log(np.trapezoid(np.exp(f - f.max()), lv))
+    assert abs(num - lik(theta)[0]) < 2e-2, (num, lik(theta)[0])

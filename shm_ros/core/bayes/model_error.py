@@ -150,7 +150,9 @@ class ModelErrorLikelihood:
         inv_g, self._logw_f = _variance_nodes(self.freq_prior, self.dof_f, q_f)
         self._sigma2_nodes = (self.freq_prior.scale + 0.5 * self.w_f)[:, None] * inv_g  # (m, Q)
         self._c_f = ig_marginal_loglik(self.w_f, self.dof_f, self.freq_prior)  # (m,)
-        self.log_jacobian = -float(np.sum(st.n_freq * np.log(st.f_ref)))
+        # Hz instead of relative values, and n^(-1/2) per mode: N(ybar | 0, s^2 + sigma^2/n) is the
+        # density of the mean, the windows' joint density has the sum's (sqrt(n) wider)
+        self.log_jacobian = -float(np.sum(st.n_freq * np.log(st.f_ref))) - 0.5 * float(np.sum(np.log(st.n_freq)))
         self.s_grid, self._s_logprior = _scale_grid(*freq_scale_range, n_grid)
 
         # shapes: scatter matrices and their squares (the amplitude-weighted mean residual)
