@@ -81,7 +81,7 @@ def test_sampled_channel_variance_integrates_to_marginal():
     grid = np.linspace(np.log(1e-8), np.log(1e1), 6001)
     X = np.column_stack([np.repeat(theta[None], grid.size, 0), grid])
     ss = samp.residual_ss(theta)[0]  # one simulation; the grid only varies the variance
-    N = one.outputs.shape[0]
+    N = samp.n_innovations  # residual samples after the AR model's conditioning samples
     f = -0.5 * N * np.log(2 * np.pi * np.exp(grid)) - 0.5 * ss / np.exp(grid) + samp.extra_logprior(X[:, 3:])
     m = f.max()
     num = m + np.log(np.trapezoid(np.exp(f - m), grid))

@@ -46,8 +46,9 @@ def test_sampled_variances_agree_with_marginalised(problem):
     """Frequencies only: theta plus 4 sampled log-variances vs the variances integrated out."""
     spec, model, obs = problem
     quick = {**FAST, "rhat_target": 1.05, "ess_target": 300}
-    marg = update(model, obs, UpdateConfig(use_shapes=False, seed=3, **quick), priors=spec.parameters)
-    sv = update(model, obs, UpdateConfig(use_shapes=False, variance="sampled", seed=3, **quick),
+    marg = update(model, obs, UpdateConfig(likelihood="gaussian", use_shapes=False, seed=3, **quick),
+                  priors=spec.parameters)
+    sv = update(model, obs, UpdateConfig(likelihood="gaussian", use_shapes=False, variance="sampled", seed=3, **quick),
                 priors=spec.parameters)
     assert len(sv.chain_names) == 3 + 4
     _agree(marg, sv)

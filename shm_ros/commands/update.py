@@ -1,7 +1,7 @@
 """`shm-ros update`: Bayesian calibration of a structure file's parameters (docs/interfaces.md §6).
 
     shm-ros update --structure S.yaml (--modes TABLE.csv | --bag BAG) --out DIR
-                   [--sampler mh|emcee] [--likelihood gaussian|fitness|time] [--study]
+                   [--sampler mh|emcee] [--likelihood model-error|gaussian|fitness|time] [--study]
 
 Writes ``DIR/posterior.json`` (MAP, mean, std and 95 % interval per parameter, sampler diagnostics,
 fit, log evidence, with ``schema_version`` and ``provenance``), ``DIR/samples.npz`` (draws, chains,

@@ -7,7 +7,17 @@ sensors are simulated and
     log p(D | theta, sigma^2) = sum_i [ -N/2 log(2 pi sigma_i^2) - SS_i(theta) / (2 sigma_i^2) ]
 
 with one prediction-error variance per channel, each with an inverse-gamma prior (marginalised in
-closed form by default, or sampled as log-variances). The response comes from
+closed form by default, or sampled as log-variances).
+
+Residual samples are not independent: model error (an unmodelled mode, a wrong damping) leaves a
+narrow-band residual whose neighbouring samples are nearly equal, and treating thousands of them as
+independent makes the posterior far narrower than the estimate's actual error. So each channel's
+residual follows an AR(p) model (``ar_order``, default 2: one resonance), whose coefficients are
+profiled out by least squares for every theta; the likelihood above then applies to the
+innovations (the first p samples conditioned on), N - p of them per channel. ``ar_order=0`` is the
+white-noise model.
+
+The response comes from
 :mod:`shm_ros.core.response`: the model's full state space (non-classical damping, dampers, every
 input kind) discretised exactly for inputs linear between samples, so the likelihood and the
 prediction stage share one implementation of the dynamics.
@@ -77,13 +87,35 @@ def base_response(model: AffineModel, theta: np.ndarray, record_input: np.ndarra
     return sensor_accelerations(model, theta, record_input, dt, list(channel_ids), inputs)
 
 
+def ar_innovation_ss(residual: np.ndarray, order: int) -> np.ndarray:
+    """Sum of squared one-step prediction errors of an AR(``order``) model of each column of
+    ``residual`` (N, c), its coefficients fitted by least squares (conditional on the first
+    ``order`` samples); ``order=0``: the plain sum of squares."""
+    r = np.asarray(residual, dtype=float)
+    if order == 0:
+        return np.sum(r**2, axis=0)
+    n = r.shape[0]
+    out = np.empty(r.shape[1])
+    for c in range(r.shape[1]):
+        y = r[order:, c]
+        X = np.column_stack([r[order - j: n - j, c] for j in range(1, order + 1)])
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        e = y - X @ coef
+        out[c] = float(np.dot(e, e))
+    return out
+
+
 class TimeDomainLikelihood:
     """Gaussian prediction error on accelerations, per-channel variances with IG priors."""
 
     def __init__(self, model: AffineModel, record: AccelerationRecord, *, variance: str = "marginal",
-                 error_prior_shape: float = 1.0, error_guess: float = 0.1, n_modes: int | None = None):
+                 error_prior_shape: float = 1.0, error_guess: float = 0.1, n_modes: int | None = None,
+                 ar_order: int = 2):
         if variance not in ("marginal", "sampled"):
             raise ValueError(f"variance must be 'marginal' or 'sampled', got {variance!r}")
+        if not 0 <= int(ar_order) < record.outputs.shape[0] // 4:
+            raise ValueError(f"ar_order must be >= 0 and well below the record length, got {ar_order}")
+        self.ar_order = int(ar_order)
         known = set(model.sensor_rows) | set(model.sensor_dofs)
         missing = [c for c in record.channel_ids if c not in known]
         if missing:
@@ -110,7 +142,12 @@ class TimeDomainLikelihood:
                              r.channel_ids, self.n_modes)
 
     def residual_ss(self, theta: np.ndarray) -> np.ndarray:
-        return np.sum((self.record.outputs - self.predict(theta)) ** 2, axis=0)
+        """Per channel: the sum of squared innovations of the residual's AR(p) model."""
+        return ar_innovation_ss(self.record.outputs - self.predict(theta), self.ar_order)
+
+    @property
+    def n_innovations(self) -> int:
+        return self.record.outputs.shape[0] - self.ar_order
 
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
         if self.variance != "sampled":
@@ -129,7 +166,7 @@ class TimeDomainLikelihood:
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         x = np.atleast_2d(x)
-        N = self.record.outputs.shape[0]
+        N = self.n_innovations
         out = np.empty(x.shape[0])
         for b in range(x.shape[0]):
             theta = x[b, : self.n_theta]
@@ -146,7 +183,7 @@ class TimeDomainLikelihood:
 
     def variance_estimates(self, theta: np.ndarray) -> dict[str, float]:
         ss = self.residual_ss(np.asarray(theta, dtype=float))
-        N = self.record.outputs.shape[0]
+        N = self.n_innovations
         return {n: float(ig_posterior_mean(s, N, p))
                 for n, s, p in zip(self.variance_names, ss, self.priors, strict=True)}
 

@@ -26,6 +26,7 @@ from .evidence import nested_evidence
 from .fit import modal_fit
 from .forward import build_predictor
 from .likelihoods import FitnessJ, FitnessLikelihood, GaussianModalLikelihood, InverseGamma, set_pairing
+from .model_error import ModelErrorLikelihood
 from .observations import ModalObservations
 from .pairing import DEFAULT_MAC_GATE, ModePairing, PairingGate, UnmodelledMode, pair_with_model, select_modes
 from .priors import JointPrior, Prior, PriorError, priors_from_specs
@@ -33,7 +34,8 @@ from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance
 
 
 class Likelihood(enum.StrEnum):
-    GAUSSIAN = "gaussian"  # Gaussian prediction error on modal data
+    MODEL_ERROR = "model-error"  # modal data with a systematic model error shared by the windows
+    GAUSSIAN = "gaussian"  # Gaussian prediction error on modal data, windows independent
     FITNESS = "fitness"  # the bridge paper's exp(-J / 2k^2)
     TIME = "time"  # accelerations under the measured input
 
@@ -62,9 +64,10 @@ SAMPLERS = tuple(m.value for m in Sampler)
 class UpdateConfig:
     """Settings of one updating run (every field has a default; all are plain data)."""
 
-    likelihood: str = option(Likelihood.GAUSSIAN.value, "gaussian prediction error on modal data, "
-                             "the bridge paper's fitness exp(-J/2k^2), or time: accelerations under "
-                             "the measured input", choices=Likelihood)
+    likelihood: str = option(Likelihood.MODEL_ERROR.value, "model-error: modal data with a systematic "
+                             "model error shared by all windows (docs/updating.md); gaussian: windows "
+                             "independent; the bridge paper's fitness exp(-J/2k^2); or time: "
+                             "accelerations under the measured input", choices=Likelihood)
     sampler: str = option(Sampler.EMCEE.value, "emcee ensemble or adaptive Metropolis-Hastings",
                           choices=Sampler)
     # priors by parameter name: {"dist": "normal", "mean": 1.0, "std": 0.1}; None = from the model
@@ -82,6 +85,8 @@ class UpdateConfig:
     use_damping: bool = option(False, "gaussian likelihood: damping ratios enter too (model ratios from "
                                "the structure's damping law, e.g. Rayleigh at the model frequencies)")
     damping_error_guess: float = option(0.3, "prior mode of the relative damping-ratio error std")
+    residual_ar_order: int = option(2, "time likelihood: order of the autoregressive model of the "
+                                    "residuals (0: independent samples)")
     alpha: float = option(0.5, "fitness likelihood: weight of the frequencies")
     beta: float = option(0.5, "fitness likelihood: weight of 1 - MAC")
     k: float = option(0.05, "fitness likelihood: tolerance k")
@@ -276,7 +281,7 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig, *, pre
             raise TypeError("likelihood 'time' needs an AccelerationRecord (input and output "
                             "accelerations), not modal data")
         lik = TimeDomainLikelihood(model, data, variance=config.variance,
-                                   error_prior_shape=config.ig_shape)
+                                   error_prior_shape=config.ig_shape, ar_order=config.residual_ar_order)
         lik.n_theta = model.n_parameters
         return lik, None
     if not isinstance(data, ModalObservations):
@@ -284,8 +289,13 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig, *, pre
     if predictor is None:
         predictor = _modal_predictor(model, data, config)
     use_shapes = bool(predictor.sensor_ids) and data.has_shapes
-    modal: GaussianModalLikelihood | FitnessLikelihood
-    if config.likelihood == "gaussian":
+    modal: GaussianModalLikelihood | FitnessLikelihood | ModelErrorLikelihood
+    if config.likelihood == "model-error":
+        modal = ModelErrorLikelihood(
+            predictor, data, use_shapes=use_shapes, variance=config.variance,
+            freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
+            shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape))
+    elif config.likelihood == "gaussian":
         modal = GaussianModalLikelihood(
             predictor, data, use_shapes=use_shapes, variance=config.variance,
             freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
@@ -439,13 +449,13 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         diag["pairing"] = pairing.describe(full_obs.mode_numbers, pairing_at)
 
     noise: dict[str, Any] = {}
-    if config.likelihood == "gaussian" or config.likelihood == "time":
+    if config.likelihood in ("gaussian", "time", "model-error"):
         if config.variance == "sampled":
             for j, n in enumerate(lik.extra_names):
                 v = np.exp(flat[:, d + j])
                 noise[n.removeprefix("log_")] = {"mean": float(v.mean()), "std": float(v.std(ddof=1))}
-        else:
-            noise = {k: {"mean": v} for k, v in lik.variance_estimates(x_map[:d]).items()}
+        # at the MAP: variances not sampled, and the model-error scales and offsets (model-error)
+        noise.update({k: {"mean": v} for k, v in lik.variance_estimates(x_map[:d]).items() if k not in noise})
 
     if predictor is not None:
         lik.predictor = exact_predictor  # scores and evidence with the exact model
