@@ -180,7 +180,10 @@ def test_simulate_event_records_what_the_campaign_records():
     w = camp.window(0).to_window()
     assert ev.window.channel_names == w.channel_names
     np.testing.assert_array_equal(ev.window.samples, w.samples)
-    assert ev.story_drift_m.shape == (w.n_samples, 8)
+    assert ev.story_drift_m.shape == (w.n_samples, 3 * 8)  # x, y, twist of each of 8 stories
+    assert ev.family == "x" and np.all(ev.stiffness_nonlinear)
+    tr = ev.track(np.array([0.0, 30.0]), 20.0)
+    assert tr.family == "x" and tr.frequencies_hz.shape == (2, ev.small_amplitude_frequencies_hz.size)
 
 
 def test_mean_square_secant_equals_the_gaussian_factor_for_gaussian_drift():
