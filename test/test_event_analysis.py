@@ -21,6 +21,7 @@ import pytest
 from scipy import stats
 
 from shm_ros.core.event_analysis import EventConfig, analyse_event, running_median, significant_interval
+from shm_ros.core.models import build_model
 from shm_ros.core.simulate.campaign import simulate_campaign
 from shm_ros.core.simulate.equivalent_linear import secant_factors, simulate_event
 from shm_ros.core.simulate.newmark import equivalent_stiffness_factor
@@ -45,9 +46,15 @@ def events():
     out = []
     for seed in SEEDS:
         ev = simulate_event(_campaign(seed), 0)
-        res = analyse_event(ev.window, EventConfig(), lowest_frequency_hz=NOMINAL_F1_HZ)
+        res = analyse_event(ev.window, EventConfig(), model_frequencies_hz=_model_frequencies(ev))
+        assert res.lowest_frequency_hz == pytest.approx(NOMINAL_F1_HZ, rel=1e-3)
         out.append((seed, ev, res))
     return out
+
+
+def _model_frequencies(ev) -> np.ndarray:
+    """The analysis model's (the nominal planar building's) natural frequencies."""
+    return build_model(ev.truth.nominal).modes(n_modes=4).frequencies_hz
 
 
 def _truth_mode(ev, res, r: int) -> int:
@@ -257,7 +264,7 @@ def test_output_only_without_an_input_channel(events):
     keep = [i for i, c in enumerate(w.channel_names) if c != w.input_channel]
     w = dataclasses.replace(w, channel_names=[w.channel_names[i] for i in keep], samples=w.samples[:, keep],
                             input_channel=None)
-    res = analyse_event(w, EventConfig(), lowest_frequency_hz=NOMINAL_F1_HZ)
+    res = analyse_event(w, EventConfig(), model_frequencies_hz=_model_frequencies(ev))
     assert res.method == "ssi-cov" and res.input_channel is None
     assert res.strong_motion.source == "response" and res.strong_motion.channel is None
     assert np.all(np.isnan(res.input_rms_m_s2)) and res.input_m_s2.size == 0
