@@ -230,11 +230,11 @@ def test_event_command_writes_json_and_a_figure(tmp_path):
     from shm_ros.cli import main
 
     out = tmp_path / "sim"
-    assert main(["simulate", "building-earthquake", "--out", str(out), "--windows", "1", "--window-s", "90",
+    assert main(["simulate", "building-earthquake", "--out", str(out), "--windows", "1", "--window-s", "150",
                  "--effects", "amplitude_stiffness", "--seed", "4"]) == 0
     doc_path = tmp_path / "event.json"
     assert main(["event", str(out / "bag"), "--structure", str(out / "structure.yaml"), "--out", str(doc_path),
-                 "--plots", str(tmp_path / "plots"), "--window", "90", "--n-modes", "2"]) == 0
+                 "--plots", str(tmp_path / "plots"), "--window", "150", "--n-modes", "2"]) == 0
     doc = json.loads(doc_path.read_text())
     assert "provenance" in doc and len(doc["events"]) == 1
     rec = doc["events"][0]

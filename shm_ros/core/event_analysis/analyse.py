@@ -206,6 +206,9 @@ def _phases(prep: Prepared, base: IdentifyConfig, inp: str | None, spans: dict[s
         refs, guards = pool[: cfg.n_modes], list[ReferenceMode]()
     else:
         refs, guards = _model_references(pool, targets, notes)
+        if not refs:  # e.g. a short record whose whole-record modes sit low with the strong motion
+            notes.append("no identified mode near the model's: the lowest identified modes are followed")
+            refs = pool[: cfg.n_modes]
     if not refs:
         raise ValueError("no mode identified before, after or over the whole record")
     phases = []
