@@ -5,7 +5,8 @@ How the modes move within each earthquake of a recording. The bag is read and wi
 ``--all-windows``) is analysed by ``shm_ros.core.event_analysis.analyse_event``: short moving
 windows (10 periods of the structure's first natural frequency by default) identified by
 input-output SSI when the structure file declares an input sensor, else by SSI-cov; frequency and
-damping of the lowest modes against time and response amplitude; the strong-motion interval
+damping against time and response amplitude of the identified modes nearest to the nominal model's
+lowest ones (modes the model does not describe are kept apart); the strong-motion interval
 (Arias intensity 5-95 % of the input, else of the response); and pre-event, strong-motion and
 post-event estimates with standard deviations from the spread over sub-windows. Output: one record
 per event (docs/interfaces.md §3, ``events``); ``--plots DIR`` adds one figure per event (input
@@ -37,13 +38,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _first_frequency(spec: Any) -> float | None:
-    """The nominal model's first natural frequency (None when the model cannot be built)."""
+def _model_frequencies(spec: Any, n_modes: int) -> list[float] | None:
+    """The nominal model's lowest ``n_modes + 1`` natural frequencies (None when the model cannot be
+    built)."""
     from shm_ros.core.models import build_model
 
     try:
-        return float(build_model(spec).modes(n_modes=1).frequencies_hz[0])
-    except Exception:  # any kind without a model builder: the record's own lowest mode is used
+        return [float(f) for f in build_model(spec).modes(n_modes=n_modes + 1).frequencies_hz]
+    except Exception:  # any kind without a model builder: the record's own lowest modes are followed
         return None
 
 
@@ -69,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
     res = ingest_bag(args.bag, spec, window_s=args.window)
     for d in res.mismatches:
         print(f"shm-ros event: {args.bag}: warning: {d.message}", file=sys.stderr)
-    f1 = _first_frequency(spec)
+    model_f = _model_frequencies(spec, cfg.n_modes)
+    f1 = model_f[0] if model_f else None
     plots = Path(args.plots) if args.plots else None
     records: list[dict[str, Any]] = []
     n_ok = 0
@@ -78,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
             continue
         rec: dict[str, Any] = {"start": ns_to_iso(w.start_ns), "end": ns_to_iso(w.end_ns), "pga_m_s2": w.pga_m_s2}
         try:
-            result = analyse_event(w, cfg, lowest_frequency_hz=f1)
+            result = analyse_event(w, cfg, model_frequencies_hz=model_f)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
             rec.update({"window_id": w.window_id, "error": str(exc)})
             print(f"shm-ros event: window {w.window_id}: {exc}", file=sys.stderr)
@@ -93,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
                                          f"{rec['start']}  {result.method}"))
         records.append(rec)
     config = {"event": asdict(cfg), "window_s": args.window, "bag": str(args.bag), "structure": str(args.structure),
-              "lowest_frequency_hz": f1}
+              "lowest_frequency_hz": f1, "model_frequencies_hz": model_f}
     out = dump(stamp_output({"events": records}, config), args.out)
     print(f"{len(records)} event windows ({n_ok} analysed) -> {out}")
     for r in records:

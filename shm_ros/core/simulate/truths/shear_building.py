@@ -39,6 +39,7 @@ from shm_ros.core.simulate.truth_kinds import register
 from shm_ros.core.structure import StructureSpec, structure_from_dict
 
 COMPONENTS = ("x", "y", "torsion")
+HISTORIES = "response_histories"  # key of respond()'s extra with ``keep_histories``
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,9 @@ class BuildingTruth(TruthModel):
     dampers: dict[str, Any] = field(default_factory=dict)
     soil: dict[str, float] = field(default_factory=dict)
     form: PlanForm | None = None  # None: a planar shear building (model_form off)
+    # respond() also returns the story drift / drift-velocity histories (large arrays, kept out of
+    # truth.json; ``equivalent_linear.simulate_event`` sets it on its own copy of the truth)
+    keep_histories: bool = False
 
     @property
     def dpf(self) -> int:
@@ -303,6 +307,9 @@ class BuildingTruth(TruthModel):
                                        "story_velocity_rms_m_s": eq["velocity_rms"].tolist(),
                                        "stiffness_factor": eq["k_scale"].tolist(),
                                        "damping_factor": eq["c_scale"].tolist()}}
+        if self.keep_histories:
+            extra[HISTORIES] = {k: eq[k] for k in ("story_drift", "story_velocity", "stiffness_nonlinear",
+                                                   "damping_nonlinear", "drift_ref_m", "velocity_ref_m_s")}
         return y, modal, extra
 
     def nonlinear_response(self, factors: dict[str, float], effects: list[Effect], u: np.ndarray, dt: float,
