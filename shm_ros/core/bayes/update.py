@@ -218,7 +218,12 @@ def joint_prior_for(model: AffineModel, config: UpdateConfig,
 def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig):
     """The likelihood object the config asks for (batched call (B, d_total) -> (B,))."""
     if config.likelihood == "time":
+        from .records import JointTimeDomainLikelihood, RecordSet
         from .timedomain import AccelerationRecord, TimeDomainLikelihood
+
+        if isinstance(data, RecordSet):  # several events, one joint likelihood
+            return JointTimeDomainLikelihood(model, data, variance=config.variance,
+                                             error_prior_shape=config.ig_shape), None
 
         if not isinstance(data, AccelerationRecord):
             raise TypeError("likelihood 'time' needs an AccelerationRecord (input and output "
