@@ -3,9 +3,10 @@
 The prediction error of an acceleration channel is taken as ``e(t) ~ N(0, s0^2 + r^2 m(t))``:
 ``s0^2`` the error before the event (sensor noise, unmeasured ambient loads; from the record's
 pre-event part), ``m(t)`` the local mean square of the predicted response and ``r^2`` the model
-error relative to the response. ``r^2`` comes from a time-domain calibration: its error variance
-divided by the mean square of the calibration records (per draw when the variances were sampled),
-or the NRMS at the MAP; a modal posterior or the nominal model carry none and use
+error relative to the response. ``r^2`` comes from a time-domain calibration: the NRMS of the
+strong-motion part of its records at the MAP (a joint calibration over events reports it), else its
+error variance divided by the mean square of the records (per draw when the variances were
+sampled), else its NRMS at the MAP; a modal posterior or the nominal model carry none and use
 ``PredictConfig.relative_error``. Scaling with the response keeps the band honest for an event
 stronger or weaker than the calibration events, and inside an event between its quiet and its
 strong part.
@@ -95,6 +96,9 @@ def _relative_errors(post: Any, sel: np.ndarray, n: int) -> tuple[dict[str, np.n
     cols = list(getattr(post, "chain_names", []))
     flat = chains.reshape(-1, chains.shape[-1]) if chains.ndim == 3 and chains.size else None
     out: dict[str, np.ndarray] = {}
+    strong = fit.get("nrms_strong") or {}
+    if strong:  # the calibration's strong-motion error relative to the response: the best scale
+        return {ch: np.full(n, float(v) ** 2) for ch, v in strong.items()}, "time-domain calibration"
     for ch, nrms in fit["nrms"].items():
         key = f"sigma2_accel_{ch}"
         r = rms.get(ch)
