@@ -24,7 +24,8 @@ from shm_ros.core.types import Window
 
 FULL = os.environ.get("SHM_FULL", "") not in ("", "0")
 STORY_HEIGHT_M = 3.5
-DAMPER = {"model": "kelvin_voigt", "k_rel": 0.30, "c_rel_s": 0.02}
+K_REL, C_REL_S = 0.30, 0.02  # damper braces: k_d = K_REL k_story, c_d = C_REL_S k_d
+DAMPER: dict[str, Any] = {"model": "kelvin_voigt", "k_rel": K_REL, "c_rel_s": C_REL_S}
 
 
 @dataclass
@@ -72,7 +73,7 @@ def analysis_structure(simulated: dict[str, Any], err: tuple[float, float]) -> d
     d = copy.deepcopy(simulated)
     floors = d["shear_building"]["floors"]
     n = len(floors)
-    k_rel, c_rel = DAMPER["k_rel"], DAMPER["c_rel_s"]
+    k_rel, c_rel = K_REL, C_REL_S
     for i, f in enumerate(floors):
         k = float(f["stiffness"])
         f["stiffness"] = k * (1 + k_rel) * (1 + err[0 if i < n // 2 else 1])

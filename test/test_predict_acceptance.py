@@ -23,14 +23,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from predict_synth import FULL, STORY_HEIGHT_M, simulate_quakes
+
 from shm_ros.core.bayes.records import RecordSet
 from shm_ros.core.bayes.timedomain import AccelerationRecord
 from shm_ros.core.bayes.update import UpdateConfig, update
 from shm_ros.core.models import build_model
-from shm_ros.core.predict import (EventRecord, PredictConfig, draws_from_posterior, event_from_window,
-                                  predict_event)
+from shm_ros.core.predict import EventRecord, PredictConfig, draws_from_posterior, event_from_window, predict_event
 from shm_ros.core.predict.signals import baseline_correct, nrms_pct, pre_event_end, strong_motion
 from shm_ros.core.simulate.excitation import earthquake
 from shm_ros.core.simulate.linear import from_state_space

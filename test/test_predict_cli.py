@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 import yaml
-
 from predict_synth import simulate_quakes
+
 from shm_ros.cli import main
 from shm_ros.core.bayes.records import RecordSet
 from shm_ros.core.bayes.timedomain import AccelerationRecord

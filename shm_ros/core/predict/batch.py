@@ -14,7 +14,6 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 
 import numpy as np
-
 from scipy.signal import lfilter
 
 from shm_ros.core.models.base import AffineModel

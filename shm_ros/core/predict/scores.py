@@ -103,7 +103,7 @@ def summary_json(preds: list[EventPrediction]) -> dict[str, Any]:
     ms = [c.scores for p in preds for c in p.channels if c.measured]
 
     def med(k: str) -> float | None:
-        v = [s[k] for s in ms if s.get(k) is not None and math.isfinite(float(s[k]))]  # type: ignore[arg-type]
+        v = [float(x) for s in ms if (x := s.get(k)) is not None and math.isfinite(float(x))]
         return float(np.median(v)) if v else None
 
     hits = [bool(s["peak_inside"]) for s in ms if s.get("peak_inside") is not None]
