@@ -52,7 +52,8 @@ def simulate_quakes(seed: int, n_events: int = 6, *, duration_s: float = 60.0, f
                      + [{"id": f"h{k}", "at": {"floor": k}, "direction": "x"} for k in truth_floors])
     camp = simulate_campaign(sc)
     rng = np.random.default_rng(np.random.SeedSequence([seed, 77]))
-    err = tuple(float(rng.choice([-1.0, 1.0]) * rng.uniform(0.10, 0.20)) for _ in range(2))
+    e = [float(rng.choice([-1.0, 1.0]) * rng.uniform(0.10, 0.20)) for _ in range(2)]
+    err = (e[0], e[1])
     structure = analysis_structure(st, err)
     keep = [s["id"] for s in structure["sensors"]]
     windows, truth = [], {}
@@ -65,7 +66,7 @@ def simulate_quakes(seed: int, n_events: int = 6, *, duration_s: float = 60.0, f
         if truth_floors:
             truth[w.window_id] = np.column_stack([sw.accel[:, sw.sensor_ids.index(n)] for n in names]
                                                  + [_true_drift(camp, sw, truth_floors)])
-    return Quakes(structure, windows, truth, names + ["drift_top"], err)  # type: ignore[arg-type]
+    return Quakes(structure, windows, truth, names + ["drift_top"], err)
 
 
 def analysis_structure(simulated: dict[str, Any], err: tuple[float, float]) -> dict[str, Any]:
