@@ -17,9 +17,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 
 
 def main(argv: list[str]) -> int:
+    from predict_synth import simulate_quakes
     from threadpoolctl import threadpool_limits
 
-    from predict_synth import simulate_quakes
     from shm_ros.core.models import build_model
     from shm_ros.core.predict import PosteriorDraws, PredictConfig, event_from_window, predict_event
     from shm_ros.core.structure import structure_from_dict

@@ -9,9 +9,9 @@ import sys
 
 import numpy as np
 import yaml
-
 from predict_synth import simulate_quakes
 from ros_helpers.graph import node_process, stop
+
 from shm_ros.cli import main
 from shm_ros.io.window_files import save_window
 

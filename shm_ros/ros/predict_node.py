@@ -75,7 +75,8 @@ class PredictNode(Node):
         from shm_ros.core.models import build_model
         from shm_ros.io.structure import load_structure
 
-        build_model(load_structure(self.settings.structure))  # a bad file stops the node at once
+        self.structure: str = self.settings.structure
+        build_model(load_structure(self.structure))  # a bad file stops the node at once
         self.windows: OrderedDict[str, Any] = OrderedDict()
         self.queue: deque = deque()
         self.future: Future | None = None
@@ -96,7 +97,7 @@ class PredictNode(Node):
 
     def _new_pool(self) -> ProcessPoolExecutor:
         pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=predict_worker.init, initargs=(self.settings.structure,))
+                                   initializer=predict_worker.init, initargs=(self.structure,))
         before = set(multiprocessing.active_children())
         pool.submit(predict_worker.ready)
         self._workers |= set(multiprocessing.active_children()) - before

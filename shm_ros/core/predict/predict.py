@@ -6,7 +6,7 @@ window's start after the baseline correction of every record (:mod:`.signals`). 
 posterior-predictive distribution of a channel at a sample is the mixture over draws of
 ``N(y_draw(t), sigma_draw^2(t))`` (error model: :mod:`.draws`); its mean and variance are exact
 and the band is mean +- z std. Peak intervals are quantiles of each draw's peak of
-``y_draw + e_draw`` with one error record drawn per draw (near the draw's peak, where it can matter). Unmeasured floors and interstory drifts
+``y_draw + e_draw`` plus one error draw at its time (see ``_noisy_peaks``). Unmeasured floors and interstory drifts
 are outputs of the same model (every floor is a DOF of the full model, so no expansion is needed);
 drifts are model displacements consistent with the measured input, never integrated records.
 """
@@ -153,20 +153,16 @@ def predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraws
 
 def _noisy_peaks(Y: np.ndarray, s0: np.ndarray, rel2: np.ndarray, lms: np.ndarray,
                  rng: np.random.Generator) -> np.ndarray:
-    """max_t |y + e| per draw and output (B, o), e ~ N(0, s0 + rel2 lms(t)). Only samples within
-    6 error standard deviations of the draw's peak can hold the noisy peak, so the error is drawn
-    there alone (about a hundredth of the samples; the result is the same as drawing everywhere up
-    to a 1e-9 chance)."""
-    absY = np.abs(Y)
-    top = np.max(absY, axis=2)
-    sig_max = np.sqrt(s0[None, :] + rel2 * np.max(lms, axis=1)[None, :])  # (B, o)
-    cand = absY >= (top - 6.0 * sig_max)[:, :, None]
-    b, o, t = np.nonzero(cand)
-    sig = np.sqrt(s0[o] + rel2[b, o] * lms[o, t])
-    vals = np.abs(Y[b, o, t] + sig * rng.standard_normal(b.size))
-    out = np.zeros(top.shape)
-    np.maximum.at(out, (b, o), vals)
-    return out
+    """Per draw and output (B, o): the draw's peak |y| plus one error draw at the peak's time,
+    ``N(0, s0 + rel2 lms(t_peak))``. The model error is correlated in time (a slightly wrong
+    frequency shifts the whole peak cycle), so the peak moves by about one error standard
+    deviation; the maximum over independent white-noise samples would move less and give intervals
+    that are too narrow."""
+    t = np.argmax(np.abs(Y), axis=2)  # (B, o)
+    top = np.take_along_axis(np.abs(Y), t[:, :, None], 2)[:, :, 0]
+    o = np.arange(Y.shape[1])[None, :]
+    sig = np.sqrt(s0[None, :] + rel2 * lms[o, t])
+    return np.abs(top + sig * rng.standard_normal(top.shape))
 
 
 def channel_scores(y: np.ndarray, mean: np.ndarray, y_map: np.ndarray, y_nom: np.ndarray, lo: np.ndarray,
