@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
 from shm_ros.core.predict import PredictConfig
@@ -83,7 +84,7 @@ class PredictNode(Node):
         self.done = 0
         self.diag = Diagnostics(self, "predict", summary=lambda: (
             "ok", f"{self.done} predictions, {len(self.queue)} waiting", {"predicted": self.done}))
-        self.pub = self.create_publisher(topics.message_class(topics.TYPES[topics.PREDICTION]),
+        self.pub: Publisher[Any] = self.create_publisher(topics.message_class(topics.TYPES[topics.PREDICTION]),
                                          topics.PREDICTION, stream_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS,
                                  self._on_window, stream_qos())
