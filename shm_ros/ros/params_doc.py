@@ -19,9 +19,11 @@ def _nodes() -> list[tuple[str, str, list[type]]]:
     from shm_ros.core.bayes.update import UpdateConfig
     from shm_ros.core.identify import IdentifyConfig
     from shm_ros.core.ingest import IngestConfig
+    from shm_ros.core.predict import PredictConfig
     from shm_ros.core.tracking import TrackingConfig
     from shm_ros.ros.identify_node import IdentifyNodeConfig
     from shm_ros.ros.ingest_node import IngestNodeConfig
+    from shm_ros.ros.predict_node import PredictNodeConfig
     from shm_ros.ros.recorder_node import RecorderNodeConfig
     from shm_ros.ros.track_node import TrackNodeConfig
     from shm_ros.ros.update_node import UpdateNodeConfig
@@ -32,6 +34,8 @@ def _nodes() -> list[tuple[str, str, list[type]]]:
         ("track", "modal estimates in, tracked modes and novelty out", [TrackNodeConfig, TrackingConfig]),
         ("update", "modal estimates in, posterior out (sampling in a worker process)",
          [UpdateNodeConfig, UpdateConfig]),
+        ("predict", "event windows in, response predictions out (a worker process)",
+         [PredictNodeConfig, PredictConfig]),
         ("recorder", "pipeline topics into a bag", [RecorderNodeConfig]),
     ]
 

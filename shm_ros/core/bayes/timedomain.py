@@ -193,4 +193,6 @@ class TimeDomainLikelihood:
         yh = self.predict(theta)
         nrms = np.linalg.norm(y - yh, axis=0) / np.maximum(np.linalg.norm(y, axis=0), 1e-300)
         return {"nrms": dict(zip(self.record.channel_ids, map(float, nrms), strict=True)),
-                "nrms_mean": float(np.mean(nrms))}
+                "nrms_mean": float(np.mean(nrms)),
+                "output_rms": dict(zip(self.record.channel_ids, map(float, np.sqrt(np.mean(y**2, axis=0))),
+                                       strict=True))}

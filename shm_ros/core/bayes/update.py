@@ -275,7 +275,12 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig, *, pre
     passes its gated pairing and the data restricted to the paired modes).
     """
     if config.likelihood == "time":
+        from .records import JointTimeDomainLikelihood, RecordSet
         from .timedomain import AccelerationRecord, TimeDomainLikelihood
+
+        if isinstance(data, RecordSet):  # several events, one joint likelihood
+            return JointTimeDomainLikelihood(model, data, variance=config.variance,
+                                             error_prior_shape=config.ig_shape), None
 
         if not isinstance(data, AccelerationRecord):
             raise TypeError("likelihood 'time' needs an AccelerationRecord (input and output "

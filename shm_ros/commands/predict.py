@@ -1,0 +1,115 @@
+"""`shm-ros predict`: drive the (updated) model with each event's measured input (docs/interfaces.md §7).
+
+    shm-ros predict --structure S.yaml [--posterior DIR|posterior.json] (--bag BAG | --windows W.npz ...)
+                    --out DIR [--all-windows] [--n-draws N] [--seed S] [--no-plots]
+
+Without ``--posterior`` the nominal model alone is predicted. Events are the windows that ingest
+flags (``is_event``, docs/interfaces.md §1); ``--all-windows`` predicts every window. Writes
+``DIR/prediction.json`` (per event and channel: NRMS of the updated and the nominal model, band
+coverage, peaks and intervals at unmeasured floors and drifts; the Table-3 rows; a summary),
+prints the Table-3 NRMS table, and draws ``DIR/prediction_<window>.png`` per event.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.options import add_options
+    from shm_ros.core.predict import PredictConfig
+
+    p = sub.add_parser("predict", help="predict events' responses with the (updated) model",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--structure", required=True, help="structure file (YAML, docs/interfaces.md §2)")
+    p.add_argument("--posterior", default=None, help="posterior.json or the folder of `shm-ros update`")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--bag", help="recording (rosbag2); windowed as `shm-ros ingest` does")
+    src.add_argument("--windows", nargs="+", help="window files (.npz, as `shm-ros ingest --windows` writes)")
+    p.add_argument("--window", type=float, default=600.0, help="--bag: window length, s (default 600)")
+    p.add_argument("--all-windows", action="store_true", help="predict every window, not only events")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--no-plots", action="store_true", help="skip the figures")
+    add_options(p.add_argument_group("prediction (PredictConfig; the predict node's parameters of the same "
+                                     "names)"), PredictConfig)
+    p.set_defaults(func=run)
+
+
+def load_windows(args: argparse.Namespace, spec: Any) -> list:
+    if args.bag:
+        from shm_ros.io.recording import windows_from_bag
+
+        windows, _ = windows_from_bag(args.bag, spec, args.window)
+        return list(windows)
+    from shm_ros.io.window_files import load_window
+
+    return [load_window(p) for p in args.windows]
+
+
+def predict_windows(model: Any, windows: list, posterior: Any, config: Any) -> tuple[list, list[str]]:
+    """Predictions of ``windows`` (the same numbers as the predict node's for the same seed)."""
+    import numpy as np
+
+    from shm_ros.core.predict import draws_from_posterior, event_from_window, predict_event
+
+    draws = None if posterior is None else draws_from_posterior(
+        posterior, model, config.n_draws, np.random.default_rng(config.seed), config.relative_error)
+    preds, errors = [], []
+    for w in windows:
+        try:
+            preds.append(predict_event(model, event_from_window(w, model), draws, config))
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            errors.append(f"window {w.window_id}: {exc}")
+    return preds, errors
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
+    from shm_ros.commands.options import config_from_args
+    from shm_ros.core.models import build_model
+    from shm_ros.core.predict import PredictConfig, event_json, format_table3, summary_json, table3_row
+    from shm_ros.core.provenance import stamp_output
+    from shm_ros.io import jsonio
+    from shm_ros.io.structure import load_structure
+
+    out = Path(args.out)
+    try:
+        config = config_from_args(PredictConfig, args).validate()
+        spec = load_structure(args.structure)
+        model = build_model(spec)
+        posterior = None
+        if args.posterior:
+            from shm_ros.report.load import load_posterior
+
+            posterior = load_posterior(args.posterior)
+        windows = load_windows(args, spec)
+    except Exception as exc:  # file, structure and posterior errors name their source
+        print(f"shm-ros predict: error: {exc}", file=sys.stderr)
+        return 2
+    chosen = windows if args.all_windows else [w for w in windows if w.is_event]
+    if not chosen:
+        print(f"shm-ros predict: no event among {len(windows)} windows (--all-windows predicts every one)",
+              file=sys.stderr)
+        return 1
+    preds, errors = predict_windows(model, chosen, posterior, config)
+    for e in errors:
+        print(f"shm-ros predict: {e}", file=sys.stderr)
+    rows = [table3_row(model, p) for p in preds]
+    payload = {"model": "updated" if posterior is not None else "nominal",
+               "events": [event_json(p) for p in preds], "table3": rows, "summary": summary_json(preds),
+               "errors": errors}
+    cfg = asdict(config) | {"structure": args.structure, "posterior": args.posterior, "bag": args.bag}
+    out.mkdir(parents=True, exist_ok=True)
+    doc = jsonio.dump(stamp_output(payload, cfg, config.seed), out / "prediction.json", indent=2)
+    if not args.no_plots:
+        from shm_ros.report.prediction import plot_event
+
+        for p in preds:
+            plot_event(p, out / f"prediction_{p.window_id}.png")
+    print(format_table3(rows))
+    print(f"{len(preds)} events predicted -> {doc}")
+    return 0 if preds else 1

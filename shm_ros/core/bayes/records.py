@@ -1,0 +1,140 @@
+"""One time-domain likelihood over several records (events) at once.
+
+Calibrating on several earthquakes is one likelihood: the records are independent given theta and
+share the prediction-error variance of each channel, so the per-channel sums of squares and sample
+counts simply add up (marginalised or sampled as in :mod:`.timedomain`). The responses of a batch
+of parameter sets (an ensemble sampler's walkers) are computed together
+(:func:`shm_ros.core.predict.batch.batch_responses`: one discretisation per set).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shm_ros.core.models.base import AffineModel
+
+from .likelihoods import InverseGamma, ig_marginal_loglik, ig_posterior_mean
+from .priors import Prior
+from .timedomain import AccelerationRecord
+
+
+@dataclass
+class RecordSet:
+    """Several acceleration records of the same channels (events), calibrated on jointly."""
+
+    records: list[AccelerationRecord]
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if not self.records:
+            raise ValueError("a record set needs at least one record")
+        ids = self.records[0].channel_ids
+        for r in self.records[1:]:
+            if r.channel_ids != ids:
+                raise ValueError(f"records of a set must share their channels: {r.channel_ids} != {ids}")
+
+    @property
+    def n_windows(self) -> int:
+        return len(self.records)
+
+    @property
+    def channel_ids(self) -> list[str]:
+        return list(self.records[0].channel_ids)
+
+
+class JointTimeDomainLikelihood:
+    """The time-domain likelihood of a :class:`RecordSet` (same interface as ``TimeDomainLikelihood``)."""
+
+    def __init__(self, model: AffineModel, data: RecordSet, *, variance: str = "marginal",
+                 error_prior_shape: float = 1.0, error_guess: float = 0.1, chunk: int = 64):
+        if variance not in ("marginal", "sampled"):
+            raise ValueError(f"variance must be 'marginal' or 'sampled', got {variance!r}")
+        known = set(model.sensor_rows) | set(model.sensor_dofs)
+        missing = [c for c in data.channel_ids if c not in known]
+        if missing:
+            raise ValueError(f"channel(s) {missing} of the records are not output sensors of model '{model.name}'")
+        from shm_ros.core.response import sensor_outputs
+
+        self.model, self.data, self.variance, self.chunk = model, data, variance, chunk
+        self.outputs = sensor_outputs(model, data.channel_ids)
+        self.n = sum(r.outputs.shape[0] for r in data.records)
+        y2 = sum(np.sum(r.outputs ** 2, axis=0) for r in data.records)
+        self.rms = np.sqrt(y2 / self.n)
+        rms = np.where(self.rms > 0, self.rms, 1.0)
+        self.priors = [InverseGamma.weak(error_guess * r, error_prior_shape) for r in rms]
+        self.variance_names = [f"sigma2_accel_{c}" for c in data.channel_ids]
+        self.extra_names = [f"log_{n}" for n in self.variance_names] if variance == "sampled" else []
+        self.n_theta = model.n_parameters
+
+    @property
+    def n_extra(self) -> int:
+        return len(self.extra_names)
+
+    def residual_ss(self, thetas: np.ndarray) -> np.ndarray:
+        """(B, channels) sums of squared residuals over every record."""
+        from shm_ros.core.predict.batch import batch_responses
+
+        thetas = np.atleast_2d(thetas)
+        ss = np.zeros((thetas.shape[0], len(self.outputs)))
+        for r in self.data.records:
+            for a, Y in batch_responses(self.model, thetas, r.inputs, r.dt, self.outputs, chunk=self.chunk):
+                ss[a:a + Y.shape[0]] += np.sum((Y - r.outputs.T[None]) ** 2, axis=2)
+        return ss
+
+    def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
+        out = np.zeros(extra.shape[0])
+        if self.variance != "sampled":
+            return out
+        for j, p in enumerate(self.priors):
+            z = extra[:, j]
+            out += Prior.make("inverse_gamma", {"shape": p.shape, "scale": p.scale}).logpdf(np.exp(z)) + z
+        return out
+
+    def extra_initial(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        if self.variance != "sampled":
+            return np.zeros((n, 0))
+        return np.column_stack([np.log(p.scale / (p.shape + 1.0)) + 0.3 * rng.standard_normal(n)
+                                for p in self.priors])
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        x = np.atleast_2d(x)
+        out = np.full(x.shape[0], -np.inf)
+        ok = np.all(x[:, :self.n_theta] > 0, axis=1)
+        if not ok.any():
+            return out
+        ss = self.residual_ss(x[ok, :self.n_theta])
+        if self.variance == "marginal":
+            out[ok] = sum(ig_marginal_loglik(ss[:, j], self.n, p) for j, p in enumerate(self.priors))
+        else:
+            s2 = np.exp(x[ok, self.n_theta:])
+            out[ok] = np.sum(-0.5 * self.n * np.log(2 * np.pi * s2) - 0.5 * ss / s2, axis=1)
+        return out
+
+    def variance_estimates(self, theta: np.ndarray) -> dict[str, float]:
+        ss = self.residual_ss(np.asarray(theta, dtype=float))[0]
+        return {n: float(ig_posterior_mean(s, self.n, p))
+                for n, s, p in zip(self.variance_names, ss, self.priors, strict=True)}
+
+    def fit(self, theta: np.ndarray) -> dict:
+        """NRMS per channel over all records (the building paper's eq. 28), and each channel's RMS."""
+        from shm_ros.core.predict.batch import batch_responses
+        from shm_ros.core.predict.signals import strong_motion
+
+        th = np.atleast_2d(np.asarray(theta, dtype=float))
+        ss, ss_s, y2_s = (np.zeros(len(self.outputs)) for _ in range(3))
+        for r in self.data.records:
+            res = next(batch_responses(self.model, th, r.inputs, r.dt, self.outputs))[1][0] - r.outputs.T
+            s = strong_motion(r.inputs[0])
+            ss += np.sum(res ** 2, axis=1)
+            ss_s += np.sum(res[:, s] ** 2, axis=1)
+            y2_s += np.sum(r.outputs[s] ** 2, axis=0)
+        nrms = np.sqrt(ss / self.n) / np.maximum(self.rms, 1e-300)
+        ids = self.data.channel_ids
+        # the strong-motion part (5-95 % of the input's Arias intensity) alone: the relative model
+        # error a prediction's band scales with the response (shm_ros.core.predict.draws)
+        strong = np.sqrt(ss_s / np.maximum(y2_s, 1e-300))
+        return {"nrms": dict(zip(ids, map(float, nrms), strict=True)), "nrms_mean": float(np.mean(nrms)),
+                "nrms_strong": dict(zip(ids, map(float, strong), strict=True)),
+                "output_rms": dict(zip(ids, map(float, self.rms), strict=True)), "n_records": self.data.n_windows}

@@ -1,0 +1,184 @@
+"""Predict one event: the model driven by the measured input, compared with the measured outputs.
+
+For the nominal model, the MAP and every posterior draw the response comes from the exact
+time-domain solver (:mod:`shm_ros.core.response`, batched by :mod:`.batch`), from rest at the
+window's start after the baseline correction of every record (:mod:`.signals`). The
+posterior-predictive distribution of a channel at a sample is the mixture over draws of
+``N(y_draw(t), sigma_draw^2(t))`` (error model: :mod:`.draws`); its mean and variance are exact
+and the band is mean +- z std. Peak intervals are quantiles of each draw's peak of
+``y_draw + e_draw`` plus one error draw at its time (see ``_noisy_peaks``). Unmeasured floors and interstory drifts
+are outputs of the same model (every floor is a DOF of the full model, so no expansion is needed);
+drifts are model displacements consistent with the measured input, never integrated records.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import norm
+
+from shm_ros.core.models.base import AffineModel
+from shm_ros.core.response import Output, Quantity, drift_outputs, node_row, sensor_outputs
+
+from .batch import batch_responses
+from .config import PredictConfig
+from .draws import PosteriorDraws, nominal_draws
+from .record import EventRecord
+from .signals import baseline_correct, local_mean_square, nrms_pct, pre_event_end, strong_motion
+
+
+@dataclass
+class ChannelPrediction:
+    """One predicted location: a sensor (``measured``), an unmeasured floor or a story drift."""
+
+    name: str
+    quantity: str  # "acceleration" (m/s^2) | "drift" (m) | "drift_ratio" (-)
+    measured: bool
+    mean: np.ndarray
+    std: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    map: np.ndarray
+    nominal: np.ndarray
+    values: np.ndarray | None = None  # measured, baseline-corrected
+    peak_mean: float = float("nan")
+    peak_ci: tuple[float, float] = (float("nan"), float("nan"))
+    scores: dict[str, float | bool | None] = field(default_factory=dict)
+
+
+@dataclass
+class EventPrediction:
+    window_id: str
+    start_ns: int
+    fs: float
+    pga_m_s2: float
+    is_event: bool
+    channels: list[ChannelPrediction]
+    strong: slice  # the strong-motion part of the input (5-95 % of its Arias intensity)
+    n_pre: int  # pre-event samples (baseline and noise floor)
+    n_draws: int
+    source: str
+    notes: list[str] = field(default_factory=list)
+
+    def channel(self, name: str) -> ChannelPrediction:
+        for c in self.channels:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+
+def prediction_outputs(model: AffineModel, channel_ids: list[str]) -> list[tuple[Output, str]]:
+    """Measured sensors' accelerations, then (shear buildings) every floor no sensor sits on and
+    every story's drift ratio (drift in m when the story heights are not given)."""
+    outs = [(o, "acceleration") for o in sensor_outputs(model, channel_ids)]
+    if model.kind != "shear_building":
+        return outs
+    seen = {int(np.flatnonzero(o.row[:-1])[0]) for o, _ in outs
+            if np.count_nonzero(o.row[:-1]) == 1 and o.row[-1] == 0}
+    for k in range(model.n_dof):
+        if k not in seen:
+            e = np.zeros(model.n_dof)
+            e[k] = 1.0
+            outs.append((Output(f"floor{k + 1}", Quantity.ACCELERATION, node_row(model, e)), "acceleration"))
+    ratio = model.story_heights is not None
+    outs += [(o, "drift_ratio" if ratio else "drift") for o in drift_outputs(model, ratio=ratio)]
+    return outs
+
+
+def event_rng(seed: int, window_id: str) -> np.random.Generator:
+    """The error draws of one window: the same whoever predicts it and in whatever order."""
+    return np.random.default_rng(np.random.SeedSequence([int(seed), zlib.crc32(window_id.encode())]))
+
+
+def predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraws | None,
+                  config: PredictConfig | None = None) -> EventPrediction:
+    """The prediction of ``record`` by ``model`` under ``draws`` (None: the nominal model only)."""
+    cfg = (config or PredictConfig()).validate()
+    fs, dt = record.fs, 1.0 / record.fs
+    draws = draws if draws is not None else nominal_draws(model, cfg.relative_error)
+    n_pre = pre_event_end(record.inputs[0], fs, cfg.onset_arias, cfg.min_pre_event_s)
+    u = baseline_correct(record.inputs.T, n_pre, cfg.baseline).T
+    y = baseline_correct(record.outputs, n_pre, cfg.baseline)
+    spec = prediction_outputs(model, record.channel_ids)
+    outs = [o for o, _ in spec]
+    nm = len(record.channel_ids)
+    N = u.shape[1]
+
+    def one(theta: np.ndarray) -> np.ndarray:
+        return next(batch_responses(model, theta[None, :], u, dt, outs, chunk=1))[1][0]
+
+    y_nom = one(model.nominal_theta())
+    y_map = one(draws.theta_map)
+    # error model (see .draws): floor from the pre-event residual, relative part in time
+    s0 = np.zeros(len(outs))
+    for c in range(nm):
+        r = y[:n_pre, c] - y_map[c, :n_pre]
+        s0[c] = float(np.nanvar(r)) if np.isfinite(r).sum() > 1 else 0.0
+    accel = np.array([q == "acceleration" for _, q in spec])
+    s0[nm:] = np.where(accel[nm:], np.mean(s0[:nm]) if nm else 0.0, 0.0)
+    lms = local_mean_square(y_map, fs, cfg.envelope_s)
+    rel2 = np.stack([draws.rel2_for(cid) for cid in record.channel_ids]
+                    + [draws.rel2_mean()] * (len(outs) - nm), axis=1)  # (n_draws, o)
+
+    rng = event_rng(cfg.seed, record.window_id)
+    S1 = np.zeros((len(outs), N))
+    S2 = np.zeros((len(outs), N))
+    peaks = np.empty((draws.n, len(outs)))
+    for a, Y in batch_responses(model, draws.theta, u, dt, outs, chunk=cfg.chunk):
+        S1 += Y.sum(axis=0)
+        S2 += np.einsum("bon,bon->on", Y, Y)
+        peaks[a:a + Y.shape[0]] = _noisy_peaks(Y, s0, rel2[a:a + Y.shape[0]], lms, rng)
+    mean = S1 / draws.n
+    var = np.maximum(S2 / draws.n - mean ** 2, 0.0) + s0[:, None] + np.mean(rel2, axis=0)[:, None] * lms
+    std = np.sqrt(var)
+    z = float(norm.ppf(0.5 + cfg.level / 2))
+    q = (50 * (1 - cfg.level), 50 * (1 + cfg.level))
+    strong = strong_motion(u[0])
+
+    channels = []
+    for c, (o, kind) in enumerate(spec):
+        lo, hi = mean[c] - z * std[c], mean[c] + z * std[c]
+        pk = np.percentile(peaks[:, c], q)
+        ch = ChannelPrediction(o.name, kind, c < nm, mean[c], std[c], lo, hi, y_map[c], y_nom[c],
+                               peak_mean=float(np.max(np.abs(mean[c]))), peak_ci=(float(pk[0]), float(pk[1])))
+        if c < nm:
+            ch.values = y[:, c]
+            ch.scores = channel_scores(y[:, c], mean[c], y_map[c], y_nom[c], lo, hi, pk, strong)
+        channels.append(ch)
+    return EventPrediction(record.window_id, record.start_ns, fs, record.pga_m_s2, record.is_event, channels,
+                           strong, n_pre, draws.n, draws.source, list(record.notes) + list(draws.notes))
+
+
+def _noisy_peaks(Y: np.ndarray, s0: np.ndarray, rel2: np.ndarray, lms: np.ndarray,
+                 rng: np.random.Generator) -> np.ndarray:
+    """Per draw and output (B, o): the draw's peak |y| plus one error draw at the peak's time,
+    ``N(0, s0 + rel2 lms(t_peak))``. The model error is correlated in time (a slightly wrong
+    frequency shifts the whole peak cycle), so the peak moves by about one error standard
+    deviation; the maximum over independent white-noise samples would move less and give intervals
+    that are too narrow."""
+    t = np.argmax(np.abs(Y), axis=2)  # (B, o)
+    top = np.take_along_axis(np.abs(Y), t[:, :, None], 2)[:, :, 0]
+    o = np.arange(Y.shape[1])[None, :]
+    sig = np.sqrt(s0[None, :] + rel2 * lms[o, t])
+    return np.abs(top + sig * rng.standard_normal(top.shape))
+
+
+def channel_scores(y: np.ndarray, mean: np.ndarray, y_map: np.ndarray, y_nom: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray, peak_ci: np.ndarray, strong: slice) -> dict[str, float | bool | None]:
+    """NRMS of the predictive mean, the MAP and the nominal model; band coverage (all samples and
+    the strong-motion part); the measured peak and whether it lies inside its interval."""
+    ok = np.isfinite(y)
+    inside = (y >= lo) & (y <= hi)
+    s_ok = ok[strong]
+    peak = float(np.max(np.abs(y[ok]))) if ok.any() else float("nan")
+    return {
+        "nrms_pct": nrms_pct(y, mean),
+        "nrms_pct_map": nrms_pct(y, y_map),
+        "nrms_pct_nominal": nrms_pct(y, y_nom),
+        "coverage_95": float(np.mean(inside[ok])) if ok.any() else None,
+        "coverage_95_strong": float(np.mean(inside[strong][s_ok])) if s_ok.any() else None,
+        "peak_measured": peak,
+        "peak_inside": bool(peak_ci[0] <= peak <= peak_ci[1]) if np.isfinite(peak) else None,
+    }

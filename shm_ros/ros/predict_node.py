@@ -1,0 +1,160 @@
+"""predict: windows in, response predictions out (docs/predict.md, docs/interfaces.md §7).
+
+Subscribes to ``/shm/windows`` and ``/shm/posterior``. Every window that ingest flags as an event,
+and any window named on ``/shm/predict_request`` (std_msgs/String: a window id among the last
+``keep_windows`` received; no service type is used because std_srvs is not a dependency), is
+predicted with the posterior file ``posterior`` (re-read when it changes; a ``/shm/posterior``
+message marks that it did) or the nominal model without one, scored and published as
+``ResponsePrediction`` on ``/shm/prediction``. Predictions run one at a time in a worker process
+(:mod:`shm_ros.ros.predict_worker`); a timer in the executor thread collects them.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections import OrderedDict, deque
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+
+from shm_ros.core.config import option
+from shm_ros.core.predict import PredictConfig
+from shm_ros.ros import predict_worker, topics
+from shm_ros.ros.convert import ns_to_time, window_from_msg
+from shm_ros.ros.diagnostics import Diagnostics
+from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.params import load_config
+from shm_ros.ros.qos import latched_qos, stream_qos
+from shm_ros.ros.timers import steady_timer
+
+REQUEST = "/shm/predict_request"  # std_msgs/msg/String: the id of a window to predict
+
+
+@dataclass
+class PredictNodeConfig:
+    structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
+    posterior: str | None = option(None, "posterior.json or its folder (unset: the nominal model)")
+    keep_windows: int = option(20, "windows kept for requests by id")
+
+
+def prediction_to_msg(pred: Any) -> Any:
+    """``shm_interfaces/msg/ResponsePrediction`` of an ``EventPrediction``: every predicted location,
+    row-major samples x channels."""
+    msg = topics.message_class(topics.TYPES[topics.PREDICTION])()
+    msg.header.stamp = ns_to_time(pred.start_ns)
+    msg.window_id = pred.window_id
+    msg.start = ns_to_time(pred.start_ns)
+    msg.sample_rate_hz = float(pred.fs)
+    msg.channel_names = [c.name for c in pred.channels]
+    msg.measured = [bool(c.measured) for c in pred.channels]
+    n = int(pred.channels[0].mean.size) if pred.channels else 0
+    msg.n_samples = n
+    nan = np.full(n, np.nan)
+    msg.predicted_mean = np.column_stack([c.mean for c in pred.channels]).ravel().tolist()
+    msg.predicted_std = np.column_stack([c.std for c in pred.channels]).ravel().tolist()
+    msg.measured_values = np.column_stack([c.values if c.values is not None else nan
+                                           for c in pred.channels]).ravel().tolist()
+    msg.nrms_pct = [float(c.scores.get("nrms_pct", np.nan)) if c.measured else float("nan")
+                    for c in pred.channels]
+    return msg
+
+
+class PredictNode(Node):
+    """Parameters: every option of :class:`PredictConfig` and of :class:`PredictNodeConfig`."""
+
+    def __init__(self, name: str = "predict", parameters: dict[str, Any] | None = None) -> None:
+        super().__init__(name, parameter_overrides=overrides(parameters))
+        self.config = load_config(self, PredictConfig).validate()
+        self.settings = load_config(self, PredictNodeConfig)
+        if not self.settings.structure:
+            raise SystemExit(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
+        from shm_ros.core.models import build_model
+        from shm_ros.io.structure import load_structure
+
+        self.structure: str = self.settings.structure
+        build_model(load_structure(self.structure))  # a bad file stops the node at once
+        self.windows: OrderedDict[str, Any] = OrderedDict()
+        self.queue: deque = deque()
+        self.future: Future | None = None
+        self.done = 0
+        self.diag = Diagnostics(self, "predict", summary=lambda: (
+            "ok", f"{self.done} predictions, {len(self.queue)} waiting", {"predicted": self.done}))
+        self.pub: Publisher[Any] = self.create_publisher(topics.message_class(topics.TYPES[topics.PREDICTION]),
+                                         topics.PREDICTION, stream_qos())
+        self.create_subscription(topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS,
+                                 self._on_window, stream_qos())
+        self.create_subscription(topics.message_class(topics.TYPES[topics.POSTERIOR]), topics.POSTERIOR,
+                                 lambda _msg: None, latched_qos())  # the file is re-read when it changed
+        self.create_subscription(topics.message_class("std_msgs/msg/String"), REQUEST, self._on_request,
+                                 stream_qos())
+        self._workers: set = set()
+        self.pool = self._new_pool()
+        steady_timer(self, 0.1, self._poll)
+
+    def _new_pool(self) -> ProcessPoolExecutor:
+        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=predict_worker.init, initargs=(self.structure,))
+        before = set(multiprocessing.active_children())
+        pool.submit(predict_worker.ready)
+        self._workers |= set(multiprocessing.active_children()) - before
+        return pool
+
+    def destroy_node(self) -> None:
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        for proc in self._workers:
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(5.0)
+        super().destroy_node()
+
+    def _on_window(self, msg: Any) -> None:
+        w = window_from_msg(msg)
+        self.windows[w.window_id] = w
+        while len(self.windows) > max(1, self.settings.keep_windows):
+            self.windows.popitem(last=False)
+        if w.is_event:
+            self.queue.append(w)
+
+    def _on_request(self, msg: Any) -> None:
+        w = self.windows.get(str(msg.data))
+        if w is None:
+            self.diag.report("warn", f"request for window {msg.data!r}: not among the last windows", "request")
+        else:
+            self.queue.append(w)
+
+    def _poll(self) -> None:
+        if self.future is not None and self.future.done():
+            future, self.future = self.future, None
+            try:
+                pred, row = future.result()
+            except BrokenProcessPool as exc:
+                self.diag.report("error", f"prediction failed: worker process lost ({exc})", "prediction")
+                self.pool = self._new_pool()
+            except Exception as exc:  # a failed prediction must not take the node down
+                self.diag.report("error", f"prediction failed: {exc}", "prediction")
+            else:
+                self.pub.publish(prediction_to_msg(pred))
+                self.done += 1
+                self.diag.report("ok", f"{pred.window_id}: NRMS floor 4 {row.get('accel_floor4')}, "
+                                 f"floor 8 {row.get('accel_floor8')}", "prediction")
+            self.diag.publish()
+        if self.future is None and self.queue:
+            w = self.queue.popleft()
+            self.future = self.pool.submit(predict_worker.run, w, self.config, self.settings.posterior)
+
+
+def make_node(name: str, parameters: dict[str, Any]) -> PredictNode:
+    return PredictNode(name, parameters)
+
+
+def main(args: list[str] | None = None) -> int:
+    return spin(lambda: PredictNode(), args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
