@@ -1,0 +1,217 @@
+"""Environmental models of the tracked frequencies: regression on covariates, or PCA without them.
+
+Per tracked mode the candidates are
+
+- ``constant``; ``linear`` in the main covariate x (``temperature_c``);
+- ``bilinear``: ``a + b x + c min(x - knee, 0)`` (bearings and deck stiffen below freezing), the
+  knee chosen on a grid over the training range;
+- ``multi``: every measured covariate (temperatures at several points, each also through a
+  first-order lag for thermal inertia, ``rms_accel_m_s2``, ...) and time; ``multi_knee`` adds the knee.
+
+and the one with the smallest held-out error (blocked cross-validation: contiguous blocks of the
+training windows, so neighbouring windows do not vouch for each other) is kept; among candidates
+within 2 % of the best the simplest wins. That held-out error, not the in-sample spread, scales
+the residuals the novelty chart sees. Without any covariate the ``pca`` model takes over: the leading
+principal components of the standardised frequencies (found in every window) are the environment,
+and a window's residual is what its modes do beyond them.
+
+``normalised = f - prediction(x) + reference`` is the frequency at the training period's mean
+conditions (exported beside the tracked frequencies).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shm_ros.core.tracking.config import EnvModel
+
+N_FOLDS = 5
+MIN_FIT = 6  # windows of a mode needed to fit anything but a constant
+TIME = "time_d"  # the time feature: days since the first window
+SIMPLER = [EnvModel.CONSTANT, EnvModel.LINEAR, EnvModel.BILINEAR, EnvModel.MULTI, EnvModel.MULTI_KNEE]
+
+
+@dataclass
+class EnvironmentalFit:
+    mode: int
+    intercept_hz: float
+    slope_hz_per_unit: float  # per unit of the main covariate (above the knee)
+    slope_pct_per_unit: float
+    r2: float
+    residual_std_hz: float  # held-out RMSE: the residual scale of the novelty chart
+    n: int
+    model: str = "constant"
+    features: list[str] = field(default_factory=list)  # design columns after the intercept
+    coefficients: list[float] = field(default_factory=list)  # intercept first
+    knee: float = float("nan")
+    reference_hz: float = float("nan")  # frequency at the training period's mean conditions
+    heldout_rmse_hz: dict[str, float] = field(default_factory=dict)  # every candidate's
+
+
+def _design(x: dict[str, np.ndarray], features: list[str], knee: float, main: str) -> np.ndarray:
+    n = len(next(iter(x.values()))) if x else 0
+    cols = [np.ones(n)]
+    for name in features:
+        if name == "knee":
+            cols.append(np.minimum(x[main] - knee, 0.0))
+        else:
+            cols.append(x[name])
+    return np.column_stack(cols)
+
+
+def _lstsq(a: np.ndarray, y: np.ndarray) -> np.ndarray:
+    scale = np.where(np.std(a, axis=0) > 0, np.std(a, axis=0), 1.0)
+    scale[0] = 1.0
+    sol = np.linalg.lstsq(a / scale, y, rcond=None)[0]
+    return sol / scale
+
+
+def _cv_rmse(a: np.ndarray, y: np.ndarray) -> float:
+    n = y.size
+    if n < 2 * N_FOLDS or a.shape[1] >= n - n // N_FOLDS - 1:
+        return float("inf")
+    folds = np.array_split(np.arange(n), N_FOLDS)
+    err = np.empty(n)
+    for test in folds:
+        train = np.setdiff1d(np.arange(n), test)
+        if np.linalg.matrix_rank(a[train]) < a.shape[1]:
+            return float("inf")
+        err[test] = y[test] - a[test] @ _lstsq(a[train], y[train])
+    return float(np.sqrt(np.mean(err ** 2)))
+
+
+def candidate_features(x: dict[str, np.ndarray], main: str, train: np.ndarray) -> dict[EnvModel, list[str]]:
+    """Design columns of each candidate model, given the covariates measured in training."""
+    usable = [k for k, v in x.items() if np.isfinite(v[train]).mean() >= 0.9 and np.ptp(v[train][
+        np.isfinite(v[train])]) > 0]
+    out: dict[EnvModel, list[str]] = {EnvModel.CONSTANT: []}
+    if main in usable:
+        out[EnvModel.LINEAR] = [main]
+        out[EnvModel.BILINEAR] = [main, "knee"]
+    multi = ([main] if main in usable else []) + [k for k in usable if k != main]
+    if len(multi) > 1:
+        out[EnvModel.MULTI] = multi
+        if main in usable:
+            out[EnvModel.MULTI_KNEE] = [*multi, "knee"]
+    return out
+
+
+def knee_grid(xm: np.ndarray) -> np.ndarray:
+    xm = xm[np.isfinite(xm)]
+    if xm.size < 10:
+        return np.zeros(0)
+    lo, hi = np.quantile(xm, [0.1, 0.9])
+    return np.arange(np.ceil(lo), np.floor(hi) + 0.5, 1.0)
+
+
+def fit_mode(number: int, f: np.ndarray, x: dict[str, np.ndarray], main: str, choice: EnvModel
+             ) -> EnvironmentalFit:
+    """The environmental model of one mode on its training rows (``f`` NaN = not found)."""
+    use = np.isfinite(f)
+    for v in x.values():
+        use &= np.isfinite(v)
+    y = f[use]
+    if y.size < 2:
+        return EnvironmentalFit(number, float("nan"), float("nan"), float("nan"), float("nan"), float("nan"),
+                                int(y.size))
+    xs = {k: v[use] for k, v in x.items()}
+    cands = candidate_features(x, main, use) if y.size >= MIN_FIT else {EnvModel.CONSTANT: []}
+    if choice not in (EnvModel.AUTO, EnvModel.PCA):
+        cands = {choice: cands[choice]} if choice in cands else {EnvModel.CONSTANT: []}
+    knees = knee_grid(xs[main]) if main in xs else np.zeros(0)
+    scores: dict[EnvModel, tuple[float, float]] = {}
+    for kind, feats in cands.items():
+        best = (float("inf"), float("nan"))
+        for knee in (knees if "knee" in feats else [float("nan")]):
+            err = _cv_rmse(_design(xs, feats, knee, main), y)
+            if err < best[0]:
+                best = (err, float(knee))
+        scores[kind] = best
+    best_err = min(s[0] for s in scores.values())
+    if not np.isfinite(best_err):
+        kind = EnvModel.CONSTANT
+    else:
+        kind = next(k for k in SIMPLER if k in scores and scores[k][0] <= 1.02 * best_err)
+    feats, knee = cands[kind], scores.get(kind, (np.inf, np.nan))[1]
+    a = _design(xs, feats, knee, main)
+    coef = _lstsq(a, y)
+    res = y - a @ coef
+    ss = float(np.sum((y - y.mean()) ** 2))
+    r2 = 1.0 - float(np.sum(res ** 2)) / ss if ss > 0 else 0.0
+    dof = max(1, y.size - a.shape[1])
+    insample = float(np.sqrt(np.sum(res ** 2) / dof))
+    heldout = scores.get(kind, (np.inf, np.nan))[0]
+    sd = max(heldout if np.isfinite(heldout) else insample, insample, 1e-9 * abs(float(y.mean())))
+    mean_x = {k: float(np.mean(v)) for k, v in xs.items()}
+    ref = float(predict_one(coef, feats, knee, main, mean_x))
+    slope = float(coef[1 + feats.index(main)]) if main in feats else 0.0
+    return EnvironmentalFit(number, float(coef[0]), slope, float(100 * slope / ref) if ref else float("nan"), r2,
+                            sd, int(y.size), kind.value, list(feats), [float(c) for c in coef], knee, ref,
+                            {k.value: float(v[0]) for k, v in scores.items()})
+
+
+def predict_one(coef: np.ndarray | list[float], feats: list[str], knee: float, main: str,
+                x: dict[str, float]) -> float:
+    """Prediction of one fit for one window's covariates (NaN when one it needs is missing)."""
+    out = float(coef[0])
+    for c, name in zip(coef[1:], feats, strict=True):
+        v = min(x.get(main, np.nan) - knee, 0.0) if name == "knee" else x.get(name, np.nan)
+        out += float(c) * float(v)
+    return out
+
+
+def predict(fit: EnvironmentalFit, x: dict[str, float], main: str) -> float:
+    if not fit.coefficients:
+        return float("nan")
+    return predict_one(fit.coefficients, fit.features, fit.knee, main, x)
+
+
+@dataclass
+class PcaModel:
+    """Environment as the leading principal components of the standardised frequencies."""
+
+    mean: np.ndarray  # (n_modes,)
+    std: np.ndarray
+    components: np.ndarray  # (n_modes, r)
+    residual_std: np.ndarray  # (n_modes,) held-out, in the standardised units
+
+    @classmethod
+    def fit(cls, freq: np.ndarray, explained: float = 0.9) -> PcaModel | None:
+        full = freq[np.all(np.isfinite(freq), axis=1)]
+        m = freq.shape[1]
+        if m < 2 or full.shape[0] < max(10, m + 2):
+            return None
+        mean, std = full.mean(axis=0), full.std(axis=0)
+        std = np.where(std > 0, std, 1.0)
+        y = (full - mean) / std
+        _, sv, vt = np.linalg.svd(y, full_matrices=False)
+        frac = np.cumsum(sv ** 2) / np.sum(sv ** 2)
+        r = int(min(m - 1, np.searchsorted(frac, explained) + 1))
+        comps = vt[:r].T
+        # held-out residual scale: each mode predicted from the others (leave that mode out)
+        res = np.full(y.shape, np.nan)
+        for k in range(m):
+            keep = np.arange(m) != k
+            c = np.linalg.lstsq(comps[keep], y[:, keep].T, rcond=None)[0]
+            res[:, k] = y[:, k] - (comps[k] @ c)
+        return cls(mean, std, comps, np.sqrt(np.mean(res ** 2, axis=0)))
+
+    def residual_z(self, f: np.ndarray) -> np.ndarray:
+        """Standardised residual of each mode of one window, predicted from its other modes."""
+        y = (f - self.mean) / self.std
+        z = np.full(f.size, np.nan)
+        ok = np.isfinite(y)
+        for k in np.flatnonzero(ok):
+            others = ok.copy()
+            others[k] = False
+            if others.sum() < self.components.shape[1]:
+                continue
+            c = np.linalg.lstsq(self.components[others], y[others], rcond=None)[0]
+            z[k] = (y[k] - self.components[k] @ c) / self.residual_std[k]
+        return z
+
+    def normalised(self, f: np.ndarray) -> np.ndarray:
+        z = self.residual_z(f)
+        return self.mean + z * self.residual_std * self.std
