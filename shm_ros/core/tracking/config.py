@@ -50,8 +50,10 @@ class TrackingConfig:
     training_fraction: float = option(0.25, "first fraction of the windows that trains the "
                                       "environmental model and the novelty threshold", ros=False)
     ewma_lambda: float = option(0.2, "weight of the newest window in the novelty chart's EWMA")
-    alarm_quantile: float = option(0.999, "novelty threshold: this quantile of the chart statistic "
+    alarm_quantile: float = option(0.9999, "novelty threshold: this quantile of the chart statistic "
                                    "under normal conditions (or of the training statistic if larger)")
+    alarm_windows: int = option(3, "consecutive windows above the threshold before an alarm (one "
+                                "odd window is not a change)")
     novelty_damping: bool = option(False, "damping ratios enter the novelty chart too")
 
     def __post_init__(self) -> None:
@@ -67,6 +69,8 @@ class TrackingConfig:
             raise ValueError(f"max_freq_gate must be in [freq_tol, 1), got {self.max_freq_gate}")
         if not 0 <= self.adapt < 1:
             raise ValueError(f"adapt must be in [0, 1), got {self.adapt}")
+        if self.alarm_windows < 1:
+            raise ValueError(f"alarm_windows must be >= 1, got {self.alarm_windows}")
         if self.birth_windows < 0 or self.lag_hours < 0 or self.freq_weight < 0:
             raise ValueError("birth_windows, lag_hours and freq_weight must be >= 0")
         self.reference_source = ReferenceSource(self.reference_source).value

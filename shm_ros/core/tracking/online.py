@@ -94,6 +94,7 @@ class Tracker:
         self._damp_stats: np.ndarray = np.zeros((0, 2))
         self._chart = NoveltyChart(self.config.ewma_lambda, 0)
         self.trained = False
+        self._above = 0  # consecutive windows above the threshold
         self._pool: deque[tuple[int, float, float, np.ndarray]] = deque()
         self.n_rows = 0
         self.unassigned = 0
@@ -306,6 +307,8 @@ class Tracker:
             self._damp_stats = np.column_stack([np.nanmedian(logd, axis=0) if logd.size else [],
                                                 np.nanstd(logd, axis=0) if logd.size else []]) \
                 if np.isfinite(logd).any() else np.full((n_t, 2), np.nan)
+        for k, fit in enumerate(self._fits):
+            self._chart.set_autocorrelation(2 * k, fit.autocorrelation)
         stats = [self._chart.update(self._residuals(freq[w], damp[w], {k: xs[k][w] for k in names})[0])
                  for w in range(len(self._train))]
         self._chart.calibrate(np.array(stats), cfg.alarm_quantile)
@@ -343,7 +346,9 @@ class Tracker:
         z, row.normalised_hz = self._residuals(row.frequencies_hz, row.damping, x)
         row.novelty_score = self._chart.update(z)
         row.novelty_threshold = self._chart.threshold
-        row.novelty_alarm = bool(math.isfinite(row.novelty_score) and row.novelty_score > self._chart.threshold)
+        above = math.isfinite(row.novelty_score) and row.novelty_score > self._chart.threshold
+        self._above = self._above + 1 if above else 0
+        row.novelty_alarm = self._above >= self.config.alarm_windows
         if row.novelty_alarm:
             dims = [n for n in self.numbers for _ in (0, 1)]
             row.alarm_modes = sorted(set(self._chart.alarm_modes(dims, self.config.alarm_quantile)))
