@@ -13,7 +13,8 @@ Per tracked mode the candidates are
 and the one with the smallest held-out error (blocked cross-validation: contiguous blocks of the
 training windows, so neighbouring windows do not vouch for each other) is kept; among candidates
 within 2 % of the best the simplest wins. The chosen model's residual spread and lag-1
-autocorrelation over the training windows scale what the novelty chart sees. Without any covariate the ``pca`` model takes over: the leading
+autocorrelation over the training windows scale what the novelty chart sees. Without any
+covariate the ``pca`` model takes over: the leading
 principal components of the standardised frequencies (found in every window) are the environment,
 and a window's residual is what its modes do beyond them.
 
@@ -181,7 +182,8 @@ def fit_mode(number: int, f: np.ndarray, x: dict[str, np.ndarray], main: str, ch
     ref = float(predict_one(coef, feats, knee, main, mean_x))
     # d f / d x = (d f^2 / d x) / (2 f) at the reference conditions
     slope = float(coef[1 + feats.index(main)]) / (2 * ref) if main in feats else 0.0
-    return EnvironmentalFit(number, float(np.sqrt(max(coef[0], 0.0))), slope, float(100 * slope / ref) if ref else float("nan"), r2,
+    pct = float(100 * slope / ref) if ref else float("nan")
+    return EnvironmentalFit(number, float(np.sqrt(max(coef[0], 0.0))), slope, pct, r2,
                             sd, int(y.size), kind.value, list(feats), [float(c) for c in coef], knee, ref,
                             {k.value: float(v[0]) for k, v in scores.items()}, float(np.clip(ac, 0.0, 0.95)))
 
