@@ -59,15 +59,15 @@ def test_store_resumes_after_crashes_without_loss_or_duplicates(tmp_path):
     assert hit.count("estimates") == 240 and not hit.has("torn")
     assert hit.rows() == calm.rows()
     assert hit.alarms() == calm.alarms() and len(calm.alarms()) > 10
-    assert [m["record"] if "record" in m else m for m in hit.models()] == calm.models()
+    assert hit.models() == calm.models()
     write_tracked_modes(tmp_path / "calm.csv", calm.observations())
     write_tracked_modes(tmp_path / "hit.csv", hit.observations())
     assert (tmp_path / "calm.csv").read_bytes() == (tmp_path / "hit.csv").read_bytes()
     # the store's table is the batch tracker's table
     batch = track(est, TrackingConfig(reference_windows=12, training_fraction=TRAIN / 240))
     assert np.allclose(calm.observations().frequencies_hz, batch.observations.frequencies_hz, equal_nan=True)
-    assert [a["window_id"] for a in calm.alarms()] == [w for w, a in zip(batch.window_ids, batch.novelty_alarm)
-                                                      if a]
+    assert [a["window_id"] for a in calm.alarms()] == [w for w, a in zip(batch.window_ids, batch.novelty_alarm,
+                                                                                  strict=True) if a]
     # the fitted models are kept: the reference set and, after training, the environmental fits
     models = calm.models()
     assert models[0]["reference"] and models[-1]["environment"] and models[-1]["threshold"] > 0
