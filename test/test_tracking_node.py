@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
 from ros_helpers.graph import node_process, stop, wait_ready
 
 HERE = Path(__file__).resolve().parent

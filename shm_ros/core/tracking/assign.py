@@ -8,7 +8,8 @@ where both terms must be <= 1 (gated). The shape term leads: two modes whose fre
 their identities as long as their shapes differ more than the identification scatter. ``f_pred``
 is the frequency the tracker expects (the environmental model's prediction plus the recent offset,
 or the drift-following reference before the model is fitted); ``gate`` is relative, ``freq_tol``
-widened by the predicted shift from the reference and by consecutive misses.
+widened by the predicted shift from the reference, by the mode's spread in the reference period
+and by consecutive misses.
 """
 
 from __future__ import annotations
@@ -31,11 +32,15 @@ class Assignment:
     unassigned: np.ndarray  # indices of the window's modes left over
 
 
-def gates(cfg: TrackingConfig, predicted: np.ndarray, reference: np.ndarray, misses: np.ndarray) -> np.ndarray:
-    """Relative frequency gate of each tracked mode."""
+def gates(cfg: TrackingConfig, predicted: np.ndarray, reference: np.ndarray, misses: np.ndarray,
+          spread: np.ndarray | None = None) -> np.ndarray:
+    """Relative frequency gate of each tracked mode: ``freq_tol`` (or twice the mode's spread in
+    the reference period, when larger: an event catalogue's amplitude softening), widened by the
+    predicted shift from the reference and by consecutive misses, at most ``max_freq_gate``."""
     with np.errstate(invalid="ignore", divide="ignore"):
         shift = np.nan_to_num(np.abs(predicted - reference) / reference)
-    g = cfg.freq_tol * (1.0 + 0.5 * np.minimum(misses, 6)) + shift
+    base = cfg.freq_tol if spread is None else np.maximum(cfg.freq_tol, 2.0 * spread)
+    g = base * (1.0 + 0.5 * np.minimum(misses, 6)) + shift
     return np.minimum(g, cfg.max_freq_gate)
 
 

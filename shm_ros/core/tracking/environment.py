@@ -55,8 +55,7 @@ class EnvironmentalFit:
     autocorrelation: float = 0.0  # lag-1, of the training residuals (window to window), >= 0
 
 
-def _design(x: dict[str, np.ndarray], features: list[str], knee: float, main: str) -> np.ndarray:
-    n = len(next(iter(x.values()))) if x else 0
+def _design(x: dict[str, np.ndarray], features: list[str], knee: float, main: str, n: int) -> np.ndarray:
     cols = [np.ones(n)]
     for name in features:
         if name == "knee":
@@ -127,7 +126,7 @@ def refine_knee(xs: dict[str, np.ndarray], feats: list[str], knee: float, main: 
     from scipy.optimize import minimize_scalar
 
     def sse(k: float) -> float:
-        a = _design(xs, feats, k, main)
+        a = _design(xs, feats, k, main, y.size)
         return float(np.sum((np.sqrt(y) - _root(a @ _lstsq(a, y))) ** 2))
 
     return float(minimize_scalar(sse, bounds=(knee - 0.5, knee + 0.5), method="bounded",
@@ -155,12 +154,12 @@ def fit_mode(number: int, f: np.ndarray, x: dict[str, np.ndarray], main: str, ch
     for kind, feats in cands.items():
         best = (float("inf"), float("nan"))
         for knee in (knees if "knee" in feats else [float("nan")]):
-            err = _cv_rmse(_design(xs, feats, knee, main), y)
+            err = _cv_rmse(_design(xs, feats, knee, main, y.size), y)
             if err < best[0]:
                 best = (err, float(knee))
         if "knee" in feats and np.isfinite(best[1]):
             knee = refine_knee(xs, feats, best[1], main, y)
-            best = (min(best[0], _cv_rmse(_design(xs, feats, knee, main), y)), knee)
+            best = (min(best[0], _cv_rmse(_design(xs, feats, knee, main, y.size), y)), knee)
         scores[kind] = best
     best_err = min(s[0] for s in scores.values())
     if not np.isfinite(best_err):
@@ -168,7 +167,7 @@ def fit_mode(number: int, f: np.ndarray, x: dict[str, np.ndarray], main: str, ch
     else:
         kind = next(k for k in SIMPLER if k in scores and scores[k][0] <= 1.02 * best_err)
     feats, knee = cands[kind], scores.get(kind, (np.inf, np.nan))[1]
-    a = _design(xs, feats, knee, main)
+    a = _design(xs, feats, knee, main, y.size)
     coef = _lstsq(a, y)
     res = fy - _root(a @ coef)
     ss = float(np.sum((fy - fy.mean()) ** 2))

@@ -209,7 +209,8 @@ class Tracker:
         d_w = np.array([m.damping_ratio for m in est.modes], dtype=float)
         s_w = shapes_on(est, self.sensors)
         pred, base = self._predicted(x)
-        a = assign(f_w, s_w, pred, gates(cfg, pred, base, self._misses), self._ref_s, cfg)
+        spread = np.array([r.spread for r in self.reference])
+        a = assign(f_w, s_w, pred, gates(cfg, pred, base, self._misses, spread), self._ref_s, cfg)
         freq, damp = np.full(n_t, np.nan), np.full(n_t, np.nan)
         shapes = np.full((n_t, n_s), np.nan)
         for k in range(n_t):
@@ -264,13 +265,14 @@ class Tracker:
                                   np.array([p[0] for p in items]), cfg.cluster_cutoff, cfg.min_presence,
                                   cfg.birth_windows)
         taken: set[int] = set()
-        for fm, shape, presence, dm, members in clusters:
+        for fm, shape, presence, dm, members, spread in clusters:
             mac = mac_table(shape[None, :], self._ref_s)[0] if self.reference else np.zeros(0)
             near = np.abs(fm - self._ref_f) / self._ref_f <= cfg.max_freq_gate
             if np.any((mac >= cfg.mac_min) & near):
                 continue  # a tracked mode that missed its gate, not a new one
             number = max(self.numbers, default=0) + 1
-            self.reference.append(ReferenceMode(number, fm, shape.copy(), presence, dm, "born", window_id))
+            self.reference.append(ReferenceMode(number, fm, shape.copy(), presence, dm, "born", spread=spread,
+                                                born_window=window_id))
             self._ref_f = np.append(self._ref_f, fm)
             self._ref_s = np.vstack([self._ref_s.reshape(-1, len(self.sensors)), shape[None, :]])
             self._ref_d = np.append(self._ref_d, dm)
@@ -303,10 +305,11 @@ class Tracker:
             self._fits = [env.fit_mode(r.number, freq[:, k], use, cfg.covariate, choice)
                           for k, r in enumerate(self.reference)]
         logd = np.log(np.where(damp > 0, damp, np.nan))
-        with np.errstate(invalid="ignore"):
-            self._damp_stats = np.column_stack([np.nanmedian(logd, axis=0) if logd.size else [],
-                                                np.nanstd(logd, axis=0) if logd.size else []]) \
-                if np.isfinite(logd).any() else np.full((n_t, 2), np.nan)
+        self._damp_stats = np.full((n_t, 2), np.nan)
+        for k in range(n_t):
+            v = logd[:, k][np.isfinite(logd[:, k])]
+            if v.size >= 3:
+                self._damp_stats[k] = np.median(v), np.std(v)
         for k, fit in enumerate(self._fits):
             self._chart.set_autocorrelation(2 * k, fit.autocorrelation)
         stats = [self._chart.update(self._residuals(freq[w], damp[w], {k: xs[k][w] for k in names})[0])

@@ -33,13 +33,17 @@ class ReferenceMode:
     presence: float  # fraction of the reference windows in which it was found
     damping: float = float("nan")
     source: str = "windows"  # windows, model, both or born (appeared later)
+    spread: float = 0.0  # relative frequency spread of its members (widens its gate)
     born_window: str = ""  # window id where a mode born later was first assigned
+
+
+Cluster = tuple[float, np.ndarray, float, float, np.ndarray, float]
 
 
 def cluster_modes(estimates: list[ModalEstimate], sensors: list[str], cutoff: float, min_presence: float,
                   n_windows: int | None = None) -> list[tuple]:
-    """Recurring modes of ``estimates``: (median frequency, shape, presence, median damping),
-    ascending frequency. ``n_windows``: the presence denominator (default: len(estimates))."""
+    """Recurring modes of ``estimates``: (median frequency, shape, presence, median damping,
+    relative spread), ascending frequency. ``n_windows``: the presence denominator (default: len(estimates))."""
     f_list: list[float] = []
     d_list: list[float] = []
     shp_list: list[np.ndarray] = []
@@ -56,13 +60,13 @@ def cluster_modes(estimates: list[ModalEstimate], sensors: list[str], cutoff: fl
         return []
     found = cluster_arrays(np.array(f_list), np.array(d_list, float), np.array(shp_list), np.array(win_list),
                            cutoff, min_presence, n_windows or len(estimates))
-    return [c[:4] for c in found]
+    return [(*c[:4], c[5]) for c in found]
 
 
 def cluster_arrays(f: np.ndarray, damp: np.ndarray, shp: np.ndarray, win: np.ndarray, cutoff: float,
-                   min_presence: float, n_windows: int) -> list[tuple[float, np.ndarray, float, float, np.ndarray]]:
-    """:func:`cluster_modes` on arrays of modes (``win``: the window of each); each cluster also
-    carries its member indices."""
+                   min_presence: float, n_windows: int) -> list[Cluster]:
+    """:func:`cluster_modes` on arrays of modes (``win``: the window of each): (median frequency,
+    shape, presence, median damping, member indices, relative spread) per cluster."""
     if f.size == 0:
         return []
     if f.size == 1:
@@ -72,6 +76,8 @@ def cluster_arrays(f: np.ndarray, damp: np.ndarray, shp: np.ndarray, win: np.nda
         iu = np.triu_indices(f.size, 1)
         labels = fcluster(linkage(np.clip(d[iu], 0, None), method="average"), t=cutoff,
                           criterion="distance") - 1
+        labels = _split_shared_windows(labels, d, win)
+        labels = _merge_disjoint(labels, d, win, cutoff)
     out = []
     for lab in np.unique(labels):
         members = np.flatnonzero(labels == lab)
@@ -82,9 +88,57 @@ def cluster_arrays(f: np.ndarray, damp: np.ndarray, shp: np.ndarray, win: np.nda
         rep = members[np.argmin(np.abs(f[members] - fm))]
         dm = damp[members]
         dmed = float(np.median(dm[np.isfinite(dm)])) if np.isfinite(dm).any() else float("nan")
-        out.append((fm, shp[rep], presence, dmed, members))
+        spread = float(np.quantile(np.abs(f[members] / fm - 1), 0.9)) if members.size > 2 else 0.0
+        out.append((fm, shp[rep], presence, dmed, members, spread))
     out.sort(key=lambda r: r[0])
     return out
+
+
+def _split_shared_windows(labels: np.ndarray, d: np.ndarray, win: np.ndarray, depth: int = 4) -> np.ndarray:
+    """One physical mode appears once per window: a cluster holding two modes of the same window in
+    more than 10 % of its windows is two modes (a close pair whose frequencies vary by more than
+    their spacing, as in an event catalogue) and is split in two, recursively."""
+    labels = labels.copy()
+    for _ in range(depth):
+        changed = False
+        for lab in np.unique(labels):
+            members = np.flatnonzero(labels == lab)
+            windows = np.unique(win[members])
+            if members.size < 4 or (members.size - windows.size) <= 0.1 * windows.size:
+                continue
+            sub = d[np.ix_(members, members)]
+            iu = np.triu_indices(members.size, 1)
+            halves = fcluster(linkage(np.clip(sub[iu], 0, None), method="average"), t=2, criterion="maxclust")
+            if np.unique(halves).size < 2:
+                continue
+            labels[members[halves == 2]] = labels.max() + 1
+            changed = True
+        if not changed:
+            break
+    return labels
+
+
+def _merge_disjoint(labels: np.ndarray, d: np.ndarray, win: np.ndarray, cutoff: float) -> np.ndarray:
+    """The converse: two neighbouring clusters that (almost) never share a window and whose mean
+    distance is below three cut-offs are one mode whose frequency varied more than the cut-off
+    (amplitude softening between earthquakes, a season)."""
+    labels = labels.copy()
+    while True:
+        labs = np.unique(labels)
+        best, pair = 3 * cutoff, None
+        for i, a in enumerate(labs):
+            ma = np.flatnonzero(labels == a)
+            for b in labs[i + 1:]:
+                mb = np.flatnonzero(labels == b)
+                shared = np.intersect1d(win[ma], win[mb]).size
+                if shared > 0.1 * min(np.unique(win[ma]).size, np.unique(win[mb]).size):
+                    continue
+                dist = float(np.mean(d[np.ix_(ma, mb)]))
+                if dist < best:
+                    best, pair = dist, (a, b)
+        if pair is None:
+            return labels
+        labels[labels == pair[1]] = pair[0]
 
 
 def model_modes(spec: StructureSpec, sensors: list[str], n_modes: int = 8,
@@ -123,7 +177,7 @@ def build_reference(estimates: list[ModalEstimate], sensors: list[str], cfg: Tra
         return [ReferenceMode(k + 1, f, s, float("nan"), source="model") for k, (f, s) in enumerate(model)]
     clusters = cluster_modes(estimates, sensors, cfg.cluster_cutoff, cfg.min_presence)
     if source is ReferenceSource.WINDOWS:
-        return [ReferenceMode(k + 1, f, s, p, d) for k, (f, s, p, d) in enumerate(clusters)]
+        return [ReferenceMode(k + 1, f, s, p, d, spread=w) for k, (f, s, p, d, w) in enumerate(clusters)]
     assert model is not None
     # both: FE modes name the set; a cluster takes the number of the FE mode it matches by shape
     mac = mac_table(np.array([c[1] for c in clusters]).reshape(len(clusters), len(sensors)),
@@ -136,9 +190,9 @@ def build_reference(estimates: list[ModalEstimate], sensors: list[str], cfg: Tra
         if r is None:
             refs.append(ReferenceMode(0, f, s, 0.0, source="model"))
         else:
-            fc, sc, pc, dc = clusters[r]
-            refs.append(ReferenceMode(0, fc, sc, pc, dc, source="both"))
-    refs += [ReferenceMode(0, f, s, p, d) for r, (f, s, p, d) in enumerate(clusters) if r not in matched]
+            fc, sc, pc, dc, wc = clusters[r]
+            refs.append(ReferenceMode(0, fc, sc, pc, dc, source="both", spread=wc))
+    refs += [ReferenceMode(0, f, s, p, d, spread=w) for r, (f, s, p, d, w) in enumerate(clusters) if r not in matched]
     for k, ref in enumerate(refs):
         ref.number = k + 1
     return refs
