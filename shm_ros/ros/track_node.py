@@ -45,11 +45,13 @@ class TrackNodeConfig:
                                    "novelty threshold (144: one day of 10-minute windows)")
     frame_id: str = option("", "frame_id in the header of the published tracked modes")
     store: str = option("", "history store (SQLite); empty: $ROS_HOME/shm_ros/track.sqlite (ROS_HOME "
-                        "defaults to ~/.ros); none: no store, no resume")
+                        "defaults to ~/.ros); none: no store, no resume", cli=False)
     retention_days: float = option(0.0, "store: delete windows older than this before the newest (0 = keep all)")
     checkpoint_every: int = option(100, "store: windows between checkpoints of the tracker (a restart "
                                    "replays at most this many)")
-    structure: str = option("", "structure file whose FE modes seed the reference (reference_source model/both)")
+    # the command's --store (a store to export) and --structure are its own options
+    structure: str = option("", "structure file whose FE modes seed the reference (reference_source model/both)",
+                            cli=False)
 
 
 def default_store() -> Path:
