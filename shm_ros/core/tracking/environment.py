@@ -12,7 +12,7 @@ Per tracked mode the candidates are
 
 and the one with the smallest held-out error (blocked cross-validation: contiguous blocks of the
 training windows, so neighbouring windows do not vouch for each other) is kept; among candidates
-within 2 % of the best the simplest wins. The chosen model's residual spread and lag-1
+within 5 % of the best the simplest wins. The chosen model's residual spread and lag-1
 autocorrelation over the training windows scale what the novelty chart sees. Without any
 covariate the ``pca`` model takes over: the leading
 principal components of the standardised frequencies (found in every window) are the environment,
@@ -165,7 +165,7 @@ def fit_mode(number: int, f: np.ndarray, x: dict[str, np.ndarray], main: str, ch
     if not np.isfinite(best_err):
         kind = EnvModel.CONSTANT
     else:
-        kind = next(k for k in SIMPLER if k in scores and scores[k][0] <= 1.02 * best_err)
+        kind = next(k for k in SIMPLER if k in scores and scores[k][0] <= 1.05 * best_err)
     feats, knee = cands[kind], scores.get(kind, (np.inf, np.nan))[1]
     a = _design(xs, feats, knee, main, y.size)
     coef = _lstsq(a, y)
