@@ -46,11 +46,12 @@ def test_identities_survive_freezing_and_a_crossing():
 
 
 def test_damage_after_frost_is_detected_and_frost_is_not_novelty():
-    """Detection: the issue asks >= 17 of 20 seeds; at a true rate of >= 0.95 (all 20 seeds of
-    the full run detect within 3 windows) the CI's 5 of 5 fails with probability 1 - 0.95^5 = 23 %
-    - too often - so CI asks >= 4 of 5 (fails with 2.3 %) and the full run 17 of 20. False alarms:
-    the mean episode count per clean campaign <= 1 (full: 20 campaigns; CI: 5, at <= 1.6, a mean
-    the full run's 0.35 exceeds by chance with probability < 1 % by a Poisson tail)."""
+    """Detection: the issue asks >= 17 of 20 seeds. If the true rate were only 0.95, 5 of 5 CI
+    seeds would fail with probability 1 - 0.95^5 = 23 %, so CI asks >= 4 of 5 (fails with 2.3 %);
+    the full run asks 17 of 20. False alarms: mean episodes per clean 8-day campaign <= 1 (full: 20
+    campaigns); CI (5 campaigns) allows 1.6: for Poisson counts with mean 1 per campaign, a sum of
+    more than 8 over 5 campaigns has probability 6.8 %, and at the full run's measured rate (see
+    docs/tracking.md) far less."""
     detected, delays, episodes, outside = 0, [], [], 0
     for seed in NOVELTY_SEEDS:
         camp = girder_tables(seed, N, damage_at=DAMAGE_AT, **FROST)

@@ -24,6 +24,7 @@ conditions (exported beside the tracked frequencies).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,6 +54,7 @@ class EnvironmentalFit:
     reference_hz: float = float("nan")  # frequency at the training period's mean conditions
     heldout_rmse_hz: dict[str, float] = field(default_factory=dict)  # every candidate's (selection)
     autocorrelation: float = 0.0  # lag-1, of the training residuals (window to window), >= 0
+    coefficient_cov: list[list[float]] = field(default_factory=list)  # of the f^2 coefficients
 
 
 def _design(x: dict[str, np.ndarray], features: list[str], knee: float, main: str, n: int) -> np.ndarray:
@@ -177,6 +179,8 @@ def fit_mode(number: int, f: np.ndarray, x: dict[str, np.ndarray], main: str, ch
     # of the training period measures extrapolation to an unseen spell, not normal scatter
     sd = max(float(np.sqrt(np.sum(res ** 2) / dof)), 1e-9 * abs(float(fy.mean())))
     ac = float(np.corrcoef(res[:-1], res[1:])[0, 1]) if res.size > 3 and np.std(res) > 0 else 0.0
+    res2 = y - a @ coef
+    cov = float(np.sum(res2 ** 2) / dof) * np.linalg.pinv(a.T @ a)
     mean_x = {k: float(np.mean(v)) for k, v in xs.items()}
     ref = float(predict_one(coef, feats, knee, main, mean_x))
     # d f / d x = (d f^2 / d x) / (2 f) at the reference conditions
@@ -184,7 +188,8 @@ def fit_mode(number: int, f: np.ndarray, x: dict[str, np.ndarray], main: str, ch
     pct = float(100 * slope / ref) if ref else float("nan")
     return EnvironmentalFit(number, float(np.sqrt(max(coef[0], 0.0))), slope, pct, r2,
                             sd, int(y.size), kind.value, list(feats), [float(c) for c in coef], knee, ref,
-                            {k.value: float(v[0]) for k, v in scores.items()}, float(np.clip(ac, 0.0, 0.95)))
+                            {k.value: float(v[0]) for k, v in scores.items()}, float(np.clip(ac, 0.0, 0.95)),
+                            cov.tolist())
 
 
 def predict_one(coef: np.ndarray | list[float], feats: list[str], knee: float, main: str,
@@ -195,6 +200,22 @@ def predict_one(coef: np.ndarray | list[float], feats: list[str], knee: float, m
         v = min(x.get(main, np.nan) - knee, 0.0) if name == "knee" else x.get(name, np.nan)
         out += float(c) * float(v)
     return float(np.sqrt(out)) if out > 0 else float("nan")
+
+
+def _row(feats: list[str], knee: float, main: str, x: dict[str, float]) -> np.ndarray:
+    return np.array([1.0] + [min(x.get(main, np.nan) - knee, 0.0) if n == "knee" else x.get(n, np.nan)
+                             for n in feats], float)
+
+
+def prediction_std(fit: EnvironmentalFit, x: dict[str, float], main: str, f: float) -> float:
+    """Standard error of the predicted frequency (Hz) from the coefficients' uncertainty: small
+    inside the training conditions, growing as the model extrapolates (a frost colder than any in
+    training), so that the chart does not mistake extrapolation error for change."""
+    if not fit.coefficient_cov or not math.isfinite(f) or f <= 0:
+        return 0.0
+    a = _row(fit.features, fit.knee, main, x)
+    var = float(a @ np.asarray(fit.coefficient_cov) @ a)
+    return math.sqrt(max(var, 0.0)) / (2 * f) if math.isfinite(var) else 0.0
 
 
 def predict(fit: EnvironmentalFit, x: dict[str, float], main: str) -> float:

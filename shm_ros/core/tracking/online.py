@@ -30,6 +30,9 @@ if TYPE_CHECKING:
 
 MIN_TRAINING = 10  # windows with a novelty statistic needed before alarms are raised
 NS_PER_DAY = 86400e9
+# weight of the prediction's standard error in the residual scale: the coefficients' error is
+# a lower bound on the error of a model pushed beyond its training conditions (its form may be off too)
+EXTRAPOLATION = 3.0
 
 
 @dataclass
@@ -336,7 +339,8 @@ class Tracker:
             for k, fit in enumerate(self._fits[:n_t]):
                 p = env.predict(fit, x, self.config.covariate)
                 if math.isfinite(p) and math.isfinite(f[k]):
-                    z[2 * k] = (f[k] - p) / fit.residual_std_hz
+                    se = env.prediction_std(fit, x, self.config.covariate, p)
+                    z[2 * k] = (f[k] - p) / math.hypot(fit.residual_std_hz, EXTRAPOLATION * se)
                     norm[k] = f[k] - p + fit.reference_hz
         if self.config.novelty_damping and self._damp_stats.size:
             for k in range(min(n_t, self._damp_stats.shape[0])):
