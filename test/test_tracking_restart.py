@@ -27,7 +27,7 @@ from test_tracking_core import _campaign
 from shm_interfaces.msg import ModalEstimate as EstimateMsg
 from shm_ros.ros.convert import estimate_to_msg
 from shm_ros.ros.qos import stream_qos
-est, _, _ = _campaign(12, n=int(sys.argv[2]), damage_at=0.7, damage=0.02)
+est, _, _ = _campaign(12, n=int(sys.argv[2]), damage_at=0.6, damage=0.05)
 rclpy.init(); node = rclpy.create_node("estimates_source")
 pub = node.create_publisher(EstimateMsg, "/shm/modal_estimates", stream_qos())
 for e in est:
@@ -92,7 +92,7 @@ def test_kill_9_and_restart_lose_and_repeat_nothing(tmp_path):
             source.kill()
             out = source.communicate()[0]
     assert len(killed) == 2 and sup.restarts["track"] >= 2, (killed, sup.restarts, out[-2000:])
-    est, _, _ = _campaign(12, n=N, damage_at=0.7, damage=0.02)
+    est, _, _ = _campaign(12, n=N, damage_at=0.6, damage=0.05)
     calm = TrackStore(tmp_path / "calm.sqlite")
     tracker = Tracker(TrackingConfig(reference_windows=REF), training_windows=TRAIN)
     for e in est:
