@@ -65,12 +65,12 @@ def girder_tables(seed: int, n_windows: int = 1152, *, t_mean_c: float = 5.0, t_
         sc.effects.append(EffectRequest("damage", {"at": f"{damage_at * sc.interval_s + 1}s",
                                                    "factor": damage_factor, "where": "span1"}))
     c = simulate_campaign(sc)
-    factors = [c.factors(i) for i in range(n_windows)]
-    deck = np.array([f.get("EI", 1.0) for f in factors])
+    factors: list[dict[str, float]] = [c.factors(i) for i in range(n_windows)]
+    deck = np.array([fac.get("EI", 1.0) for fac in factors])
     lo, hi = deck.min() * 0.999, deck.max() * 1.001
     grids = {}
-    for f in factors:
-        key = tuple(sorted((k, v) for k, v in f.items() if k != "EI"))
+    for fac in factors:
+        key = tuple(sorted((k, v) for k, v in fac.items() if k != "EI"))
         if key not in grids:
             grids[key] = _grid_truth(c, dict(key), lo, hi)
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(77,)))
@@ -85,8 +85,8 @@ def girder_tables(seed: int, n_windows: int = 1152, *, t_mean_c: float = 5.0, t_
         grid, gf, gs = grids[key]
         j = int(np.clip(np.searchsorted(grid, deck[i]) - 1, 0, grid.size - 2))
         w = (deck[i] - grid[j]) / (grid[j + 1] - grid[j])
-        f = (1 - w) * gf[j] + w * gf[j + 1]
-        s = (1 - w) * gs[j] + w * gs[j + 1]
+        f: np.ndarray = (1 - w) * gf[j] + w * gf[j + 1]
+        s: np.ndarray = (1 - w) * gs[j] + w * gs[j + 1]
         damp = np.full(f.size, 0.015)
         if crossing:
             if lat_shape is None:  # MAC 0.56 with vertical mode 2 at the sensors
@@ -99,7 +99,8 @@ def girder_tables(seed: int, n_windows: int = 1152, *, t_mean_c: float = 5.0, t_
             s = np.vstack([s, lat_shape])
             damp = np.append(damp, 0.01)
         truth_rows.append(f)
-        modes, ids = [], []
+        modes: list[Mode] = []
+        ids: list[int | None] = []
         cols = [k for k in range(len(sensors)) if rng.uniform() > 0.03]
         for k in range(f.size):
             if rng.uniform() < missing:
@@ -138,7 +139,7 @@ def identity_score(camp: TableCampaign, res) -> tuple[float, dict[int, int]]:
             if got.size:
                 votes.setdefault(ident, {}).setdefault(int(got[0]), 0)
                 votes[ident][int(got[0])] += 1
-    owner = {ident: max(v, key=v.get) for ident, v in votes.items()}
+    owner = {ident: max(v.items(), key=lambda kv: kv[1])[0] for ident, v in votes.items()}
     good = 0
     for w, (e, ids) in enumerate(zip(camp.estimates, camp.truth_ids, strict=True)):
         ok = True
