@@ -43,10 +43,11 @@ STAGES: dict[str, tuple[type, type, dict[str, Any], set[str], set[str], set[str]
                  # the recording, the files, and the window length of ingest (IngestConfig's)
                  {"bag", "structure", "out", "window", "plots", "config"},
                  set()),
-    "track": (TrackingConfig, TrackNodeConfig, {},
-              # the node trains on a number of windows, the command on a fraction of the campaign
-              {"training_windows", "frame_id"},
-              {"modes", "out", "no_plot", "training_fraction"},
+    "track": (TrackingConfig, TrackNodeConfig, {"store": "none"},
+              # the node trains on a number of windows, the command on a fraction of the campaign;
+              # the node writes its store, the command exports a time range of one
+              {"training_windows", "frame_id", "retention_days", "checkpoint_every"},
+              {"modes", "out", "no_plot", "training_fraction", "t_from", "t_to"},
               set()),
     "update": (UpdateConfig, UpdateNodeConfig, {"structure": str(ROOT / "examples" / "building.yaml")},
                {"min_windows", "min_new_windows", "output_dir"},

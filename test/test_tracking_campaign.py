@@ -37,7 +37,9 @@ def test_tracked_girder_modes_follow_the_truth_over_a_day(tmp_path, seed):
     assert len(windows) == N
     cfg = IdentifyConfig(uncertainty=False)
     estimates = [identify_window(w, cfg) for w in windows]
-    res = track(estimates, TrackingConfig(reference_windows=12, training_fraction=1.0))
+    # the hidden effect is linear in temperature: the linear model's slope is compared with the
+    # truth's (with 48 windows of SSI scatter, `auto` may prefer a knee that is not there)
+    res = track(estimates, TrackingConfig(reference_windows=12, training_fraction=1.0, env_model="linear"))
     by_start = {int(w["start_ns"]): w for w in truth["windows"]}
     # every true mode, in-plane or not: the records hold the deck's torsion and lateral modes too
     # (off-centre sensors, cross-axis sensitivity), and a tracked mode may be one of them

@@ -68,8 +68,8 @@ def test_identities_slopes_and_novelty_over_many_seeds():
         assert [r.number for r in res.reference] == [1, 2, 3, 4, 5]
         assert np.allclose([r.frequency_hz for r in res.reference], F0, rtol=0.03)
         fr = res.observations.frequencies_hz
-        for w, (e, ids) in enumerate(zip(est, truth)):
-            for m, true_k in zip(e.modes, ids):
+        for w, (e, ids) in enumerate(zip(est, truth, strict=True)):
+            for m, true_k in zip(e.modes, ids, strict=True):
                 got = np.flatnonzero(fr[w] == m.frequency_hz)
                 if got.size == 0:
                     continue
@@ -79,7 +79,7 @@ def test_identities_slopes_and_novelty_over_many_seeds():
                     right += 1
                 else:
                     wrong += 1
-        for fit, s in zip(res.environment, SLOPE * F0):
+        for fit, s in zip(res.environment, SLOPE * F0, strict=True):
             slope_err.append(abs(fit.slope_hz_per_unit / s - 1))
         n = len(est)
         cut = int(np.ceil(2 / 3 * n))

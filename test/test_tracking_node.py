@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
 from ros_helpers.graph import node_process, stop, wait_ready
 
 HERE = Path(__file__).resolve().parent
@@ -49,13 +48,14 @@ print(json.dumps({"n": len(rows), "modes": [list(r.mode_numbers) for r in rows[:
 """
 
 
-def test_track_node_publishes_one_row_per_window_like_the_offline_tracker():
+def test_track_node_publishes_one_row_per_window_like_the_offline_tracker(tmp_path):
     sys.path.insert(0, str(HERE))
     from test_tracking_core import _campaign
 
     from shm_ros.core.tracking import Tracker, TrackingConfig
 
-    node = node_process("track", {"reference_windows": REF, "training_windows": TRAIN})
+    node = node_process("track", {"reference_windows": REF, "training_windows": TRAIN,
+                                  "store": str(tmp_path / "track.sqlite")})
     try:
         wait_ready(subscribers={"/shm/modal_estimates": 1}, publishers={"/shm/tracked_modes": 1})
         run = subprocess.run([sys.executable, "-c", SOURCE, str(HERE), str(N), str(DAMAGE_AT)],

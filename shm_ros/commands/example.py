@@ -33,7 +33,7 @@ def stage_settings(n_windows: int, out: Path) -> dict[str, dict[str, Any]]:
     schedule scaled to a short campaign (one posterior, from every window)."""
     half = max(3, n_windows // 2)
     return {"identify": {},
-            "track": {"reference_windows": half, "training_windows": half},
+            "track": {"reference_windows": half, "training_windows": half, "store": str(out / "track.sqlite")},
             "update": {"min_windows": n_windows, "min_new_windows": n_windows,
                        "output_dir": str(out / "update")}}
 

@@ -1,9 +1,14 @@
-"""`shm-ros track MODES.json --out DIR`: mode identities across windows, temperature, novelty.
+"""`shm-ros track MODES.json --out DIR`: mode identities across windows, environment, novelty.
 
 Reads the modal estimates written by ``shm-ros identify`` (docs/interfaces.md §3), tracks them with
 ``shm_ros.core.tracking.track`` and writes ``DIR/tracked_modes.csv`` (docs/interfaces.md §4, the
-input of ``shm-ros update --modes``), ``DIR/tracking.json`` (reference modes, the environmental
-model per mode, novelty threshold and alarms; with provenance) and ``DIR/tracking.png``.
+input of ``shm-ros update --modes``), ``DIR/normalised_modes.csv`` (the same table with the
+frequencies at the training period's mean conditions), ``DIR/tracking.json`` (reference modes, the
+environmental model per mode, novelty threshold, alarms with their modes; with provenance) and
+``DIR/tracking.png``.
+
+``shm-ros track --store DB --out DIR [--from T] [--to T]``: the windows of a history store (the
+track node's, SQLite) in a time range -> the same two tables and ``DIR/alarms.json``.
 """
 
 from __future__ import annotations
@@ -23,8 +28,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("track", help="track modes across windows (identities, temperature, novelty)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("modes", help="modes JSON of `shm-ros identify`")
+    p.add_argument("modes", nargs="?", help="modes JSON of `shm-ros identify`")
     p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--store", help="history store (SQLite) to export from (without MODES.json)")
+    p.add_argument("--from", dest="t_from", help="export windows starting at or after this time (ISO 8601)")
+    p.add_argument("--to", dest="t_to", help="export windows starting before this time (ISO 8601)")
+    p.add_argument("--structure", help="structure file whose FE modes seed the reference "
+                   "(--reference-source model/both)")
     p.add_argument("--no-plot", action="store_true", help="skip tracking.png")
     add_options(p.add_argument_group("tracking (TrackingConfig; the track node's parameters of the "
                                      "same names)"), TrackingConfig)
@@ -35,6 +45,38 @@ def _num(v: float) -> float | None:
     return None if v is None or not math.isfinite(float(v)) else float(v)
 
 
+def _ns(text: str | None) -> int | None:
+    if text is None:
+        return None
+    from shm_ros.io.tables import parse_time
+
+    return int(round(parse_time(text) * 1e9))
+
+
+def export_store(args: argparse.Namespace) -> int:
+    from shm_ros.io import jsonio
+    from shm_ros.io.store import StoreError, TrackStore
+    from shm_ros.io.tables import write_tracked_modes
+
+    try:
+        lo, hi = _ns(args.t_from), _ns(args.t_to)
+        with TrackStore(args.store, writer=False) as store:
+            obs = store.observations(lo, hi)
+            norm = store.observations(lo, hi, normalised=True)
+            alarms = [a for a in store.alarms() if (lo is None or a["start_ns"] >= lo)
+                      and (hi is None or a["start_ns"] < hi)]
+    except (StoreError, ValueError, OSError) as exc:
+        print(f"shm-ros track: {args.store}: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_tracked_modes(out / "tracked_modes.csv", obs)
+    write_tracked_modes(out / "normalised_modes.csv", norm)
+    jsonio.dump({"store": str(args.store), "alarms": alarms}, out / "alarms.json")
+    print(f"{obs.n_windows} windows, {obs.n_modes} tracked modes, {len(alarms)} alarms from {args.store} -> {out}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from shm_ros.commands.options import config_from_args
     from shm_ros.core.provenance import stamp_output
@@ -43,16 +85,27 @@ def run(args: argparse.Namespace) -> int:
     from shm_ros.io.modes_json import read_modes_json
     from shm_ros.io.tables import write_tracked_modes
 
+    if args.modes is None:
+        if not args.store:
+            print("shm-ros track: give MODES.json, or --store DB to export", file=sys.stderr)
+            return 2
+        return export_store(args)
     try:
         cfg = config_from_args(TrackingConfig, args)
         estimates = read_modes_json(args.modes)
-        res = track(estimates, cfg)
+        spec = None
+        if args.structure:
+            from shm_ros.io.structure import load_structure
+
+            spec = load_structure(args.structure)
+        res = track(estimates, cfg, structure=spec)
     except (OSError, KeyError, ValueError, json.JSONDecodeError) as exc:
         print(f"shm-ros track: {args.modes}: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_tracked_modes(out / "tracked_modes.csv", res.observations)
+    write_tracked_modes(out / "normalised_modes.csv", res.normalised_observations())
     obs = res.observations
     payload: dict[str, Any] = {
         "reference_modes": [{"mode": r.number, "frequency_hz": r.frequency_hz,
@@ -62,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
         "environment": [{k: (_num(v) if isinstance(v, float) else v)
                          for k, v in dataclasses.asdict(e).items()} for e in res.environment],
         "covariate": cfg.covariate,
+        "born_modes": [{"mode": r.number, "window": r.born_window} for r in res.reference if r.source == "born"],
         "found_fraction": {str(n): float(v) for n, v in
                            zip(obs.mode_numbers, (obs.frequencies_hz == obs.frequencies_hz).mean(0),
                                strict=True)},
@@ -69,6 +123,8 @@ def run(args: argparse.Namespace) -> int:
         "novelty": {"threshold": _num(res.novelty_threshold), "training_windows": res.n_training,
                     "alarms": int(res.novelty_alarm.sum()),
                     "alarm_windows": [w for w, a in zip(res.window_ids, res.novelty_alarm, strict=True) if a],
+                    "alarm_modes": {w: m for w, m in zip(res.window_ids, res.alarm_modes, strict=True) if m},
+                    "episodes": [{"first": res.window_ids[a], "last": res.window_ids[b]} for a, b in res.episodes],
                     "scores": [_num(v) for v in res.novelty_score]},
         "notes": res.notes,
     }

@@ -44,6 +44,11 @@ def _parse_time(cell: str) -> tuple[float, str]:
     return dt.timestamp(), "iso"
 
 
+def parse_time(cell: str) -> float:
+    """Seconds (POSIX seconds for ISO 8601, UTC when no zone is given) of a time cell."""
+    return _parse_time(cell)[0]
+
+
 def _number(cell: str | None) -> float:
     if cell is None:
         return math.nan

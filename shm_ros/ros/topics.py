@@ -7,6 +7,7 @@ import importlib
 WINDOWS = "/shm/windows"  # shm_interfaces/msg/Window, pipeline QoS
 MODAL_ESTIMATES = "/shm/modal_estimates"  # shm_interfaces/msg/ModalEstimate, pipeline QoS
 TRACKED_MODES = "/shm/tracked_modes"  # shm_interfaces/msg/TrackedModes
+TRACKING_ALARMS = "/shm/tracking_alarms"  # shm_interfaces/msg/TrackedModes of alarm windows, latched
 POSTERIOR = "/shm/posterior"  # shm_interfaces/msg/PosteriorSummary, latched
 PREDICTION = "/shm/prediction"  # shm_interfaces/msg/ResponsePrediction
 VERDICT = "/shm/verdict"  # shm_interfaces/msg/Verdict, latched
@@ -18,6 +19,7 @@ TYPES = {
     WINDOWS: "shm_interfaces/msg/Window",
     MODAL_ESTIMATES: "shm_interfaces/msg/ModalEstimate",
     TRACKED_MODES: "shm_interfaces/msg/TrackedModes",
+    TRACKING_ALARMS: "shm_interfaces/msg/TrackedModes",
     POSTERIOR: "shm_interfaces/msg/PosteriorSummary",
     PREDICTION: "shm_interfaces/msg/ResponsePrediction",
     VERDICT: "shm_interfaces/msg/Verdict",

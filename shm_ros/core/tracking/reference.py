@@ -1,0 +1,198 @@
+"""The tracked mode set: learned from the first windows, taken from the FE model, or both.
+
+From windows: all modes of the first windows are clustered on ``|f_i - f_j| / max(f_i, f_j) +
+(1 - MAC_ij)`` (average linkage, as the stabilization-diagram picking); a cluster found in at least
+``min_presence`` of those windows is a tracked mode (median frequency and damping, the shape of the
+member nearest the median frequency). From the model: the structure file's lowest modes read at the
+sensors. Both: the clusters are matched to the FE modes by MAC (optimal assignment), so the FE model
+names and completes the set while the data fix the frequencies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.cluster.hierarchy import fcluster, linkage
+from scipy.optimize import linear_sum_assignment
+
+from shm_ros.core.tracking.config import ReferenceSource, TrackingConfig
+from shm_ros.core.tracking.shapes import mac_table, shapes_on
+from shm_ros.core.types import ModalEstimate
+
+if TYPE_CHECKING:
+    from shm_ros.core.structure import StructureSpec
+
+
+@dataclass
+class ReferenceMode:
+    number: int
+    frequency_hz: float  # median over the reference windows (or the FE frequency)
+    shape: np.ndarray  # over the tracker's sensor list (NaN = sensor never seen)
+    presence: float  # fraction of the reference windows in which it was found
+    damping: float = float("nan")
+    source: str = "windows"  # windows, model, both or born (appeared later)
+    spread: float = 0.0  # relative frequency spread of its members (widens its gate)
+    born_window: str = ""  # window id where a mode born later was first assigned
+
+
+Cluster = tuple[float, np.ndarray, float, float, np.ndarray, float]
+
+
+def cluster_modes(estimates: list[ModalEstimate], sensors: list[str], cutoff: float, min_presence: float,
+                  n_windows: int | None = None) -> list[tuple]:
+    """Recurring modes of ``estimates``: (median frequency, shape, presence, median damping,
+    relative spread), ascending frequency. ``n_windows``: the presence denominator (default: len(estimates))."""
+    f_list: list[float] = []
+    d_list: list[float] = []
+    shp_list: list[np.ndarray] = []
+    win_list: list[int] = []
+    for w, est in enumerate(estimates):
+        s = shapes_on(est, sensors)
+        for k, m in enumerate(est.modes):
+            if np.isfinite(m.frequency_hz) and m.frequency_hz > 0:
+                f_list.append(m.frequency_hz)
+                d_list.append(m.damping_ratio)
+                shp_list.append(s[k])
+                win_list.append(w)
+    if not f_list:
+        return []
+    found = cluster_arrays(np.array(f_list), np.array(d_list, float), np.array(shp_list), np.array(win_list),
+                           cutoff, min_presence, n_windows or len(estimates))
+    return [(*c[:4], c[5]) for c in found]
+
+
+def cluster_arrays(f: np.ndarray, damp: np.ndarray, shp: np.ndarray, win: np.ndarray, cutoff: float,
+                   min_presence: float, n_windows: int) -> list[Cluster]:
+    """:func:`cluster_modes` on arrays of modes (``win``: the window of each): (median frequency,
+    shape, presence, median damping, member indices, relative spread) per cluster."""
+    if f.size == 0:
+        return []
+    if f.size == 1:
+        labels = np.zeros(1, int)
+    else:
+        d = np.abs(f[:, None] - f[None, :]) / np.maximum(f[:, None], f[None, :]) + (1.0 - mac_table(shp, shp))
+        iu = np.triu_indices(f.size, 1)
+        labels = fcluster(linkage(np.clip(d[iu], 0, None), method="average"), t=cutoff,
+                          criterion="distance") - 1
+        labels = _split_shared_windows(labels, d, win)
+        labels = _merge_disjoint(labels, d, win, cutoff)
+    out = []
+    for lab in np.unique(labels):
+        members = np.flatnonzero(labels == lab)
+        presence = np.unique(win[members]).size / n_windows
+        if presence < min_presence:
+            continue
+        fm = float(np.median(f[members]))
+        rep = members[np.argmin(np.abs(f[members] - fm))]
+        dm = damp[members]
+        dmed = float(np.median(dm[np.isfinite(dm)])) if np.isfinite(dm).any() else float("nan")
+        spread = float(np.quantile(np.abs(f[members] / fm - 1), 0.9)) if members.size > 2 else 0.0
+        out.append((fm, shp[rep], presence, dmed, members, spread))
+    out.sort(key=lambda r: r[0])
+    return out
+
+
+def _split_shared_windows(labels: np.ndarray, d: np.ndarray, win: np.ndarray, depth: int = 4) -> np.ndarray:
+    """One physical mode appears once per window: a cluster holding two modes of the same window in
+    more than 10 % of its windows is two modes (a close pair whose frequencies vary by more than
+    their spacing, as in an event catalogue) and is split in two, recursively."""
+    labels = labels.copy()
+    for _ in range(depth):
+        changed = False
+        for lab in np.unique(labels):
+            members = np.flatnonzero(labels == lab)
+            windows = np.unique(win[members])
+            if members.size < 4 or (members.size - windows.size) <= 0.1 * windows.size:
+                continue
+            sub = d[np.ix_(members, members)]
+            iu = np.triu_indices(members.size, 1)
+            halves = fcluster(linkage(np.clip(sub[iu], 0, None), method="average"), t=2, criterion="maxclust")
+            if np.unique(halves).size < 2:
+                continue
+            labels[members[halves == 2]] = labels.max() + 1
+            changed = True
+        if not changed:
+            break
+    return labels
+
+
+def _merge_disjoint(labels: np.ndarray, d: np.ndarray, win: np.ndarray, cutoff: float) -> np.ndarray:
+    """The converse: two neighbouring clusters that (almost) never share a window and whose mean
+    distance is below three cut-offs are one mode whose frequency varied more than the cut-off
+    (amplitude softening between earthquakes, a season)."""
+    labels = labels.copy()
+    while True:
+        labs = np.unique(labels)
+        best, pair = 3 * cutoff, None
+        for i, a in enumerate(labs):
+            ma = np.flatnonzero(labels == a)
+            for b in labs[i + 1:]:
+                mb = np.flatnonzero(labels == b)
+                shared = np.intersect1d(win[ma], win[mb]).size
+                if shared > 0.1 * min(np.unique(win[ma]).size, np.unique(win[mb]).size):
+                    continue
+                dist = float(np.mean(d[np.ix_(ma, mb)]))
+                if dist < best:
+                    best, pair = dist, (a, b)
+        if pair is None:
+            return labels
+        labels[labels == pair[1]] = pair[0]
+
+
+def model_modes(spec: StructureSpec, sensors: list[str], n_modes: int = 8,
+                max_frequency_hz: float | None = None) -> list[tuple[float, np.ndarray]]:
+    """The FE model's lowest modes at ``sensors`` (NaN at a sensor the model cannot read)."""
+    from shm_ros.core.models import build_model
+
+    model = build_model(spec)
+    sol = model.modes(n_modes=n_modes)
+    rows = np.full((len(sensors), model.n_dof), np.nan)
+    for j, sid in enumerate(sensors):
+        try:
+            rows[j] = model.sensor_matrix([sid])[0]
+        except KeyError:
+            continue
+    out = []
+    for k, f in enumerate(sol.frequencies_hz):
+        if max_frequency_hz is not None and f > max_frequency_hz:
+            continue
+        phi = rows @ sol.shapes[:, k]
+        ok = np.isfinite(phi)
+        if not ok.any() or np.max(np.abs(phi[ok])) <= 0:
+            continue  # a mode the sensors cannot see
+        out.append((float(f), phi / np.max(np.abs(phi[ok]))))
+    return out
+
+
+def build_reference(estimates: list[ModalEstimate], sensors: list[str], cfg: TrackingConfig,
+                    model: list[tuple[float, np.ndarray]] | None = None) -> list[ReferenceMode]:
+    """The tracked mode set, numbered from 1 (see the module docstring)."""
+    source = ReferenceSource(cfg.reference_source)
+    if source is not ReferenceSource.WINDOWS and not model:
+        raise ValueError(f"reference_source={source.value} needs the structure's FE modes")
+    if source is ReferenceSource.MODEL:
+        assert model is not None
+        return [ReferenceMode(k + 1, f, s, float("nan"), source="model") for k, (f, s) in enumerate(model)]
+    clusters = cluster_modes(estimates, sensors, cfg.cluster_cutoff, cfg.min_presence)
+    if source is ReferenceSource.WINDOWS:
+        return [ReferenceMode(k + 1, f, s, p, d, spread=w) for k, (f, s, p, d, w) in enumerate(clusters)]
+    assert model is not None
+    # both: FE modes name the set; a cluster takes the number of the FE mode it matches by shape
+    mac = mac_table(np.array([c[1] for c in clusters]).reshape(len(clusters), len(sensors)),
+                    np.array([m[1] for m in model]))
+    rows, cols = linear_sum_assignment(-mac) if mac.size else (np.zeros(0, int), np.zeros(0, int))
+    matched = {int(r): int(c) for r, c in zip(rows, cols, strict=True) if mac[r, c] >= cfg.mac_min}
+    refs: list[ReferenceMode] = []
+    for c, (f, s) in enumerate(model):
+        r = next((r for r, cc in matched.items() if cc == c), None)
+        if r is None:
+            refs.append(ReferenceMode(0, f, s, 0.0, source="model"))
+        else:
+            fc, sc, pc, dc, wc = clusters[r]
+            refs.append(ReferenceMode(0, fc, sc, pc, dc, source="both", spread=wc))
+    refs += [ReferenceMode(0, f, s, p, d, spread=w) for r, (f, s, p, d, w) in enumerate(clusters) if r not in matched]
+    for k, ref in enumerate(refs):
+        ref.number = k + 1
+    return refs

@@ -1,0 +1,39 @@
+"""Mode shapes on the tracker's sensor list (windows may lose channels; MAC on common sensors)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shm_ros.core.modal import mac as modal_mac
+from shm_ros.core.types import ModalEstimate
+
+
+def shapes_on(est: ModalEstimate, sensors: list[str]) -> np.ndarray:
+    """(n_modes, n_sensors) shapes of one window on ``sensors`` (NaN where absent)."""
+    out = np.full((len(est.modes), len(sensors)), np.nan)
+    col = {s: j for j, s in enumerate(sensors)}
+    idx = [col[s] for s in est.sensor_ids]
+    for k, m in enumerate(est.modes):
+        out[k, idx] = np.asarray(m.mode_shape, dtype=float)
+    return out
+
+
+def mac_table(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """MAC of every row of ``a`` against every row of ``b`` on their common finite sensors."""
+    if a.shape[0] == 0 or b.shape[0] == 0:
+        return np.zeros((a.shape[0], b.shape[0]))
+    return np.asarray(modal_mac(a[:, None, :], b[None, :, :], min_common=2))
+
+
+def aligned(shape: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """``shape`` with the sign that agrees with ``ref`` on their common sensors."""
+    ok = np.isfinite(shape) & np.isfinite(ref)
+    return -shape if ok.any() and float(shape[ok] @ ref[ok]) < 0 else shape
+
+
+def widen(shapes: np.ndarray, n_sensors: int) -> np.ndarray:
+    """Pad the last axis with NaN to ``n_sensors`` (a sensor seen for the first time)."""
+    if shapes.shape[-1] >= n_sensors:
+        return shapes
+    pad = np.full((*shapes.shape[:-1], n_sensors - shapes.shape[-1]), np.nan)
+    return np.concatenate([shapes, pad], axis=-1)

@@ -1,0 +1,266 @@
+"""The tracking history store: an embedded SQLite database (WAL, one writer, versioned schema).
+
+It holds every window's modal estimate (with its covariates), the tracked row the tracker made of
+it (assignments, normalised frequencies, novelty), the alarms, the models fitted on them
+(reference modes, environmental fits, threshold) and a checkpoint of the tracker. Each window is
+one transaction: estimate, rows, alarms and (every ``checkpoint_every`` windows) the checkpoint
+commit together, so a process killed at any instant leaves a store that is a prefix of the
+undisturbed run's. :func:`resume` rebuilds the tracker from the checkpoint and replays the
+estimates stored after it (the tracker is deterministic), so a restart neither loses nor repeats a
+window; an estimate whose window is already stored is skipped (:meth:`TrackStore.has`).
+
+One writer: the writer holds an exclusive ``flock`` on ``<path>.lock``; readers (``shm-ros track
+--store``) open the database read-only and may run at any time (WAL). Retention: rows and estimates
+older than ``retention_days`` before the newest window are deleted (models and alarms are kept).
+The checkpoint is a pickle of the tracker: the store is the node's own file, not an exchange format
+(a checkpoint that does not load, e.g. after an upgrade, is rebuilt by replaying every stored estimate).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pickle
+import sqlite3
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.tracking import TrackedRow, Tracker
+from shm_ros.core.types import ModalEstimate, Mode
+
+SCHEMA_VERSION = 1
+NS_PER_DAY = 86400 * 10**9
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS estimates (seq INTEGER PRIMARY KEY AUTOINCREMENT, window_id TEXT UNIQUE NOT NULL,
+    start_ns INTEGER NOT NULL, record TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS rows (window_id TEXT PRIMARY KEY, start_ns INTEGER NOT NULL, record TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS rows_time ON rows (start_ns);
+CREATE TABLE IF NOT EXISTS alarms (window_id TEXT PRIMARY KEY, start_ns INTEGER NOT NULL, score REAL,
+    threshold REAL, modes TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS models (id INTEGER PRIMARY KEY AUTOINCREMENT, after_seq INTEGER NOT NULL,
+    kind TEXT NOT NULL, record TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS checkpoint (id INTEGER PRIMARY KEY CHECK (id = 1), seq INTEGER NOT NULL,
+    state BLOB NOT NULL);
+"""
+
+
+class StoreError(RuntimeError):
+    """The store cannot be opened (another writer, a newer schema); the message names the file."""
+
+
+def _f(v: Any) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _arr(v: Any) -> Any:
+    a = np.asarray(v, dtype=float)
+    return [_arr(x) for x in a] if a.ndim > 1 else [_f(x) for x in a]
+
+
+def _nan(v: Any) -> np.ndarray:
+    return np.array(v if v is not None else [], dtype=float) if not isinstance(v, list) else np.array(
+        [[math.nan if x is None else x for x in r] if isinstance(r, list) else (math.nan if r is None else r)
+         for r in v], dtype=float)
+
+
+def estimate_record(e: ModalEstimate) -> dict[str, Any]:
+    return {"window_id": e.window_id, "start_ns": e.start_ns, "end_ns": e.end_ns, "sensor_ids": list(e.sensor_ids),
+            "method": e.method, "temperature_c": e.temperature_c, "covariates": dict(e.covariates),
+            "modes": [[m.frequency_hz, m.damping_ratio, [float(x) for x in m.mode_shape]] for m in e.modes]}
+
+
+def estimate_from_record(r: dict[str, Any]) -> ModalEstimate:
+    return ModalEstimate(r["window_id"], int(r["start_ns"]), int(r["end_ns"]), list(r["sensor_ids"]),
+                         [Mode(float(f), float(d), np.array(s, float)) for f, d, s in r["modes"]], r["method"],
+                         r["temperature_c"], dict(r["covariates"]))
+
+
+def row_record(r: TrackedRow) -> dict[str, Any]:
+    return {"window_id": r.window_id, "start_ns": r.start_ns, "modes": list(r.mode_numbers),
+            "frequencies_hz": _arr(r.frequencies_hz), "damping": _arr(r.damping), "macs": _arr(r.macs),
+            "sensor_ids": list(r.sensor_ids), "shapes": _arr(r.shapes), "covariates": {
+                k: _f(v) for k, v in r.covariates.items()}, "normalised_hz": _arr(r.normalised_hz),
+            "novelty_score": _f(r.novelty_score), "novelty_threshold": _f(r.novelty_threshold),
+            "novelty_alarm": bool(r.novelty_alarm), "alarm_modes": list(r.alarm_modes), "unassigned": r.unassigned}
+
+
+class TrackStore:
+    """See the module docstring. ``writer=False`` opens read-only."""
+
+    def __init__(self, path: str | Path, writer: bool = True, retention_days: float = 0.0,
+                 checkpoint_every: int = 100) -> None:
+        self.path = Path(path)
+        self.writer = writer
+        self.retention_days = retention_days
+        self.checkpoint_every = max(1, checkpoint_every)
+        self._lock = None
+        if writer:
+            import fcntl
+
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._lock = open(str(self.path) + ".lock", "w")  # noqa: SIM115 - held for the store's life
+            try:
+                fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as exc:
+                self._lock.close()
+                raise StoreError(f"{self.path}: another process writes this store") from exc
+            self.db = sqlite3.connect(self.path, isolation_level=None)
+            self.db.execute("PRAGMA journal_mode=WAL")
+            self.db.execute("PRAGMA synchronous=NORMAL")
+            self.db.executescript(_SCHEMA)
+            got = self.meta("schema_version")
+            if got is None:
+                self.db.execute("INSERT INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
+            elif int(got) > SCHEMA_VERSION:
+                raise StoreError(f"{self.path}: schema version {got} is newer than this program's {SCHEMA_VERSION}")
+        else:
+            if not self.path.is_file():
+                raise StoreError(f"{self.path}: no such store")
+            self.db = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True)
+        self._since_checkpoint = 0
+
+    def close(self) -> None:
+        self.db.close()
+        if self._lock is not None:
+            self._lock.close()
+
+    def __enter__(self) -> TrackStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- reading --------------------------------------------------------------------------------
+    def meta(self, key: str) -> str | None:
+        row = self.db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        return None if row is None else str(row[0])
+
+    def has(self, window_id: str) -> bool:
+        return self.db.execute("SELECT 1 FROM estimates WHERE window_id = ?", (window_id,)).fetchone() is not None
+
+    def count(self, table: str = "rows") -> int:
+        assert table in ("rows", "estimates", "alarms", "models")
+        return int(self.db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0])
+
+    def rows(self, start_ns: int | None = None, end_ns: int | None = None) -> list[dict[str, Any]]:
+        """Tracked rows with ``start_ns <= window start < end_ns``, in time order."""
+        q = "SELECT record FROM rows WHERE start_ns >= ? AND start_ns < ? ORDER BY start_ns, window_id"
+        lo, hi = start_ns if start_ns is not None else -(2**63), end_ns if end_ns is not None else 2**63 - 1
+        return [json.loads(r[0]) for r in self.db.execute(q, (lo, hi))]
+
+    def alarms(self) -> list[dict[str, Any]]:
+        return [{"window_id": w, "start_ns": t, "score": s, "threshold": th, "modes": json.loads(m)}
+                for w, t, s, th, m in self.db.execute("SELECT * FROM alarms ORDER BY start_ns")]
+
+    def models(self, kind: str | None = None) -> list[dict[str, Any]]:
+        q = "SELECT kind, after_seq, record FROM models" + (" WHERE kind = ?" if kind else "") + " ORDER BY id"
+        return [{"kind": k, "after_seq": s, **json.loads(r)} for k, s, r in self.db.execute(q, (kind,) if kind else ())]
+
+    def estimates_after(self, seq: int) -> list[tuple[int, ModalEstimate]]:
+        q = "SELECT seq, record FROM estimates WHERE seq > ? ORDER BY seq"
+        return [(int(s), estimate_from_record(json.loads(r))) for s, r in self.db.execute(q, (seq,))]
+
+    def observations(self, start_ns: int | None = None, end_ns: int | None = None,
+                     normalised: bool = False) -> ModalObservations:
+        """The tracked-modes table (docs/interfaces.md §4) of a time range."""
+        rows = self.rows(start_ns, end_ns)
+        if not rows:
+            raise ValueError(f"{self.path}: no tracked window in that time range")
+        numbers = max((r["modes"] for r in rows), key=len)
+        sensors: list[str] = []
+        for r in rows:
+            sensors += [s for s in r["sensor_ids"] if s not in sensors]
+        n_w, n_m, n_s = len(rows), len(numbers), len(sensors)
+        freq, damp = np.full((n_w, n_m), np.nan), np.full((n_w, n_m), np.nan)
+        shapes = np.full((n_w, n_m, n_s), np.nan)
+        names: list[str] = []
+        for r in rows:
+            names += [c for c in r["covariates"] if c not in names]
+        for w, r in enumerate(rows):
+            k = len(r["modes"])
+            freq[w, :k] = _nan(r["normalised_hz"] if normalised else r["frequencies_hz"])[:k] if k else []
+            damp[w, :k] = _nan(r["damping"])
+            cols = [sensors.index(s) for s in r["sensor_ids"]]
+            if k and cols:
+                shapes[w, :k][:, cols] = _nan(r["shapes"]).reshape(k, len(cols))
+        cov = {c: np.array([math.nan if r["covariates"].get(c) is None else r["covariates"][c] for r in rows])
+               for c in names}
+        return ModalObservations(np.array([r["start_ns"] / 1e9 for r in rows]), list(numbers), freq, shapes,
+                                 sensors, damp, cov, [], "iso")
+
+    # -- writing --------------------------------------------------------------------------------
+    def record(self, est: ModalEstimate, rows: list[TrackedRow], tracker: Tracker) -> int:
+        """One window in one transaction; returns its sequence number."""
+        db = self.db
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            cur = db.execute("INSERT INTO estimates (window_id, start_ns, record) VALUES (?, ?, ?)",
+                             (est.window_id, est.start_ns, json.dumps(estimate_record(est))))
+            seq = int(cur.lastrowid or 0)
+            for r in rows:
+                db.execute("INSERT OR REPLACE INTO rows VALUES (?, ?, ?)",
+                           (r.window_id, r.start_ns, json.dumps(row_record(r))))
+                if r.novelty_alarm:
+                    db.execute("INSERT OR REPLACE INTO alarms VALUES (?, ?, ?, ?, ?)",
+                               (r.window_id, r.start_ns, _f(r.novelty_score), _f(r.novelty_threshold),
+                                json.dumps(r.alarm_modes)))
+            self._models(tracker, seq)
+            self._since_checkpoint += 1
+            if self._since_checkpoint >= self.checkpoint_every:
+                db.execute("INSERT OR REPLACE INTO checkpoint VALUES (1, ?, ?)", (seq, pickle.dumps(tracker)))
+                self._since_checkpoint = 0
+                self._retain(est.start_ns)
+            db.execute("COMMIT")
+        except BaseException:
+            db.execute("ROLLBACK")
+            raise
+        return seq
+
+    def _models(self, tracker: Tracker, seq: int) -> None:
+        """A new model record whenever the tracker's reference set or fits change."""
+        record = {"reference": [{"mode": r.number, "frequency_hz": _f(r.frequency_hz), "presence": _f(r.presence),
+                                 "source": r.source, "shape": _arr(r.shape)} for r in tracker.reference],
+                  "environment": [{k: (_f(v) if isinstance(v, float) else v) for k, v in asdict(f).items()}
+                                  for f in tracker.environment],
+                  "threshold": _f(tracker.threshold) if tracker.trained else None}
+        text = json.dumps(record, sort_keys=True)
+        last = self.db.execute("SELECT record FROM models ORDER BY id DESC LIMIT 1").fetchone()
+        if tracker.reference and (last is None or last[0] != text):
+            self.db.execute("INSERT INTO models (after_seq, kind, record) VALUES (?, 'tracking', ?)", (seq, text))
+
+    def _retain(self, newest_ns: int) -> None:
+        if self.retention_days <= 0:
+            return
+        cut = newest_ns - int(self.retention_days * NS_PER_DAY)
+        ck = self.db.execute("SELECT seq FROM checkpoint WHERE id = 1").fetchone()
+        keep_seq = int(ck[0]) if ck else 0  # estimates after the checkpoint are needed to resume
+        self.db.execute("DELETE FROM estimates WHERE start_ns < ? AND seq <= ?", (cut, keep_seq))
+        self.db.execute("DELETE FROM rows WHERE start_ns < ?", (cut,))
+
+    def checkpoint(self) -> tuple[int, Tracker | None]:
+        row = self.db.execute("SELECT seq, state FROM checkpoint WHERE id = 1").fetchone()
+        if row is None:
+            return 0, None
+        try:
+            return int(row[0]), pickle.loads(row[1])  # noqa: S301 - the node's own file (module docstring)
+        except Exception:  # an older program's tracker: rebuild by replaying every estimate
+            return 0, None
+
+
+def resume(store: TrackStore, make_tracker: Any) -> tuple[Tracker, int]:
+    """The tracker as it was after the last stored window (``make_tracker()``: a fresh one), and
+    how many stored estimates were replayed to get there."""
+    seq, tracker = store.checkpoint()
+    if tracker is None:
+        seq, tracker = 0, make_tracker()
+    replay = store.estimates_after(seq)
+    for _, est in replay:
+        tracker.add(est)  # rows already stored with their estimate
+    return tracker, len(replay)
