@@ -53,7 +53,7 @@ def test_damping_informs_a_damping_parameter_only_when_enabled(damped):
     over 4 modes: std of the factor ~1 %, so 5 % is 5 sigma); without it the posterior of that
     factor is its prior (lognormal, std 0.5)."""
     spec, model, obs = damped
-    short = UpdateConfig(sampler="mh", n_steps=600, rhat_target=1.05, ess_target=300.0, evidence=False)
+    short = UpdateConfig(likelihood="gaussian", sampler="mh", n_steps=600, rhat_target=1.05, ess_target=300.0, evidence=False)
     with_d = update(model, obs, replace(short, use_damping=True), priors=spec.parameters)
     z = with_d.parameters["zeta"]
     assert abs(z.mean / TRUTH[3] - 1) < 0.05 and z.std < 0.05, z

@@ -117,13 +117,14 @@ def test_marginal_equals_joint_gaussian_integrated_numerically():
     log sigma^2 against the marginal."""
     from scipy.stats import multivariate_normal
 
-    from shm_ros.core.bayes.likelihoods import InverseGamma
+    from shm_ros.core.bayes.likelihoods import InverseGamma, set_pairing
     from shm_ros.core.bayes.model_error import FREQ_SCALE_RANGE, ModelErrorLikelihood
 
     obs = _one_mode(5)
     prior = InverseGamma.weak(0.01)
     kw = dict(use_shapes=False, freq_prior=prior, time_correlation=False, n_grid=200, n_quad=40)
     lik = ModelErrorLikelihood(_FixedPredictor(), obs, **kw)
+    set_pairing(lik, np.array([0]))  # one data mode, one model mode
     theta = np.array([[2.01]])
     x = obs.frequencies_hz[:, 0] / lik.stats.f_ref[0]
     r = theta[0, 0] / lik.stats.f_ref[0]

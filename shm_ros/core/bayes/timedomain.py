@@ -13,8 +13,10 @@ Residual samples are not independent: model error (an unmodelled mode, a wrong d
 narrow-band residual whose neighbouring samples are nearly equal, and treating thousands of them as
 independent makes the posterior far narrower than the estimate's actual error. So each channel's
 residual follows an AR(p) model (``ar_order``, default 2: one resonance), whose coefficients are
-profiled out by least squares for every theta; the likelihood above then applies to the
-innovations (the first p samples conditioned on), N - p of them per channel. ``ar_order=0`` is the
+estimated once by least squares from the residual at the white-noise MAP and then held fixed
+(:meth:`TimeDomainLikelihood.fix_ar`; refitted for every theta they would reward a large but
+smooth residual); the likelihood above then applies to the innovations (the first p samples
+conditioned on), N - p of them per channel. ``ar_order=0`` is the
 white-noise model.
 
 The response comes from
@@ -87,22 +89,32 @@ def base_response(model: AffineModel, theta: np.ndarray, record_input: np.ndarra
     return sensor_accelerations(model, theta, record_input, dt, list(channel_ids), inputs)
 
 
-def ar_innovation_ss(residual: np.ndarray, order: int) -> np.ndarray:
+def ar_fit(residual: np.ndarray, order: int) -> np.ndarray:
+    """Least-squares AR(``order``) coefficients (c, order) of each column of ``residual`` (N, c),
+    conditional on the first ``order`` samples."""
+    r = np.asarray(residual, dtype=float)
+    n = r.shape[0]
+    coef = np.zeros((r.shape[1], order))
+    for c in range(r.shape[1]):
+        X = np.column_stack([r[order - j: n - j, c] for j in range(1, order + 1)])
+        coef[c], *_ = np.linalg.lstsq(X, r[order:, c], rcond=None)
+    return coef
+
+
+def ar_innovation_ss(residual: np.ndarray, order: int, coef: np.ndarray | None = None) -> np.ndarray:
     """Sum of squared one-step prediction errors of an AR(``order``) model of each column of
-    ``residual`` (N, c), its coefficients fitted by least squares (conditional on the first
-    ``order`` samples); ``order=0``: the plain sum of squares."""
+    ``residual`` (N, c), with the given coefficients (c, order), or coefficients fitted by least
+    squares to this residual when ``coef`` is None; ``order=0``: the plain sum of squares."""
     r = np.asarray(residual, dtype=float)
     if order == 0:
         return np.sum(r**2, axis=0)
+    if coef is None:
+        coef = ar_fit(r, order)
     n = r.shape[0]
-    out = np.empty(r.shape[1])
-    for c in range(r.shape[1]):
-        y = r[order:, c]
-        X = np.column_stack([r[order - j: n - j, c] for j in range(1, order + 1)])
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        e = y - X @ coef
-        out[c] = float(np.dot(e, e))
-    return out
+    e = r[order:].copy()
+    for j in range(1, order + 1):
+        e -= coef[:, j - 1][None, :] * r[order - j: n - j]
+    return np.sum(e**2, axis=0)
 
 
 class TimeDomainLikelihood:
@@ -116,6 +128,7 @@ class TimeDomainLikelihood:
         if not 0 <= int(ar_order) < record.outputs.shape[0] // 4:
             raise ValueError(f"ar_order must be >= 0 and well below the record length, got {ar_order}")
         self.ar_order = int(ar_order)
+        self.ar_coef: np.ndarray | None = None  # (channels, ar_order), set by fix_ar
         known = set(model.sensor_rows) | set(model.sensor_dofs)
         missing = [c for c in record.channel_ids if c not in known]
         if missing:
@@ -142,8 +155,17 @@ class TimeDomainLikelihood:
                              r.channel_ids, self.n_modes)
 
     def residual_ss(self, theta: np.ndarray) -> np.ndarray:
-        """Per channel: the sum of squared innovations of the residual's AR(p) model."""
-        return ar_innovation_ss(self.record.outputs - self.predict(theta), self.ar_order)
+        """Per channel: the sum of squared innovations of the residual's AR(p) model, whose
+        coefficients are held fixed (:meth:`fix_ar`; zero, i.e. white, until then)."""
+        coef = self.ar_coef if self.ar_coef is not None else np.zeros((len(self.record.channel_ids), self.ar_order))
+        return ar_innovation_ss(self.record.outputs - self.predict(theta), self.ar_order, coef)
+
+    def fix_ar(self, theta: np.ndarray) -> None:
+        """Estimate the residual's AR coefficients once, at ``theta`` (the white-noise MAP), and keep
+        them for every theta. Refitting them for each theta would reward a large but smooth residual
+        (a smooth residual is easy to predict one step ahead), pulling theta away from the fit."""
+        if self.ar_order:
+            self.ar_coef = ar_fit(self.record.outputs - self.predict(np.asarray(theta, dtype=float)), self.ar_order)
 
     @property
     def n_innovations(self) -> int:

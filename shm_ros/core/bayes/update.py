@@ -122,6 +122,9 @@ class UpdateConfig:
         check_choice("update", "reduction", self.reduction, Reduction)
         check_choice("update", "variance", self.variance, Variance)
         check_choice("update", "fitness_j", self.fitness_j, FitnessJ)
+        if self.use_damping and self.likelihood != Likelihood.GAUSSIAN.value:
+            raise ValueError(f"update: use_damping needs likelihood 'gaussian' (damping ratios enter only that "
+                             f"likelihood), got likelihood {self.likelihood!r}")
         if self.frequency_gate < 0 or not 0 <= self.mac_gate < 1:
             raise ValueError(f"update: frequency_gate must be >= 0 (0 = automatic) and mac_gate in "
                              f"[0, 1), got {self.frequency_gate}, {self.mac_gate}")
@@ -391,6 +394,11 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
         scale = np.concatenate([prior_std, np.ones(n_extra)])
         x_map, lp_map = find_map(log_post, starts, scale, seed=config.seed)
+        if attempt == 0 and getattr(lik, "ar_order", 0) and getattr(lik, "ar_coef", 1) is None:
+            # time domain: the residual's AR model is estimated once, at the white-noise MAP
+            lik.fix_ar(x_map[:d])
+            starts_theta = np.vstack([x_map[None, :d], starts_theta])
+            continue
         if pairing is None or attempt == 1 or not config.pair_at_map:
             break
         # once, at the MAP: a nominal model far from the data may have paired a mode wrongly
