@@ -1,78 +1,84 @@
-"""The predict node over DDS: event windows in, one ResponsePrediction per event out, equal (same
-seed) to the numbers of ``shm-ros predict`` on the same windows within 1e-9 (separate processes)."""
+"""The predict node in the graph, over DDS: a simulated earthquake bag replayed through the real
+ingest node into the predict node (given a posterior file) gives one ResponsePrediction per event
+window, equal (same seed) to the numbers of ``shm-ros predict`` on the same bag and posterior
+within 1e-9: the NRMS of ``prediction.json``, and the predictive mean and standard deviation of
+``predict_windows`` (the function the command runs) sample by sample."""
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
-import yaml
-from predict_synth import simulate_quakes
-from ros_helpers.graph import node_process, stop
 
 from shm_ros.cli import main
-from shm_ros.io.window_files import save_window
+from shm_ros.commands.predict import predict_windows
+from shm_ros.core.bayes.records import RecordSet
+from shm_ros.core.bayes.timedomain import AccelerationRecord
+from shm_ros.core.bayes.update import UpdateConfig, update
+from shm_ros.core.models import build_model
+from shm_ros.core.predict import PredictConfig, event_from_window
+from shm_ros.core.predict.signals import baseline_correct, pre_event_end
+from shm_ros.io.posterior_files import write_posterior
+from shm_ros.io.recording import windows_from_bag
+from shm_ros.io.structure import load_structure
+from shm_ros.report.load import load_posterior
+from shm_ros.ros.graph_run import replay_through_graph
 
-PUBLISH = r"""
-import sys, time, json
-import numpy as np, rclpy
-from rclpy.node import Node
-from shm_interfaces.msg import ResponsePrediction, Window as WindowMsg
-from shm_ros.io.window_files import load_window
-from shm_ros.ros.convert import window_to_msg
-from shm_ros.ros.qos import stream_qos
-
-files = sys.argv[1:]
-rclpy.init(); node = Node("windows_source")
-pub = node.create_publisher(WindowMsg, "/shm/windows", stream_qos())
-got = []
-node.create_subscription(ResponsePrediction, "/shm/prediction", got.append, stream_qos())
-end = time.monotonic() + 60
-while (pub.get_subscription_count() == 0 or node.count_publishers("/shm/prediction") == 0) \
-        and time.monotonic() < end:
-    rclpy.spin_once(node, timeout_sec=0.1)
-for f in files:
-    pub.publish(window_to_msg(load_window(f)))
-    rclpy.spin_once(node, timeout_sec=0.05)
-end = time.monotonic() + 240
-while len(got) < len(files) and time.monotonic() < end:
-    rclpy.spin_once(node, timeout_sec=0.2)
-print(json.dumps([{"id": m.window_id, "names": list(m.channel_names), "nrms": list(m.nrms_pct),
-                   "n": m.n_samples, "mean": list(m.predicted_mean[:50]), "std": list(m.predicted_std[:50])}
-                  for m in got]))
-"""
+WINDOW_S, N_DRAWS, SEED = 20.0, 20, 3
 
 
-def test_predict_node_matches_cli(tmp_path):
-    q = simulate_quakes(5, 2, duration_s=30.0, fs=40.0)
-    s_path = tmp_path / "s.yaml"
-    s_path.write_text(yaml.safe_dump(q.structure))
-    files = []
-    for i, w in enumerate(q.windows):
-        assert w.is_event
-        files.append(str(tmp_path / f"w{i}.npz"))
-        save_window(files[-1], w)
-    assert main(["predict", "--structure", str(s_path), "--windows", *files, "--out", str(tmp_path / "cli"),
-                 "--no-plots", "--n-draws", "20", "--seed", "3"]) == 0
-    cli = json.loads((tmp_path / "cli" / "prediction.json").read_text())
+def _posterior(model, spec, window, out):
+    """A short time-domain calibration on one event: only that node and command read the same file
+    matters here, not how well it is converged."""
+    ev = event_from_window(window, model)
+    k = pre_event_end(ev.inputs[0], ev.fs, 0.001, 1.0)
+    rec = AccelerationRecord(1 / ev.fs, baseline_correct(ev.inputs.T, k, "mean").T,
+                             baseline_correct(ev.outputs, k, "mean"), ev.channel_ids)
+    post = update(model, RecordSet([rec]), UpdateConfig(likelihood="time", n_chains=8, n_steps=40, max_steps=40,
+                                                        evidence=False, ess_target=10, rhat_target=2.0),
+                  spec.parameters)
+    write_posterior(out, post, {})
+    return out
 
-    node = node_process("predict", {"structure": str(s_path), "n_draws": 20, "seed": 3})
-    try:
-        run = subprocess.run([sys.executable, "-c", PUBLISH, *files], capture_output=True, text=True, timeout=300)
-    finally:
-        _, log = stop(node)
-    assert run.returncode == 0, run.stdout + run.stderr + log[-3000:]
-    got = json.loads(run.stdout.strip().splitlines()[-1])
-    assert sorted(m["id"] for m in got) == sorted(w.window_id for w in q.windows), log[-3000:]
+
+def test_predict_node_in_the_graph_matches_cli(tmp_path):
+    d = tmp_path / "quake"
+    assert main(["simulate", "building-earthquake", "--out", str(d), "--windows", "4", "--window-s",
+                 str(WINDOW_S), "--quiet", "--seed", "2"]) == 0
+    s_path, bag = d / "structure.yaml", d / "bag"
+    spec = load_structure(s_path)
+    model = build_model(spec)
+    windows, _ = windows_from_bag(bag, spec, WINDOW_S)
+    events = [w for w in windows if w.is_event]
+    assert 2 <= len(events) < len(windows)  # quiet windows too: they must not be predicted
+    post = _posterior(model, spec, events[0], tmp_path / "post")
+
+    assert main(["predict", "--structure", str(s_path), "--posterior", str(post), "--bag", str(bag), "--window",
+                 str(WINDOW_S), "--out", str(tmp_path / "cli"), "--no-plots", "--n-draws", str(N_DRAWS),
+                 "--seed", str(SEED)]) == 0
+    cli = {e["window_id"]: e for e in json.loads((tmp_path / "cli" / "prediction.json").read_text())["events"]}
+    assert sorted(cli) == sorted(w.window_id for w in events)
+    preds, errors = predict_windows(model, events, load_posterior(post), PredictConfig(n_draws=N_DRAWS, seed=SEED))
+    assert not errors
+    ref = {p.window_id: p for p in preds}
+
+    run = replay_through_graph(bag, s_path, tmp_path / "graph", window_s=WINDOW_S, expected_windows=len(windows),
+                               identify={"uncertainty": False},
+                               predict={"posterior": str(post), "n_draws": N_DRAWS, "seed": SEED},
+                               expected_predictions=len(events), timeout_s=240.0)
+    got = run.predictions
+    assert sorted(m["window_id"] for m in got) == sorted(cli), [m["window_id"] for m in got]  # one per event
     for m in got:
-        ev = next(e for e in cli["events"] if e["window_id"] == m["id"])
+        ev, p = cli[m["window_id"]], ref[m["window_id"]]
+        names = [c["name"] for c in ev["channels"]]
+        assert m["channel_names"] == names and m["n_samples"] == p.channels[0].mean.size
         by = {c["name"]: c for c in ev["channels"]}
-        assert m["names"] == [c["name"] for c in ev["channels"]]
-        for name, v in zip(m["names"], m["nrms"], strict=True):
+        for name, v in zip(names, m["nrms_pct"], strict=True):
             if by[name]["measured"]:
-                assert abs(v - by[name]["nrms_pct"]) < 1e-9
+                assert np.isfinite(v) and abs(v - by[name]["nrms_pct"]) < 1e-9, (name, v, by[name]["nrms_pct"])
             else:
                 assert np.isnan(v)
-        assert m["n"] == int(round(30.0 * 40.0))
+        for key, attr in (("predicted_mean", "mean"), ("predicted_std", "std")):
+            want = np.column_stack([getattr(c, attr) for c in p.channels])
+            have = np.asarray(m[key]).reshape(want.shape)
+            assert np.max(np.abs(have - want)) <= 1e-9 * np.max(np.abs(want)), key

@@ -33,6 +33,9 @@ class PipelineRecord:
     diagnostics: list[str] = field(default_factory=list)
     # every diagnostic status: level (0 OK .. 3 STALE), source (the status name), message, values
     diagnostic_rows: list[dict[str, Any]] = field(default_factory=list)
+    # ResponsePrediction messages: window_id, channel_names, measured, nrms_pct, n_samples,
+    # predicted_mean and predicted_std (row-major samples x channels)
+    predictions: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -47,6 +50,7 @@ class GraphRun:
     posteriors: list[dict[str, Any]] = field(default_factory=list)
     wall_s: float = 0.0
     diagnostic_rows: list[dict[str, Any]] = field(default_factory=list)
+    predictions: list[dict[str, Any]] = field(default_factory=list)
 
 
 def read_pipeline_bag(path: Path) -> PipelineRecord:
@@ -72,6 +76,11 @@ def read_pipeline_bag(path: Path) -> PipelineRecord:
         elif m.topic == topics.POSTERIOR:
             rec.posteriors.append({"n_windows": int(msg.n_windows), "converged": bool(msg.converged),
                                    "parameters": {p.name: {"mean": p.mean, "std": p.std} for p in msg.parameters}})
+        elif m.topic == topics.PREDICTION:
+            rec.predictions.append({"window_id": msg.window_id, "channel_names": list(msg.channel_names),
+                                    "measured": list(msg.measured), "nrms_pct": list(msg.nrms_pct),
+                                    "n_samples": int(msg.n_samples), "predicted_mean": list(msg.predicted_mean),
+                                    "predicted_std": list(msg.predicted_std)})
         elif m.topic == topics.DIAGNOSTICS:
             rec.diagnostics += [f"{s.name}: {s.message}" for s in msg.status if s.level != 0]
             for st in msg.status:
@@ -83,36 +92,42 @@ def read_pipeline_bag(path: Path) -> PipelineRecord:
 
 
 def analysis_nodes(structure: str | Path, window_s: float, *, identify: dict | None = None,
-                   track: dict | None = None, update: dict | None = None) -> list[NodeSpec]:
-    """ingest + identify, and track / update when their parameters are given."""
+                   track: dict | None = None, update: dict | None = None,
+                   predict: dict | None = None) -> list[NodeSpec]:
+    """ingest + identify, and track / update / predict when their parameters are given."""
     nodes = [NodeSpec("ingest", "ingest", {"structure": str(structure), "window_s": float(window_s)}),
              NodeSpec("identify", "identify", dict(identify or {}))]
     if track is not None:
         nodes.append(NodeSpec("track", "track", dict(track)))
     if update is not None:
         nodes.append(NodeSpec("update", "update", {"structure": str(structure), **update}))
+    if predict is not None:
+        nodes.append(NodeSpec("predict", "predict", {"structure": str(structure), **predict}))
     return nodes
 
 
 def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | Path, *,
                          window_s: float, expected_windows: int | None = None,
                          identify: dict | None = None, track: dict | None = None,
-                         update: dict | None = None, timeout_s: float = 600.0,
+                         update: dict | None = None, predict: dict | None = None,
+                         expected_predictions: int | None = None, timeout_s: float = 600.0,
                          log: Callable[[str], None] = print) -> GraphRun:
     """Start the analysis nodes and a recorder as processes, replay ``bag``, wait until every
-    window is identified (and tracked, and in a posterior, when those nodes run), stop, collect."""
-    nodes = analysis_nodes(structure, window_s, identify=identify, track=track, update=update)
-    return run_graph(bag, nodes, workdir, expected_windows=expected_windows, timeout_s=timeout_s, log=log)
+    window is identified (and tracked, and in a posterior, and ``expected_predictions`` predicted,
+    when those nodes run), stop, collect."""
+    nodes = analysis_nodes(structure, window_s, identify=identify, track=track, update=update, predict=predict)
+    return run_graph(bag, nodes, workdir, expected_windows=expected_windows,
+                     expected_predictions=expected_predictions, timeout_s=timeout_s, log=log)
 
 
 def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
-              expected_windows: int | None = None, timeout_s: float = 600.0,
-              log: Callable[[str], None] = print) -> GraphRun:
+              expected_windows: int | None = None, expected_predictions: int | None = None,
+              timeout_s: float = 600.0, log: Callable[[str], None] = print) -> GraphRun:
     import rclpy
     from rclpy.node import Node
 
     from shm_ros.ros import topics
-    from shm_ros.ros.qos import latched_qos, pipeline_qos
+    from shm_ros.ros.qos import latched_qos, pipeline_qos, stream_qos
     from shm_ros.ros.replay import replay_bag
 
     kinds = {n.kind for n in nodes}
@@ -128,7 +143,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
     try:
         # Count results as they arrive, so we know when the graph is done with the recording.
         watcher = Node("shm_graph_watch")
-        seen: dict[str, set[str]] = {"estimates": set(), "tracked": set()}
+        seen: dict[str, set[str]] = {"estimates": set(), "tracked": set(), "predicted": set()}
         posterior_windows = [0]
 
         def on_posterior(m: Any) -> None:
@@ -142,6 +157,10 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                                     pipeline_qos())
         watcher.create_subscription(topics.message_class(topics.TYPES[topics.POSTERIOR]),
                                     topics.POSTERIOR, on_posterior, latched_qos())
+        if "predict" in kinds:
+            watcher.create_subscription(topics.message_class(topics.TYPES[topics.PREDICTION]),
+                                        topics.PREDICTION, lambda m: seen["predicted"].add(m.window_id),
+                                        stream_qos())
         window_readers = [0]
 
         def on_diagnostics(m: Any) -> None:
@@ -157,15 +176,17 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         # The graph as this process sees it is not enough on a busy machine: ingest's own window
         # publisher must have matched identify and the recorder (its status says so).
         estimate_readers = 1 + ("track" in kinds) + ("update" in kinds)  # + the watcher's own
+        win_readers = 2 + ("predict" in kinds)  # identify, the recorder, predict
         ready_by = time.monotonic() + 120.0
         while time.monotonic() < ready_by and not (
-                window_readers[0] >= 2
-                and watcher.count_subscribers(topics.WINDOWS) >= 2
+                window_readers[0] >= win_readers
+                and watcher.count_subscribers(topics.WINDOWS) >= win_readers
                 and watcher.count_publishers(topics.MODAL_ESTIMATES) >= 1
                 and watcher.count_publishers(topics.INGEST_RECEIVED) >= 1
                 and watcher.count_subscribers(topics.MODAL_ESTIMATES) >= estimate_readers + 1
                 and ("track" not in kinds or watcher.count_publishers(topics.TRACKED_MODES) >= 1)
-                and ("update" not in kinds or watcher.count_publishers(topics.POSTERIOR) >= 1)):
+                and ("update" not in kinds or watcher.count_publishers(topics.POSTERIOR) >= 1)
+                and ("predict" not in kinds or watcher.count_publishers(topics.PREDICTION) >= 1)):
             rclpy.spin_once(watcher, timeout_sec=0.2)
         result = replay_bag(bag, rate=0.0, wait_s=60.0, progress=True)
         log(f"replayed {result.published} messages, lost {result.lost}")
@@ -175,7 +196,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                 return False
             return (len(seen["estimates"]) >= expected_windows
                     and ("track" not in kinds or len(seen["tracked"]) >= expected_windows)
-                    and ("update" not in kinds or posterior_windows[0] >= expected_windows))
+                    and ("update" not in kinds or posterior_windows[0] >= expected_windows)
+                    and ("predict" not in kinds or len(seen["predicted"]) >= (expected_predictions or 0)))
 
         bar = Progress("graph", every_s=5.0)
         end = time.monotonic() + timeout_s
@@ -194,7 +216,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                 break
         log(f"identified {len(seen['estimates'])} windows"
             + (f", tracked {len(seen['tracked'])}" if "track" in kinds else "")
-            + (f", posterior from {posterior_windows[0]} windows" if "update" in kinds else ""))
+            + (f", posterior from {posterior_windows[0]} windows" if "update" in kinds else "")
+            + (f", predicted {len(seen['predicted'])}" if "predict" in kinds else ""))
         time.sleep(1.0)  # let the recorder write the last messages
         watcher.destroy_node()
     finally:
@@ -202,4 +225,4 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         code = sup.stop_all()
     rec = read_pipeline_bag(out_bag)
     return GraphRun(result, rec.windows, rec.estimates, rec.diagnostics, out_bag, code, rec.tracked,
-                    rec.posteriors, time.monotonic() - t0, rec.diagnostic_rows)
+                    rec.posteriors, time.monotonic() - t0, rec.diagnostic_rows, rec.predictions)

@@ -1,64 +1,121 @@
 """Responses of many parameter draws to one input record, with :mod:`shm_ros.core.response`.
 
-Each draw is discretised once (the exact first-order-hold step of its state space). The draws of a
-chunk are then run together in modal coordinates: ``Phi = V diag(lam) V^-1`` per draw (batched
-eigen-decomposition), the drive ``V^-1 (G1 u[k] + G2 (u[k+1] - u[k]))`` formed for all draws at
-once, and the diagonal recursion ``q[k+1] = lam q[k] + g[k]`` run for every draw and
-pole: one compiled first-order filter per pole of each draw (one of each conjugate pair). A
-draw whose eigenbasis is ill-conditioned (a Jordan block of support integrator states) falls back
-to :func:`shm_ros.core.response.simulate`, the same recursion run step by step.
+The draws of a chunk are discretised together in modal coordinates: one batched eigen-decomposition
+``A = V diag(s) V^-1`` of their continuous state matrices, after which the exact first-order-hold
+step (:func:`shm_ros.core.response.discretize_foh`) of every pole is a scalar formula,
+
+    q[k+1] = e^{z} q[k] + h (phi1(z) - phi2(z)) b u[k] + h phi2(z) b u[k+1],   z = s h,
+    phi1(z) = (e^z - 1) / z,   phi2(z) = (e^z - 1 - z) / z^2,   b = V^-1 B,
+
+and each pole (one of each conjugate pair) is one compiled first-order filter. A draw whose
+eigenbasis is ill-conditioned (a Jordan block of support integrator states) falls back to
+:func:`shm_ros.core.response.simulate` on the matrix-exponential step.
+
+Chunks may run on ``threads`` threads (the products and eigenproblems release the GIL). Callers
+should hold BLAS to one thread (``single_blas_thread``, as :func:`.predict.predict_event` does):
+the matrices are small, and a BLAS thread pool only waits on them (on a loaded machine, a hundred
+times slower). Results do not depend on ``threads`` or on the chunk size.
 """
 
 from __future__ import annotations
 
+import contextlib
+from collections import deque
 from collections.abc import Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 from scipy.signal import lfilter
 
 from shm_ros.core.models.base import AffineModel
-from shm_ros.core.response import Output, build_state_space, discretize_foh, simulate
+from shm_ros.core.response import Output, StateSpace, build_state_space, discretize_foh, simulate
 from shm_ros.core.structure import InputSpec
 
 _MAX_COND = 1e8  # as shm_ros.core.response.simulate: the modal route keeps ~1e-8 accuracy below it
+_SERIES = 1e-2  # |z| below which phi1, phi2 come from their Taylor series (no cancellation)
 
 
 def batch_responses(model: AffineModel, thetas: np.ndarray, u: np.ndarray, dt: float,
                     outputs: Sequence[Output], inputs: Sequence[InputSpec] | None = None,
-                    chunk: int = 32) -> Iterator[tuple[int, np.ndarray]]:
+                    chunk: int = 32, threads: int = 1) -> Iterator[tuple[int, np.ndarray]]:
     """Yield ``(first draw index, Y)`` with Y (B, n_outputs, N) for successive chunks of ``thetas``
-    (n_draws, d), from rest; ``u`` (n_inputs, N) are the input records (gains applied by the model)."""
+    (n_draws, d), in order, from rest; ``u`` (n_inputs, N) are the input records (gains applied by
+    the model). At most ``threads + 1`` chunks are held at once."""
     thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
     u = np.atleast_2d(np.asarray(u, dtype=float))
     ins = list(model.inputs if inputs is None else inputs)
-    for a in range(0, thetas.shape[0], max(1, int(chunk))):
-        systems = [discretize_foh(build_state_space(model, th, outputs, ins), dt)
-                   for th in thetas[a:a + chunk]]
-        yield a, _run_chunk(systems, u)
+    step = max(1, int(chunk))
+    starts = list(range(0, thetas.shape[0], step))
+
+    def work(a: int) -> np.ndarray:
+        return _run_chunk([build_state_space(model, th, outputs, ins) for th in thetas[a:a + step]], u, dt)
+
+    if threads <= 1 or len(starts) <= 1:
+        for a in starts:
+            yield a, work(a)
+        return
+    with ThreadPoolExecutor(max_workers=int(threads)) as pool:
+        queue: deque[tuple[int, Future[np.ndarray]]] = deque()
+        for a in starts:
+            queue.append((a, pool.submit(work, a)))
+            if len(queue) > threads:
+                b, f = queue.popleft()
+                yield b, f.result()
+        while queue:
+            b, f = queue.popleft()
+            yield b, f.result()
 
 
-def _run_chunk(systems: list, u: np.ndarray) -> np.ndarray:
+def single_blas_thread() -> contextlib.AbstractContextManager:
+    """One BLAS thread (``threadpoolctl``) while in the context; the numbers are the same either way."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - pinned in requirements/base.txt
+        return contextlib.nullcontext()
+    return threadpool_limits(1, "blas")
+
+
+def phi12(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``phi1(z) = (e^z - 1)/z`` and ``phi2(z) = (e^z - 1 - z)/z^2`` (limits 1 and 1/2 at 0)."""
+    z = np.asarray(z, dtype=complex)
+    small = np.abs(z) < _SERIES
+    zs = np.where(small, 1.0, z)
+    em1 = np.expm1(zs)
+    p1 = em1 / zs
+    p2 = (em1 - zs) / zs ** 2
+    if small.any():
+        w = z[small]
+        # Taylor series: terms up to z^6 leave < 1e-17 at |z| < 1e-2
+        s1 = np.zeros_like(w)
+        s2 = np.zeros_like(w)
+        fact = 1.0
+        for k in range(7):
+            fact *= k + 1  # (k + 1)!
+            s1 += w ** k / fact
+            s2 += w ** k / (fact * (k + 2))
+        p1[small] = s1
+        p2[small] = s2
+    return p1, p2
+
+
+def _run_chunk(systems: list[StateSpace], u: np.ndarray, dt: float) -> np.ndarray:
     B = len(systems)
     m, N = u.shape
     out = np.stack([s.D for s in systems]) @ u  # direct terms, (B, o, N)
-    Phi = np.stack([s.Phi for s in systems])
-    n = Phi.shape[1]
+    A = np.stack([s.A for s in systems])
+    n = A.shape[1]
     if n == 0 or N < 2:
         return out
-    lam, V = np.linalg.eig(Phi)
+    lam, V = np.linalg.eig(A)
     good = np.linalg.cond(V) < _MAX_COND
     for b in np.flatnonzero(~good):
-        out[b] = simulate(systems[b], u)
+        out[b] = simulate(discretize_foh(systems[b], dt), u)
     idx = np.flatnonzero(good)
     if idx.size == 0:
         return out
     lam, V = lam[idx], V[idx]
-    G1 = np.stack([systems[b].G1 for b in idx])
-    G2 = np.stack([systems[b].G2 for b in idx])
+    Bm = np.stack([systems[b].B for b in idx])
     C = np.stack([systems[b].C for b in idx])
-    # modal step q[k+1] = lam q[k] + alpha u[k] + beta u[k+1] (the hold's two terms)
-    beta = np.linalg.solve(V, G2.astype(complex))  # (b, n, m)
-    alpha = np.linalg.solve(V, (G1 - G2).astype(complex))
     # a real system's poles are real or conjugate pairs, whose modal responses are conjugate too:
     # filter one pole of each pair and count it twice
     scale = np.maximum(1.0, np.max(np.abs(lam), axis=1, keepdims=True))
@@ -67,17 +124,24 @@ def _run_chunk(systems: list, u: np.ndarray) -> np.ndarray:
     order = np.argsort(weight == 0.0, axis=1, kind="stable")  # kept poles first
     nk = int(np.max(np.sum(weight > 0, axis=1)))
     keep = order[:, :nk]
-    lam_k = np.take_along_axis(lam, keep, 1)
+    lam_k = np.take_along_axis(lam, keep, 1)  # (b, nk)
     w_k = np.take_along_axis(weight, keep, 1)
+    bt = np.take_along_axis(np.linalg.solve(V, Bm.astype(complex)), keep[:, :, None], 1)  # (b, nk, m)
+    z = lam_k * dt
+    p1, p2 = phi12(z)
+    pole = np.exp(z)
+    beta = (dt * p2)[:, :, None] * bt  # weight of u[k+1]
+    alpha = (dt * (p1 - p2))[:, :, None] * bt  # weight of u[k]
     CV = np.take_along_axis(C.astype(complex) @ V, keep[:, None, :], 2) * w_k[:, None, :]  # (b, o, nk)
     # real and imaginary parts of the modal responses, stored apart for two real products
     Qre = np.zeros((idx.size, nk * m, N))
     Qim = np.zeros((idx.size, nk * m, N))
+    den = np.ones(2, dtype=complex)
+    num = np.empty(2, dtype=complex)
     for b, j in zip(*np.nonzero(w_k), strict=True):
-        jj = keep[b, j]
-        den = [1.0, -lam_k[b, j]]
+        den[1] = -pole[b, j]
         for i in range(m):
-            num = [beta[b, jj, i], alpha[b, jj, i]]
+            num[0], num[1] = beta[b, j, i], alpha[b, j, i]
             # from rest: q[0] = 0, so the filter's first output beta u[0] is cancelled by its state
             q = lfilter(num, den, u[i], zi=[-num[0] * u[i, 0]])[0]
             Qre[b, j * m + i] = q.real

@@ -32,6 +32,7 @@ class PredictConfig:
     relative_error: float = option(0.1, "model error relative to the response RMS when the posterior "
                                    "carries no time-domain calibration (modal posterior, nominal model)")
     chunk: int = option(32, "draws simulated at once (memory: chunk x states x samples complex values)")
+    threads: int = option(1, "threads simulating chunks of draws concurrently (the numbers do not depend on it)")
 
     def validate(self) -> PredictConfig:
         check_choice("predict", "baseline", self.baseline, Baseline)
@@ -41,6 +42,8 @@ class PredictConfig:
             raise ValueError(f"predict: level must be in (0, 1), got {self.level}")
         if not 0.0 < self.onset_arias < 0.5:
             raise ValueError(f"predict: onset_arias must be in (0, 0.5), got {self.onset_arias}")
-        if self.chunk < 1 or self.envelope_s <= 0 or self.relative_error < 0 or self.min_pre_event_s < 0:
-            raise ValueError("predict: chunk >= 1, envelope_s > 0, relative_error >= 0, min_pre_event_s >= 0")
+        if self.chunk < 1 or self.threads < 1 or self.envelope_s <= 0 or self.relative_error < 0 \
+                or self.min_pre_event_s < 0:
+            raise ValueError("predict: chunk >= 1, threads >= 1, envelope_s > 0, relative_error >= 0, "
+                             "min_pre_event_s >= 0")
         return self

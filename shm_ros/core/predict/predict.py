@@ -22,7 +22,7 @@ from scipy.stats import norm
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import Output, Quantity, drift_outputs, node_row, sensor_outputs
 
-from .batch import batch_responses
+from .batch import batch_responses, single_blas_thread
 from .config import PredictConfig
 from .draws import PosteriorDraws, nominal_draws
 from .record import EventRecord
@@ -95,6 +95,12 @@ def event_rng(seed: int, window_id: str) -> np.random.Generator:
 def predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraws | None,
                   config: PredictConfig | None = None) -> EventPrediction:
     """The prediction of ``record`` by ``model`` under ``draws`` (None: the nominal model only)."""
+    with single_blas_thread():  # small matrices: a BLAS thread pool only waits (see .batch)
+        return _predict_event(model, record, draws, config)
+
+
+def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraws | None,
+                   config: PredictConfig | None) -> EventPrediction:
     cfg = (config or PredictConfig()).validate()
     fs, dt = record.fs, 1.0 / record.fs
     draws = draws if draws is not None else nominal_draws(model, cfg.relative_error)
@@ -107,7 +113,7 @@ def predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraws
     N = u.shape[1]
 
     def one(theta: np.ndarray) -> np.ndarray:
-        return next(batch_responses(model, theta[None, :], u, dt, outs, chunk=1))[1][0]
+        return np.concatenate([Y for _, Y in batch_responses(model, theta[None, :], u, dt, outs, chunk=1)])[0]
 
     y_nom = one(model.nominal_theta())
     y_map = one(draws.theta_map)
@@ -126,7 +132,7 @@ def predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraws
     S1 = np.zeros((len(outs), N))
     S2 = np.zeros((len(outs), N))
     peaks = np.empty((draws.n, len(outs)))
-    for a, Y in batch_responses(model, draws.theta, u, dt, outs, chunk=cfg.chunk):
+    for a, Y in batch_responses(model, draws.theta, u, dt, outs, chunk=cfg.chunk, threads=cfg.threads):
         S1 += Y.sum(axis=0)
         S2 += np.einsum("bon,bon->on", Y, Y)
         peaks[a:a + Y.shape[0]] = _noisy_peaks(Y, s0, rel2[a:a + Y.shape[0]], lms, rng)
@@ -158,8 +164,9 @@ def _noisy_peaks(Y: np.ndarray, s0: np.ndarray, rel2: np.ndarray, lms: np.ndarra
     frequency shifts the whole peak cycle), so the peak moves by about one error standard
     deviation; the maximum over independent white-noise samples would move less and give intervals
     that are too narrow."""
-    t = np.argmax(np.abs(Y), axis=2)  # (B, o)
-    top = np.take_along_axis(np.abs(Y), t[:, :, None], 2)[:, :, 0]
+    absY = np.abs(Y)
+    t = np.argmax(absY, axis=2)  # (B, o)
+    top = np.take_along_axis(absY, t[:, :, None], 2)[:, :, 0]
     o = np.arange(Y.shape[1])[None, :]
     sig = np.sqrt(s0[None, :] + rel2 * lms[o, t])
     return np.abs(top + sig * rng.standard_normal(top.shape))
