@@ -148,6 +148,7 @@ def test_marginal_equals_joint_gaussian_integrated_numerically():
     assert abs(lik(theta)[0] - brute) < 2e-2, (lik(theta)[0], brute)
 
     samp = ModelErrorLikelihood(_FixedPredictor(), obs, variance="sampled", **kw)
+    set_pairing(samp, np.array([0]))
     samp.n_theta = lik.n_theta = 1
     X = np.column_stack([np.full(lv.size, theta[0, 0]), lv])
     f = samp(X) + samp.extra_logprior(X[:, 1:])

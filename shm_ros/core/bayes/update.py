@@ -31,6 +31,7 @@ from .observations import ModalObservations
 from .pairing import DEFAULT_MAC_GATE, ModePairing, PairingGate, UnmodelledMode, pair_with_model, select_modes
 from .priors import JointPrior, Prior, PriorError, priors_from_specs
 from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance, run_sampler
+from .timedomain import TimeDomainLikelihood
 
 
 class Likelihood(enum.StrEnum):
@@ -394,7 +395,7 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
         scale = np.concatenate([prior_std, np.ones(n_extra)])
         x_map, lp_map = find_map(log_post, starts, scale, seed=config.seed)
-        if attempt == 0 and getattr(lik, "ar_order", 0) and getattr(lik, "ar_coef", 1) is None:
+        if attempt == 0 and isinstance(lik, TimeDomainLikelihood) and lik.ar_order and lik.ar_coef is None:
             # time domain: the residual's AR model is estimated once, at the white-noise MAP
             lik.fix_ar(x_map[:d])
             starts_theta = np.vstack([x_map[None, :d], starts_theta])

@@ -56,7 +56,9 @@ def table3_row(model: AffineModel, pred: EventPrediction, floors: tuple[int, int
     drift = next((c for c in pred.channels if c.name in (f"drift_ratio{n}", f"drift{n}")), None)
     row["drift_top"] = row["drift_top_nominal"] = None
     if top and below and drift is not None:
-        ref = integrated_drift(pred.channel(top).values, pred.channel(below).values, pred.fs)  # type: ignore[arg-type]
+        y_top, y_below = pred.channel(top).values, pred.channel(below).values
+        assert y_top is not None and y_below is not None  # measured channels carry their records
+        ref = integrated_drift(y_top, y_below, pred.fs)
         if drift.quantity == "drift_ratio" and model.story_heights is not None:
             ref = ref / model.story_heights[n - 1]
         row["drift_top"] = nrms_pct(ref, _highpass(drift.mean, pred.fs))

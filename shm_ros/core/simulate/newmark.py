@@ -51,8 +51,8 @@ def simulate_building_nonlinear(tm, factors: dict[str, float], effects: list[Eff
     """Absolute accelerations at the sensors (n, n_sensors) and the equivalent-linear factors.
 
     The factors are those of the whole window after warm-up; ``story_drift`` / ``story_velocity``
-    (n - n_warm, n_dof; column j: the drift of DOF j's story row, ``E u``) keep the histories for time-resolved equivalent-linear properties
-    (:mod:`shm_ros.core.simulate.equivalent_linear`).
+    (n - n_warm, n_dof; column j: the drift of DOF j's story row, ``E u``) keep the histories for
+    time-resolved equivalent-linear properties (:mod:`shm_ros.core.simulate.equivalent_linear`).
 
     ``tm``: a shear-building truth model (``BuildingTruth``: ``theta``, ``building_matrices``, ``info``);
     ``u`` (n, 1 + n_dof): ground acceleration, then the wind force on every DOF.
