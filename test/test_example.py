@@ -47,8 +47,10 @@ def test_example_runs_every_stage_through_the_node_graph_and_reports(tmp_path):
         assert _t(w["start"]) == _t(tw["start"])
         found = [m["frequency_hz"] for m in w["modes"]]
         assert found == sorted(found)
-        # the first three true modes within 2 % (identification accuracy has its own acceptance tests)
-        for f_true in tw["frequencies_hz"][:3]:
+        # the first three true in-plane (vertical) modes within 2 % (identification accuracy has its
+        # own acceptance tests; lateral modes reach the vertical sensors only by cross-axis sensitivity)
+        vertical = [f for f, g in zip(tw["frequencies_hz"], tw["mode_families"], strict=True) if g == "vertical"]
+        for f_true in vertical[:3]:
             assert min(abs(f - f_true) / f_true for f in found) < 0.02, (found, f_true)
         shape = w["modes"][0]["mode_shape"]
         assert max(shape.values(), key=abs) == 1.0 and set(shape) == set(truth["sensor_ids"])
