@@ -65,6 +65,26 @@ def ig_posterior_mean(ss: np.ndarray, n: np.ndarray | float, prior: InverseGamma
     return np.where(a > 1, (prior.scale + 0.5 * ss) / np.maximum(a - 1, 1e-12), np.nan)
 
 
+def log_variance_logprior(priors: list[InverseGamma], extra: np.ndarray, sampled: bool) -> np.ndarray:
+    """Log prior of sampled log-variances ``extra`` (B, len(priors)): each IG prior of a variance
+    carried to its logarithm (+ log-Jacobian); zero when the variances are integrated out."""
+    out = np.zeros(extra.shape[0])
+    if not sampled:
+        return out
+    for j, p in enumerate(priors):
+        z = extra[:, j]
+        out += Prior.make("inverse_gamma", {"shape": p.shape, "scale": p.scale}).logpdf(np.exp(z)) + z
+    return out
+
+
+def log_variance_initial(priors: list[InverseGamma], rng: np.random.Generator, n: int, sampled: bool) -> np.ndarray:
+    """Starting log-variances (n, len(priors)): the prior modes, spread a little (burn-in moves them
+    to the data's scatter); no columns when the variances are integrated out."""
+    if not sampled:
+        return np.zeros((n, 0))
+    return np.column_stack([np.log(p.scale / (p.shape + 1.0)) + 0.3 * rng.standard_normal(n) for p in priors])
+
+
 @dataclass
 class ModalStatistics:
     """Sufficient statistics of tracked modal data for the modal likelihoods."""
@@ -332,21 +352,10 @@ class GaussianModalLikelihood(_ModalLikelihoodBase):
         return out
 
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
-        if self.variance != "sampled":
-            return np.zeros(extra.shape[0])
-        out = np.zeros(extra.shape[0])
-        for j, p in enumerate(self._variance_priors()):
-            z = extra[:, j]
-            out += Prior.make("inverse_gamma", {"shape": p.shape, "scale": p.scale}).logpdf(np.exp(z)) + z
-        return out
+        return log_variance_logprior(self._variance_priors(), extra, self.variance == "sampled")
 
     def extra_initial(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        if self.variance != "sampled":
-            return np.zeros((n, 0))
-        # start at the prior modes (spread a little); burn-in moves them to the data's scatter
-        cols = [np.log(p.scale / (p.shape + 1.0)) + 0.3 * rng.standard_normal(n)
-                for p in self._variance_priors()]
-        return np.column_stack(cols)
+        return log_variance_initial(self._variance_priors(), rng, n, self.variance == "sampled")
 
     def variance_estimates(self, theta: np.ndarray) -> dict[str, float]:
         """Posterior-mean variances given one theta (reported next to the parameters)."""

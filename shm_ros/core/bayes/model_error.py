@@ -48,9 +48,16 @@ import numpy as np
 from scipy.special import roots_genlaguerre, roots_hermitenorm
 
 from .forward import ModalPredictor
-from .likelihoods import InverseGamma, ModalStatistics, ig_marginal_loglik, ig_posterior_mean, paired_predictions
+from .likelihoods import (
+    InverseGamma,
+    ModalStatistics,
+    ig_marginal_loglik,
+    ig_posterior_mean,
+    log_variance_initial,
+    log_variance_logprior,
+    paired_predictions,
+)
 from .observations import ModalObservations
-from .priors import Prior
 
 FREQ_SCALE_RANGE = (1e-4, 0.2)  # model-error scale s of the frequencies (relative), log-uniform
 SHAPE_SCALE_RANGE = (1e-3, 0.3)  # model-error scale t of a unit shape's components, log-uniform
@@ -184,19 +191,10 @@ class ModelErrorLikelihood:
         return [self.freq_prior] * m + ([self.shape_prior] * m if self.uses_shapes else [])
 
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
-        out = np.zeros(extra.shape[0])
-        if self.variance != "sampled":
-            return out
-        for j, p in enumerate(self._variance_priors()):
-            z = extra[:, j]
-            out += Prior.make("inverse_gamma", {"shape": p.shape, "scale": p.scale}).logpdf(np.exp(z)) + z
-        return out
+        return log_variance_logprior(self._variance_priors(), extra, self.variance == "sampled")
 
     def extra_initial(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        if self.variance != "sampled":
-            return np.zeros((n, 0))
-        return np.column_stack([np.log(p.scale / (p.shape + 1.0)) + 0.3 * rng.standard_normal(n)
-                                for p in self._variance_priors()])
+        return log_variance_initial(self._variance_priors(), rng, n, self.variance == "sampled")
 
     # -- pieces ------------------------------------------------------------------------------------
     def _freq_terms(self, theta: np.ndarray, sigma2: np.ndarray | None):

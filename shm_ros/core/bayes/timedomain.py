@@ -33,8 +33,13 @@ import numpy as np
 
 from shm_ros.core.models.base import AffineModel
 
-from .likelihoods import InverseGamma, ig_marginal_loglik, ig_posterior_mean
-from .priors import Prior
+from .likelihoods import (
+    InverseGamma,
+    ig_marginal_loglik,
+    ig_posterior_mean,
+    log_variance_initial,
+    log_variance_logprior,
+)
 
 
 @dataclass
@@ -172,19 +177,10 @@ class TimeDomainLikelihood:
         return self.record.outputs.shape[0] - self.ar_order
 
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
-        if self.variance != "sampled":
-            return np.zeros(extra.shape[0])
-        out = np.zeros(extra.shape[0])
-        for j, p in enumerate(self.priors):
-            z = extra[:, j]
-            out += Prior.make("inverse_gamma", {"shape": p.shape, "scale": p.scale}).logpdf(np.exp(z)) + z
-        return out
+        return log_variance_logprior(self.priors, extra, self.variance == "sampled")
 
     def extra_initial(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        if self.variance != "sampled":
-            return np.zeros((n, 0))
-        return np.column_stack([np.log(p.scale / (p.shape + 1.0)) + 0.3 * rng.standard_normal(n)
-                                for p in self.priors])
+        return log_variance_initial(self.priors, rng, n, self.variance == "sampled")
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         x = np.atleast_2d(x)
