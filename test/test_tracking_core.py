@@ -168,3 +168,20 @@ def test_online_tracker_gives_the_batch_result():
     assert np.array_equal(alarms, batch.novelty_alarm)
     assert rows[-1].novelty_threshold == pytest.approx(batch.novelty_threshold)
     assert alarms[int(0.7 * len(est)):].mean() > 0.9
+
+
+def test_a_named_model_fits_a_mode_found_in_too_few_windows_for_cross_validation():
+    """A rarely found mode (7 training windows: too few for the 5 held-out blocks) still gets the
+    linear model asked for, fitted in sample; an unplaceable knee falls back to a constant."""
+    from shm_ros.core.tracking.config import EnvModel
+    from shm_ros.core.tracking.environment import fit_mode
+
+    temp = np.linspace(-5.0, 25.0, 40)
+    f = np.full(40, np.nan)
+    f[::6] = 10.0 * (1 - 0.004 * temp[::6])
+    x = {"temperature_c": temp}
+    fit = fit_mode(3, f, x, "temperature_c", EnvModel.LINEAR)
+    assert fit.n == 7 and fit.model == "linear"
+    assert fit.slope_hz_per_unit == pytest.approx(-0.04, rel=0.05)
+    knee = fit_mode(3, f, x, "temperature_c", EnvModel.BILINEAR)
+    assert knee.model == "constant" and knee.n == 7

@@ -1,7 +1,8 @@
 """Tracking acceptance on simulated girder campaigns of modal estimates (``tracking_tables``: the
 simulator's truth per window, a hidden bilinear freezing knee, identification scatter, missed and
 spurious modes, dropped channels, and an out-of-plane mode that a bending mode crosses as the deck
-stiffens below freezing, MAC 0.56 at the sensors).
+stiffens below freezing, MAC 0.56 at the sensors). The truth's own lateral and torsion modes (seen
+by the off-centre sensors) lie among the vertical ones: each is a truth identity like any other.
 
 Identities: over 8-day campaigns of nightly frost (frequencies up to 4-15 % above their median), >= 98 % of the windows
 have every identified truth mode assigned to its identity (within 2 % of the true frequency).
@@ -28,7 +29,8 @@ FROST = {"t_mean_c": 4.0, "t_daily_c": 10.0, "below_per_c": -0.02}
 
 
 def test_identities_survive_freezing_and_a_crossing():
-    """Every seed >= 98 % (the issue's criterion per campaign); the crossing really happens."""
+    """Every seed >= 98 % (the issue's criterion per campaign), out-of-plane truth modes included;
+    the crossing really happens."""
     scores = []
     for seed in IDENTITY_SEEDS:
         camp = girder_tables(seed, N, **FROST)
@@ -37,7 +39,9 @@ def test_identities_survive_freezing_and_a_crossing():
         scores.append(score)
         # all truth modes, the out-of-plane one included, have an identity of their own
         assert sorted(owner) == sorted(camp.identities) and len(set(owner.values())) == len(owner), owner
-        bend, lat = camp.truth_f[:, 1], camp.truth_f[:, camp.identities.index(LATERAL)]
+        # the truth's modes ascend in frequency, out-of-plane ones among them: the crossing is with
+        # vertical bending mode 2, found by family
+        bend, lat = camp.truth_f[:, camp.columns("vertical")[1]], camp.truth_f[:, camp.identities.index(LATERAL)]
         assert (bend > lat).any() and (bend < lat).any()  # the frequencies cross
         rise = camp.truth_f.max(axis=0) / np.median(camp.truth_f, axis=0) - 1
         assert 0.04 <= rise[:-1].max() <= 0.15, rise

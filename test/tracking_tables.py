@@ -1,12 +1,14 @@
 """Cheap modal-estimate campaigns for the tracking tests: the simulator's girder truth per window
 (``shm_ros.core.simulate``: its finer truth model, hidden bilinear freezing knee, damage) without
 simulating responses, plus what identification does to it (frequency and shape scatter, missed
-modes, spurious modes, dropped channels), plus one out-of-plane mode whose frequency hardly moves
-with temperature, so that a vertical bending mode crosses it as the deck stiffens below freezing
+modes, spurious modes, dropped channels), plus one synthetic out-of-plane mode whose frequency hardly
+moves with temperature, so that vertical bending mode 2 crosses it as the deck stiffens below freezing
 (their MAC at the sensors is about 0.56: neither frequency order nor a loose shape test tells them
 apart). Identities are the truth's, followed by MAC continuity of the truth's full shapes over a
 grid of deck-stiffness factors (the grid also makes the campaign cheap: modal truth is interpolated
-between grid nodes, not solved per window).
+between grid nodes, not solved per window). The truth's modes are of every family it has (with
+``model_form``, the default, the girder's lateral and torsion modes lie among the vertical ones):
+``TableCampaign.families`` says which is which, ``TableCampaign.columns`` picks one family.
 """
 
 from __future__ import annotations
@@ -20,37 +22,45 @@ from shm_ros.core.simulate import named_scenario, simulate_campaign
 from shm_ros.core.simulate.scenario import EffectRequest
 from shm_ros.core.types import ModalEstimate, Mode
 
-LATERAL = -1  # truth identity of the synthetic out-of-plane mode (vertical modes: 0, 1, ...)
+LATERAL = -1  # identity of the synthetic out-of-plane mode (the truth's modes: 0, 1, ..., every family)
 
 
 @dataclass
 class TableCampaign:
     estimates: list[ModalEstimate]
     truth_ids: list[list[int]]  # per window, the truth identity of each reported mode (None = spurious)
-    truth_f: np.ndarray  # (n_windows, n_truth) true frequencies by identity (last column: out-of-plane)
+    truth_f: np.ndarray  # (n_windows, n_truth) true frequencies by identity (last column: the synthetic mode)
     temperature_c: np.ndarray
     damage_window: int | None
     identities: list[int]  # identity of each truth_f column
+    families: list[str]  # the truth's mode family of each truth_f column ("vertical", "lateral", "torsion")
+
+    def columns(self, family: str) -> list[int]:
+        """The truth_f columns of one mode family, ascending frequency at the first window."""
+        cols = [k for k, f in enumerate(self.families) if f == family]
+        return sorted(cols, key=lambda k: self.truth_f[0, k])
 
 
 def _grid_truth(campaign, others: dict[str, float], lo: float, hi: float, n: int = 41):
     """Modal truth on a grid of the deck factor, columns ordered by identity (MAC continuity)."""
     grid = np.linspace(lo, hi, n)
-    freqs, shapes = [], []
+    freqs, shapes, fams = [], [], []
     prev = None
     for g in grid:
         _, modal = campaign.truth_model.system({**others, "EI": float(g)})
         f, s = np.asarray(modal.frequencies_hz), np.asarray(modal.shapes).T  # (modes, sensors)
+        fam = np.asarray(list(modal.families) or ["vertical"] * f.size, dtype=object)
         if prev is not None:  # keep identities: each column follows its most similar previous shape
             m = mac(prev[:, None, :], s[None, :, :])
             order = np.argmax(m, axis=1)
             if len(set(order.tolist())) == order.size:
-                f, s = f[order], s[order]
+                f, s, fam = f[order], s[order], fam[order]
         s = s * np.sign(np.sum(s * (prev if prev is not None else s), axis=1, keepdims=True) + 1e-30)
         freqs.append(f)
         shapes.append(s)
+        fams.append(fam)
         prev = s
-    return grid, np.array(freqs), np.array(shapes)
+    return grid, np.array(freqs), np.array(shapes), [str(f) for f in fams[0]]
 
 
 def girder_tables(seed: int, n_windows: int = 1152, *, t_mean_c: float = 5.0, t_daily_c: float = 6.0,
@@ -82,7 +92,7 @@ def girder_tables(seed: int, n_windows: int = 1152, *, t_mean_c: float = 5.0, t_
     lat_shape = None
     for i in range(n_windows):
         key = tuple(sorted((k, v) for k, v in factors[i].items() if k != "EI"))
-        grid, gf, gs = grids[key]
+        grid, gf, gs, fams = grids[key]
         j = int(np.clip(np.searchsorted(grid, deck[i]) - 1, 0, grid.size - 2))
         w = (deck[i] - grid[j]) / (grid[j + 1] - grid[j])
         f: np.ndarray = (1 - w) * gf[j] + w * gf[j + 1]
@@ -90,7 +100,8 @@ def girder_tables(seed: int, n_windows: int = 1152, *, t_mean_c: float = 5.0, t_
         damp = np.full(f.size, 0.015)
         if crossing:
             if lat_shape is None:  # MAC 0.56 with vertical mode 2 at the sensors
-                v = gs[0, 1] / np.linalg.norm(gs[0, 1])
+                v2 = [k for k in np.argsort(gf[0]) if fams[k] == "vertical"][1]
+                v = gs[0, v2] / np.linalg.norm(gs[0, v2])
                 o = np.sin(1.5 * np.pi * x) + 0.5 * np.cos(3.3 * np.pi * x)
                 o = o - (o @ v) * v
                 lat_shape = 0.75 * v + 0.66 * o / np.linalg.norm(o)
@@ -122,7 +133,8 @@ def girder_tables(seed: int, n_windows: int = 1152, *, t_mean_c: float = 5.0, t_
         ids_all.append([ids[o] for o in order])
     n_v = len(truth_rows[0]) - (1 if crossing else 0)
     identities = list(range(n_v)) + ([LATERAL] if crossing else [])
-    return TableCampaign(estimates, ids_all, np.array(truth_rows), temp, damage_at, identities)
+    families = list(grids[next(iter(grids))][3]) + (["lateral"] if crossing else [])
+    return TableCampaign(estimates, ids_all, np.array(truth_rows), temp, damage_at, identities, families)
 
 
 def identity_score(camp: TableCampaign, res) -> tuple[float, dict[int, int]]:

@@ -164,11 +164,17 @@ def fit_mode(number: int, f: np.ndarray, x: dict[str, np.ndarray], main: str, ch
             best = (min(best[0], _cv_rmse(_design(xs, feats, knee, main, y.size), y)), knee)
         scores[kind] = best
     best_err = min(s[0] for s in scores.values())
-    if not np.isfinite(best_err):
+    if len(cands) == 1:
+        # a model asked for by name needs no held-out error to be chosen (a mode found in fewer
+        # windows than the folds need still gets it), unless its knee could not be placed
+        kind = next(iter(cands))
+        if "knee" in cands[kind] and not np.isfinite(scores[kind][1]):
+            kind = EnvModel.CONSTANT
+    elif not np.isfinite(best_err):
         kind = EnvModel.CONSTANT
     else:
         kind = next(k for k in SIMPLER if k in scores and scores[k][0] <= 1.05 * best_err)
-    feats, knee = cands[kind], scores.get(kind, (np.inf, np.nan))[1]
+    feats, knee = cands.get(kind, []), scores.get(kind, (np.inf, np.nan))[1]
     a = _design(xs, feats, knee, main, y.size)
     coef = _lstsq(a, y)
     res = fy - _root(a @ coef)

@@ -4,8 +4,10 @@ From windows: all modes of the first windows are clustered on ``|f_i - f_j| / ma
 (1 - MAC_ij)`` (average linkage, as the stabilization-diagram picking); a cluster found in at least
 ``min_presence`` of those windows is a tracked mode (median frequency and damping, the shape of the
 member nearest the median frequency). From the model: the structure file's lowest modes read at the
-sensors. Both: the clusters are matched to the FE modes by MAC (optimal assignment), so the FE model
-names and completes the set while the data fix the frequencies.
+sensors. Both: the clusters are matched to the FE modes by MAC and frequency (optimal assignment,
+gated by ``mac_min`` and ``max_freq_gate``), so the FE model names and completes the set while the
+data fix the frequencies; clusters no FE mode matches (modes the model has no DOF for, such as a
+planar model's torsion and lateral modes) are tracked modes of their own.
 """
 
 from __future__ import annotations
@@ -179,11 +181,19 @@ def build_reference(estimates: list[ModalEstimate], sensors: list[str], cfg: Tra
     if source is ReferenceSource.WINDOWS:
         return [ReferenceMode(k + 1, f, s, p, d, spread=w) for k, (f, s, p, d, w) in enumerate(clusters)]
     assert model is not None
-    # both: FE modes name the set; a cluster takes the number of the FE mode it matches by shape
+    # both: FE modes name the set; a cluster takes the number of the FE mode it matches by shape and
+    # frequency. The FE model is a few % off, not tens: a mode the model has no DOF for (a torsion or
+    # lateral mode of a planar model) can resemble a far-off FE mode at the sensors and must not take
+    # its name; it stays a mode of its own, named by the data
     mac = mac_table(np.array([c[1] for c in clusters]).reshape(len(clusters), len(sensors)),
                     np.array([m[1] for m in model]))
-    rows, cols = linear_sum_assignment(-mac) if mac.size else (np.zeros(0, int), np.zeros(0, int))
-    matched = {int(r): int(c) for r, c in zip(rows, cols, strict=True) if mac[r, c] >= cfg.mac_min}
+    fc_ = np.array([c[0] for c in clusters], float)
+    fm_ = np.array([m[0] for m in model], float)
+    df = np.abs(fc_[:, None] - fm_[None, :]) / np.maximum(fc_[:, None], fm_[None, :])
+    ok = (mac >= cfg.mac_min) & (df <= cfg.max_freq_gate)
+    cost = np.where(ok, (1.0 - mac) + cfg.freq_weight * df, 1e6)
+    rows, cols = linear_sum_assignment(cost) if mac.size else (np.zeros(0, int), np.zeros(0, int))
+    matched = {int(r): int(c) for r, c in zip(rows, cols, strict=True) if ok[r, c]}
     refs: list[ReferenceMode] = []
     for c, (f, s) in enumerate(model):
         r = next((r for r, cc in matched.items() if cc == c), None)
