@@ -14,8 +14,7 @@ Seeds: SHM_FULL=1 pools 10 seeds and applies the issue's criteria to the pooled 
 there (truth eccentricity 1-2 % of the plan): median updated NRMS 7.1 % (limit 20 %), updated/nominal
 at most 0.56 (limit < 1), strong-motion coverage 0.913 (limits 0.80-0.99), peaks inside 0.908 (limit
 0.80), floor 5 / drift NRMS at most 21.0 % (limit 20 %: so the full size fails this criterion by
-1 point on its worst value; on seed 0 the hidden floor's NRMS follows the measured floors' on the
-same event, which the best-fitting planar model also misses by that much).
+1 point on its worst value; which seed and event that is has not been traced yet).
 CI runs seed 0 alone: median NRMS 8.7 %, updated/nominal at most 0.56, coverage 0.897, peaks 10 of 12,
 floor 5 / drift at most 14.0 %. The NRMS, ratio and
 hidden-floor criteria keep their limits. The peak criterion counts 12 peaks (4 channels x 3
