@@ -92,7 +92,7 @@ def analysis_structure(simulated: dict[str, Any], err: tuple[float, float]) -> d
 def _true_drift(camp: Any, sw: Any, floors: tuple[int, ...]) -> np.ndarray:
     """Top-story drift (m) of the truth: its own linear system driven by the true ground motion
     (the window's ambient start and unmeasured wind left out), read at the hidden sensors of the
-    two top floors."""
+    two top floors (off the stiffness centre like every sensor: the drift there includes the twist)."""
     from dataclasses import replace
 
     n = max(floors)
@@ -102,4 +102,5 @@ def _true_drift(camp: Any, sw: Any, floors: tuple[int, ...]) -> np.ndarray:
     u = np.zeros((sw.accel.shape[0], sys.B.shape[1]))
     u[:, 0] = sw.accel[:, ids.index("g0")]
     x = disp.simulate(u, 1.0 / sw.fs)
-    return x[:, ids.index(f"h{n}")] - x[:, ids.index(f"h{n - 1}")]
+    rows = camp.truth_model.signal_rows()  # x, y, z rows per sensor: the measured direction's
+    return x[:, rows[ids.index(f"h{n}")]] - x[:, rows[ids.index(f"h{n - 1}")]]

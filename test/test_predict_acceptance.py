@@ -4,19 +4,24 @@
    modal superposition) predicts noise-free records to NRMS < 1 %, and records with sensor noise of
    3 % of the response RMS to within 1 point of 3 %.
 2. Eight-story building with damper braces from the simulator's truth (its default model-form
-   error: scattered floors, its own damping, sensor gains/offsets/noise, unmeasured wind), nominal
-   story stiffnesses 10-20 % off, 6 earthquakes: calibrated jointly on 3 (one time-domain
+   error: x, y and twist per floor with eccentric masses, a flexural component, non-proportional
+   story dashpots, sensors off the stiffness centre, sensor gains/offsets/noise, unmeasured y ground
+   motion and wind), nominal story stiffnesses 10-20 % off, 6 earthquakes: calibrated jointly on 3 (one time-domain
    likelihood), the updated model predicts the other 3. Floors 2, 4, 6, 8 are measured; floor 5 and
    the top story's drift are compared with the simulator's truth.
 
 Seeds: SHM_FULL=1 pools 10 seeds and applies the issue's criteria to the pooled values; measured
-there: median updated NRMS 2.9 % (limit 20 %), updated/nominal at most 0.20 (limit < 1), strong-
-motion coverage 0.943 (limits 0.80-0.99), peaks inside 0.833 (limit 0.80), floor 5 / drift NRMS at
-most 8.3 % (limit 20 %). CI runs seed 0 alone. The NRMS, ratio and hidden-floor criteria keep
-their limits (margins of 2.5x and more over the worst of 10 seeds). The peak criterion counts 12
-peaks (4 channels x 3 events): with the pooled rate 0.833, P(fewer than 7 of 12 inside) = 0.008
-(binomial), so CI asks for >= 7 of 12, which a correct method passes with probability 0.99.
-The coverage limits 0.80-0.99 are kept (seed 0: 0.955; it pools ~8000 strong-motion samples).
+there (truth eccentricity 1-2 % of the plan): median updated NRMS 7.1 % (limit 20 %), updated/nominal
+at most 0.56 (limit < 1), strong-motion coverage 0.913 (limits 0.80-0.99), peaks inside 0.908 (limit
+0.80), floor 5 / drift NRMS at most 21.0 % (limit 20 %: so the full size fails this criterion by
+1 point on its worst value; which seed and event that is has not been traced yet).
+CI runs seed 0 alone: median NRMS 8.7 %, updated/nominal at most 0.56, coverage 0.897, peaks 10 of 12,
+floor 5 / drift at most 14.0 %. The NRMS, ratio and
+hidden-floor criteria keep their limits. The peak criterion counts 12 peaks (4 channels x 3
+events): at the rate 0.833 measured before the truth's eccentricity was reduced (the lower of the
+two), P(fewer than 7 of 12 inside) = 0.008 (binomial), so CI asks for >= 7 of 12, which a correct
+method passes with probability 0.99. The coverage limits 0.80-0.99 are kept (seed 0 pools ~8000
+strong-motion samples).
 """
 
 from __future__ import annotations
