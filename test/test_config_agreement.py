@@ -50,7 +50,7 @@ STAGES: dict[str, tuple[type, type, dict[str, Any], set[str], set[str], set[str]
               {"modes", "out", "no_plot", "training_fraction", "t_from", "t_to"},
               set()),
     "update": (UpdateConfig, UpdateNodeConfig, {"structure": str(ROOT / "examples" / "building.yaml")},
-               {"min_windows", "min_new_windows", "output_dir"},
+               {"input", "min_windows", "min_new_windows", "output_dir"},
                {"modes", "bag", "out", "study", "refer_to", "window", "no_plots"},
                {"structure"}),
 }

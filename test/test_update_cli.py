@@ -122,7 +122,8 @@ def simulated_bags(tmp_path_factory):
 
 @pytest.mark.parametrize("likelihood", ["gaussian", "time"])
 def test_update_from_bag(simulated_bags, likelihood):
-    """--bag: ingest -> identify -> modes paired with the model by MAC (or the input/output record)."""
+    """--bag: ingest -> identify -> track -> tracked modes paired with the model once (or the
+    input/output record)."""
     src = simulated_bags / ("ambient" if likelihood == "gaussian" else "quake")
     out = src / f"upd_{likelihood}"
     code = main(["update", "--structure", str(src / "structure.yaml"), "--bag", str(src / "bag"),

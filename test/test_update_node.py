@@ -1,15 +1,14 @@
-"""Issue 6 (node): the update node takes modal estimates over DDS, updates the building model,
-re-runs (warm-started) as new windows arrive, and publishes a posterior summary close to the truth
-(separate processes)."""
+"""Issue 6 (node): the update node takes the track node's tracked modes over DDS (``TrackedModes``
+rows of the core tracker, as the track node publishes them), updates the building model, re-runs
+(warm-started) as new windows arrive, and publishes a posterior summary close to the truth
+(separate processes). The window-by-window fallback on raw estimates (``input: estimates``) is
+exercised by test_update_node_worker.py."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
-import time
 from pathlib import Path
-
-import numpy as np
 
 from ros_helpers.graph import node_process, stop
 
@@ -24,7 +23,8 @@ from shm_interfaces.msg import PosteriorSummary
 from shm_ros.core.models import build_model
 from shm_ros.core.types import ModalEstimate, Mode
 from shm_ros.io.structure import load_structure
-from shm_ros.ros.convert import estimate_to_msg
+from shm_ros.core.tracking import Tracker, TrackingConfig
+from shm_ros.ros.convert import tracked_row_to_msg
 from shm_ros.ros.qos import latched_qos, stream_qos
 
 spec = load_structure(sys.argv[1]); truth = json.loads(sys.argv[2])
@@ -36,8 +36,11 @@ theta = model.theta_vector(truth)
 sol = model.modes(theta, 4)
 phi = model.sensor_matrix(sensors) @ sol.shapes
 rclpy.init(); node = Node("estimates_source")
-from shm_interfaces.msg import ModalEstimate as EstimateMsg
-pub = node.create_publisher(EstimateMsg, "/shm/modal_estimates", stream_qos())
+from shm_interfaces.msg import TrackedModes
+pub = node.create_publisher(TrackedModes, "/shm/tracked_modes", stream_qos())
+# the track node's core: the first 5 windows establish the modes, then one row per window
+tracker = Tracker(TrackingConfig(reference_windows=5), training_windows=10)
+sent = 0
 got = []
 node.create_subscription(PosteriorSummary, "/shm/posterior", got.append, latched_qos())
 end = time.monotonic() + 60
@@ -51,8 +54,11 @@ for w in range(30):
         s = s / s[np.argmax(np.abs(s))]
         modes.append(Mode(frequency_hz=f, damping_ratio=0.02, mode_shape=s))
     t0 = 1_714_521_600_000_000_000 + w * 600 * 10**9
-    pub.publish(estimate_to_msg(ModalEstimate(f"w{w}", t0, t0 + 600 * 10**9, sensors, modes)))
+    for row in tracker.add(ModalEstimate(f"w{w}", t0, t0 + 600 * 10**9, sensors, modes)):
+        pub.publish(tracked_row_to_msg(row))
+        sent += 1
     rclpy.spin_once(node, timeout_sec=0.01)
+assert sent == 30, sent
 end = time.monotonic() + 240
 while not any(m.n_windows == 30 for m in got) and time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.2)

@@ -4,7 +4,8 @@ A run is made long by its own parameters (many sampler steps, an ESS target no c
 it runs to ``max_steps``: about half a minute here). Estimates sent during the run are received at
 once (the node's progress diagnostic counts them and says it is still sampling the same run); when
 the run is done its posterior is published and the queued run starts with every window received
-by then; stopping the node in the middle of a run ends it cleanly.
+by then; stopping the node in the middle of a run ends it cleanly. The node runs without a track
+node here (``input: estimates``: raw modal estimates, each window paired with the model).
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ print(json.dumps({"started": started, "events": events}))
 
 def test_update_node_receives_while_sampling_and_queues_the_next_run(tmp_path):
     node = node_process("update", {
-        "structure": str(ROOT / "examples" / "building.yaml"), "min_windows": FIRST,
+        "structure": str(ROOT / "examples" / "building.yaml"), "input": "estimates", "min_windows": FIRST,
         "min_new_windows": 1, "evidence": False, "n_steps": 25000, "max_steps": 25000,
         "ess_target": 1.0e12})
     try:

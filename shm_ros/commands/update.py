@@ -66,9 +66,10 @@ def _observations(args: argparse.Namespace, spec: Any, model: Any):
 
 
 def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
-    """Observations from a bag: windows (ingest) -> modes per window (identify) -> modes paired
-    with the model's modes at the prior mean behind the updating's gate; or, for ``--likelihood
-    time``, the window with the strongest input as an input/output acceleration record."""
+    """Observations from a bag: windows (ingest) -> modes per window (identify) -> mode identities
+    across the windows (the tracker of ``shm-ros track``) -> one column per tracked mode; the
+    updating pairs the tracked modes with the model's modes once. For ``--likelihood time``, the
+    window with the strongest input as an input/output acceleration record."""
     from shm_ros.io.recording import windows_from_bag
 
     windows, _ = windows_from_bag(args.bag, spec, args.window or 600.0)
@@ -79,8 +80,7 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
         return _acceleration_record(args, [i.sensor for i in model.inputs], windows, observed)
     from threadpoolctl import threadpool_limits
 
-    from shm_ros.core.bayes.pairing import observations_for_model
-    from shm_ros.core.bayes.update import pairing_reference
+    from shm_ros.core.bayes.tracked import observations_from_tracking
     from shm_ros.core.identify import identify_window
 
     estimates = []
@@ -94,9 +94,8 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
     if estimates:  # auto: input-output SSI when the structure's input sensor is recorded
         print(f"shm-ros update: note: windows identified with {', '.join(sorted({e.method for e in estimates}))}",
               file=sys.stderr)
-    try:  # the updating's gate, at the prior mean
-        theta, gate = pairing_reference(model, _config(args), spec.parameters)
-        return observations_for_model(model, estimates, observed, theta=theta, gate=gate)
+    try:  # the tracker's defaults, as `shm-ros track`
+        return observations_from_tracking(estimates, observed)
     except ValueError as exc:
         raise ValueError(f"{args.bag}: {exc}") from None
 

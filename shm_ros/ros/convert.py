@@ -177,3 +177,19 @@ def posterior_to_msg(record: dict[str, Any]) -> Any:
         else:
             setattr(msg, key, value)
     return msg
+
+
+def tracked_row_from_msg(msg: Any) -> Any:
+    """``TrackedModes`` -> :class:`shm_ros.core.tracking.TrackedRow` (the fields the updating uses)."""
+    from shm_ros.core.tracking import TrackedRow
+
+    n_m, sensors = len(msg.mode_numbers), list(msg.sensor_ids)
+    shapes = np.asarray(msg.mode_shapes, dtype=np.float64)
+    if shapes.size != n_m * len(sensors):  # malformed: no shapes rather than misplaced ones
+        shapes = np.full(n_m * len(sensors), np.nan)
+    return TrackedRow(msg.window_id, time_to_ns(msg.time), [int(k) for k in msg.mode_numbers],
+                      np.asarray(msg.frequencies_hz, dtype=np.float64),
+                      np.asarray(msg.damping_ratios, dtype=np.float64),
+                      np.asarray(msg.macs_to_reference, dtype=np.float64), sensors,
+                      shapes.reshape(n_m, len(sensors)),
+                      dict(zip(msg.covariate_names, (float(v) for v in msg.covariate_values), strict=False)))

@@ -175,7 +175,10 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         # Every node must be up before the first message: windows are not kept for late joiners.
         # The graph as this process sees it is not enough on a busy machine: ingest's own window
         # publisher must have matched identify and the recorder (its status says so).
-        estimate_readers = 1 + ("track" in kinds) + ("update" in kinds)  # + the watcher's own
+        # the update node reads the track node's rows unless its input is the estimates
+        raw_update = any(n.kind == "update" and n.parameters.get("input") == "estimates" for n in nodes)
+        tracked_update = "update" in kinds and not raw_update
+        estimate_readers = 1 + ("track" in kinds) + raw_update  # + the watcher's own
         win_readers = 2 + ("predict" in kinds)  # identify, the recorder, predict
         ready_by = time.monotonic() + 120.0
         while time.monotonic() < ready_by and not (
@@ -185,6 +188,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                 and watcher.count_publishers(topics.INGEST_RECEIVED) >= 1
                 and watcher.count_subscribers(topics.MODAL_ESTIMATES) >= estimate_readers + 1
                 and ("track" not in kinds or watcher.count_publishers(topics.TRACKED_MODES) >= 1)
+                and (not tracked_update or watcher.count_subscribers(topics.TRACKED_MODES) >= 3)  # + recorder, watcher
                 and ("update" not in kinds or watcher.count_publishers(topics.POSTERIOR) >= 1)
                 and ("predict" not in kinds or watcher.count_publishers(topics.PREDICTION) >= 1)):
             rclpy.spin_once(watcher, timeout_sec=0.2)

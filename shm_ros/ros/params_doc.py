@@ -32,7 +32,7 @@ def _nodes() -> list[tuple[str, str, list[type]]]:
         ("ingest", "recording topics in, validated and aligned windows out", [IngestNodeConfig, IngestConfig]),
         ("identify", "windows in, modal estimates out", [IdentifyNodeConfig, IdentifyConfig]),
         ("track", "modal estimates in, tracked modes and novelty out", [TrackNodeConfig, TrackingConfig]),
-        ("update", "modal estimates in, posterior out (sampling in a worker process)",
+        ("update", "tracked modes (or modal estimates) in, posterior out (sampling in a worker process)",
          [UpdateNodeConfig, UpdateConfig]),
         ("predict", "event windows in, response predictions out (a worker process)",
          [PredictNodeConfig, PredictConfig]),

@@ -1,21 +1,27 @@
-"""update: modal estimates in, posterior summary out (re-run as new windows arrive).
+"""update: tracked modes in, posterior summary out (re-run as new windows arrive).
 
-Accumulates ``/shm/modal_estimates``; on the first ``min_windows`` windows, and then whenever
-``min_new_windows`` new ones have arrived, it pairs every window's modes with the nominal model by
-MAC and calls :func:`shm_ros.core.bayes.update.update`, warm-started from the last posterior;
-publishes ``/shm/posterior`` (latched) and writes ``posterior.json`` to ``output_dir`` when set.
+Accumulates the track node's ``/shm/tracked_modes`` (one row per window, mode identities kept
+across windows); on the first ``min_windows`` windows, and then whenever ``min_new_windows`` new
+ones have arrived, it builds one column per tracked mode and calls
+:func:`shm_ros.core.bayes.update.update` (which pairs the tracked modes with the model's modes
+once, behind the gate), warm-started from the last posterior; publishes ``/shm/posterior``
+(latched) and writes ``posterior.json`` to ``output_dir`` when set. With ``input: estimates`` it
+runs without a track node: it takes ``/shm/modal_estimates`` and pairs every window's modes with
+the prior-mean model instead (a spurious mode near a model frequency can then pass for a mode
+the window missed).
 
 A run (seconds to minutes) goes to a worker process (:mod:`shm_ros.ros.update_worker`): the node
 keeps receiving meanwhile. Windows that arrive during a run are kept; when it is done, the next
 run starts at once if enough new windows came, with every window received by then (so at most one
 run is ever waiting). A timer in the executor thread collects the finished run and publishes. The
 ``progress`` diagnostic says what the node is doing ("sampling, 30 windows, started at ...") with
-the values ``received`` (estimates so far), ``sampling`` and ``run_windows``; it is published on
-every estimate, at the start and end of a run and every 30 s during one.
+the values ``received`` (windows so far), ``sampling`` and ``run_windows``; it is published on
+every window received, at the start and end of a run and every 30 s during one.
 """
 
 from __future__ import annotations
 
+import enum
 import multiprocessing
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -31,7 +37,7 @@ from rclpy.publisher import Publisher
 from shm_ros.core.bayes.update import Posterior, UpdateConfig
 from shm_ros.core.config import option
 from shm_ros.ros import topics, update_worker
-from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg
+from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg, tracked_row_from_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
 from shm_ros.ros.params import load_config
@@ -41,11 +47,19 @@ from shm_ros.ros.timers import steady_timer
 PROGRESS_EVERY_S = 30.0
 
 
+class UpdateInput(enum.StrEnum):
+    TRACKED = "tracked"  # the track node's rows: identities across windows, paired with the model once
+    ESTIMATES = "estimates"  # raw modal estimates, each window paired with the prior-mean model
+
+
 @dataclass
 class UpdateNodeConfig:
     """Settings of the node itself (the updating's are :class:`UpdateConfig`)."""
 
     structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
+    input: str = option("tracked", "what the node updates from: tracked (the track node's "
+                        "/shm/tracked_modes) or estimates (/shm/modal_estimates, without a track node)",
+                        choices=UpdateInput)
     min_windows: int = option(10, "windows received before the first run")
     min_new_windows: int = option(10, "new windows received before the next run")
     output_dir: str | None = option(None, "directory of posterior.json, rewritten after every run "
@@ -70,7 +84,13 @@ class UpdateNode(Node):
         self.spec = load_structure(self.structure)
         build_model(self.spec)
         self.output_dir = Path(self.settings.output_dir) if self.settings.output_dir else None
-        self.estimates: list = []
+        try:
+            self.input = UpdateInput(self.settings.input)
+        except ValueError:
+            raise SystemExit(f"{self.get_name()}: parameter 'input' must be one of "
+                             f"{[i.value for i in UpdateInput]}, got {self.settings.input!r}") from None
+        # window id -> tracked row or estimate: a row sent again (a restarted track node) counts once
+        self.windows: dict[str, Any] = {}
         self.posterior: Posterior | None = None  # the last one: warm start of the next run
         self.used = 0  # windows of the latest run
         self.future: Future | None = None
@@ -78,13 +98,14 @@ class UpdateNode(Node):
         self.run_started = 0.0  # time.time() of the start of the current run
         self._progress_at = 0.0
         self.diag = Diagnostics(self, "update", summary=lambda: (
-            "ok", f"{len(self.estimates)} windows received"
+            "ok", f"{len(self.windows)} windows received"
             + (f", sampling {self.run_windows} of them" if self.future is not None else ", idle"),
-            {"received": len(self.estimates), "sampling": self.future is not None}))
+            {"received": len(self.windows), "sampling": self.future is not None}))
         self.pub: Publisher[Any] = self.create_publisher(
             topics.message_class(topics.TYPES[topics.POSTERIOR]), topics.POSTERIOR, latched_qos())
-        self.create_subscription(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
-                                 topics.MODAL_ESTIMATES, self._on_estimate, stream_qos())
+        topic = topics.TRACKED_MODES if self.input is UpdateInput.TRACKED else topics.MODAL_ESTIMATES
+        self.create_subscription(topics.message_class(topics.TYPES[topic]), topic, self._on_window,
+                                 stream_qos())
         self._workers: set[multiprocessing.process.BaseProcess] = set()
         self.pool = self._new_pool()
         steady_timer(self, 0.25, self._poll)
@@ -115,19 +136,20 @@ class UpdateNode(Node):
 
     # runs -------------------------------------------------------------------------------------
 
-    def _on_estimate(self, msg) -> None:
-        self.estimates.append(estimate_from_msg(msg))
+    def _on_window(self, msg) -> None:
+        convert = tracked_row_from_msg if self.input is UpdateInput.TRACKED else estimate_from_msg
+        self.windows[msg.window_id] = convert(msg)
         if self.future is None:
             self._maybe_start()
         self._progress()
 
     def _maybe_start(self) -> None:
-        n = len(self.estimates)
+        n = len(self.windows)
         if n >= self.settings.min_windows and n - self.used >= (
                 self.settings.min_new_windows if self.used else 0):
             self.used = self.run_windows = n
             self.run_started = time.time()
-            args = (list(self.estimates), self.config, self.posterior)
+            args = (list(self.windows.values()), self.input.value, self.config, self.posterior)
             try:
                 self.future = self._submit(self.pool, update_worker.run, *args)
             except BrokenProcessPool:  # the worker died while idle: once more with a new one
@@ -170,7 +192,7 @@ class UpdateNode(Node):
         self.get_logger().info(f"posterior from {n} windows: {summary}")
 
     def _progress(self) -> None:
-        received = len(self.estimates)
+        received = len(self.windows)
         if self.future is not None:
             started = datetime.fromtimestamp(self.run_started, UTC).isoformat(timespec="seconds")
             waiting = received - self.run_windows

@@ -32,13 +32,22 @@ def ready() -> bool:
     return "model" in _state
 
 
-def run(estimates: list, config: UpdateConfig, warm_start: Posterior | None) -> Posterior:
-    """Pair every estimate's modes with the model's (prior mean, the updating's gate) and update
-    (warm-started)."""
-    from shm_ros.core.bayes.pairing import observations_for_model
-    from shm_ros.core.bayes.update import pairing_reference, update
+def run(windows: list, kind: str, config: UpdateConfig, warm_start: Posterior | None) -> Posterior:
+    """Update (warm-started) from the windows received: ``kind`` "tracked" - tracked rows, one
+    column per tracked mode, paired with the model's modes once inside the updating; "estimates" -
+    modal estimates, every window's modes paired with the model's (prior mean, the updating's gate)."""
+    from shm_ros.core.bayes.update import update
 
     spec, model = _state["spec"], _state["model"]
-    theta, gate = pairing_reference(model, config, spec.parameters)
-    obs = observations_for_model(model, estimates, spec.sensor_ids, theta=theta, gate=gate)
+    sensors = [s for s in spec.sensor_ids if s in model.sensor_rows]
+    if kind == "tracked":
+        from shm_ros.core.bayes.tracked import observations_from_rows
+
+        obs = observations_from_rows(windows, sensors)
+    else:
+        from shm_ros.core.bayes.pairing import observations_for_model
+        from shm_ros.core.bayes.update import pairing_reference
+
+        theta, gate = pairing_reference(model, config, spec.parameters)
+        obs = observations_for_model(model, windows, sensors, theta=theta, gate=gate)
     return update(model, obs, config, spec.parameters, warm_start=warm_start)
