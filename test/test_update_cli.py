@@ -133,8 +133,9 @@ def test_update_from_bag(simulated_bags, likelihood):
     post = json.loads((out / "posterior.json").read_text())
     truth = json.loads((src / "truth.json").read_text())
     assert post["diagnostics"]["likelihood"] == likelihood
-    # the simulator's truth is a scattered, finer model: every tracked mode of the calibrated
-    # nominal model should come within a few percent of a true frequency
+    # the simulator's truth is outside the model's class (x, y and twist per floor, a flexural
+    # component: its best-fitting shear building misses modes 1-3 by 1-4 %, truth.json model_form):
+    # every tracked mode of the calibrated model should come within 5 % of a true frequency
     f_true = np.array(truth["windows"][0]["frequencies_hz"])
     if likelihood == "gaussian":
         modes = post["fit"]["modes"]
@@ -142,8 +143,8 @@ def test_update_from_bag(simulated_bags, likelihood):
         for m in modes:
             if m["frequency_obs_hz"] > 1.03 * f_true.max():
                 continue  # a true mode above those truth.json lists (input-output SSI finds 7 and 8)
-            assert np.min(np.abs(m["frequency_model_hz"] / f_true - 1)) < 0.03, modes
-            assert abs(m["frequency_model_hz"] / m["frequency_obs_hz"] - 1) < 0.03, modes
+            assert np.min(np.abs(m["frequency_model_hz"] / f_true - 1)) < 0.05, modes
+            assert abs(m["frequency_model_hz"] / m["frequency_obs_hz"] - 1) < 0.05, modes
     else:
         # The truth has x, y and twist per floor, an unmeasured y ground motion and sensor
         # imperfections: no shear building fits it exactly (about 0.30 NRMS on this 40 s record);
