@@ -44,7 +44,7 @@ def _posterior(model, spec, window, out):
 def test_predict_node_in_the_graph_matches_cli(tmp_path):
     d = tmp_path / "quake"
     assert main(["simulate", "building-earthquake", "--out", str(d), "--windows", "4", "--window-s",
-                 str(WINDOW_S), "--quiet", "--seed", "2"]) == 0
+                 str(WINDOW_S), "--quiet", "--seed", "3"]) == 0  # a seed whose windows ingest flags 3 of 4
     s_path, bag = d / "structure.yaml", d / "bag"
     spec = load_structure(s_path)
     model = build_model(spec)
