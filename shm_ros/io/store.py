@@ -59,9 +59,17 @@ def _f(v: Any) -> float | None:
     return v if math.isfinite(v) else None
 
 
+def _fin(xs: list[float]) -> list[float | None]:
+    return [x if math.isfinite(x) else None for x in xs]
+
+
 def _arr(v: Any) -> Any:
     a = np.asarray(v, dtype=float)
-    return [_arr(x) for x in a] if a.ndim > 1 else [_f(x) for x in a]
+    if a.ndim == 1:  # the common cases, through tolist (one C call) rather than element by element
+        return _fin(a.tolist())
+    if a.ndim == 2:
+        return [_fin(r) for r in a.tolist()]
+    return [_arr(x) for x in a]
 
 
 def _nan(v: Any) -> np.ndarray:
@@ -125,6 +133,7 @@ class TrackStore:
                 raise StoreError(f"{self.path}: no such store")
             self.db = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True)
         self._since_checkpoint = 0
+        self._model_key: tuple[Any, ...] | None = None  # the tracker's model state at the last record
 
     def close(self) -> None:
         self.db.close()
@@ -220,11 +229,24 @@ class TrackStore:
             db.execute("COMMIT")
         except BaseException:
             db.execute("ROLLBACK")
+            self._model_key = None
             raise
         return seq
 
     def _models(self, tracker: Tracker, seq: int) -> None:
         """A new model record whenever the tracker's reference set or fits change."""
+        # the record is costly to build (every fit's dataclass, JSON) and changes rarely: it is built
+        # only when the model state changed since the last window. The key holds the reference modes
+        # and fits themselves (compared by identity, so never a recycled id) and every field the record
+        # reads from them by value; fits are never modified in place (a refit makes new ones).
+        key = (tuple((r, r.number, r.frequency_hz, r.presence, r.source, r.shape.tobytes()) for r in tracker.reference),
+               tuple(tracker.environment), tracker.trained, tracker.threshold if tracker.trained else None)
+        old = self._model_key
+        if old is not None and len(old[0]) == len(key[0]) and len(old[1]) == len(key[1]) and \
+                all(a[0] is b[0] and a[1:] == b[1:] for a, b in zip(old[0], key[0], strict=True)) and \
+                all(a is b for a, b in zip(old[1], key[1], strict=True)) and old[2:] == key[2:]:
+            return  # same state as the last window: its record is already the newest one
+        self._model_key = key
         record = {"reference": [{"mode": r.number, "frequency_hz": _f(r.frequency_hz), "presence": _f(r.presence),
                                  "source": r.source, "shape": _arr(r.shape)} for r in tracker.reference],
                   "environment": [{k: (_f(v) if isinstance(v, float) else v) for k, v in asdict(f).items()}
