@@ -85,7 +85,7 @@ def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], I
 
 def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
-               drain_timeout_s: float = 60.0, stall_s: float = 30.0, recording_only: bool = True,
+               drain_timeout_s: float = 300.0, stall_s: float = 30.0, recording_only: bool = True,
                progress: bool = False, clock_hz: float = 0.0) -> ReplayResult:
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
 
@@ -93,6 +93,9 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     ``recording_only``: replay only recording topics (docs/interfaces.md §1: accelerometers, blocks, temperature).
     ``stall_s``: with flow control, give up (``result.error``) when no acknowledgement arrives for
     this long (the ingest node is gone or stuck) instead of waiting forever.
+    ``drain_timeout_s``: after the last message, how long to wait for the last acknowledgements;
+    ingest holds them while its windows wait for slow readers (identify on a busy host), so this
+    is generous.
     """
     node = Replayer(credit)
     result = ReplayResult()
