@@ -1,0 +1,91 @@
+"""The one extension point of explain: a candidate physics is a small class in this package.
+
+A candidate changes the analysis model per window: it returns, for a batch of its own parameter
+vectors, multiplicative factors on parameter groups (:mod:`shm_ros.core.explain.groups`) for every
+window, computed from the window's covariates and time (:class:`Context`); a damping candidate
+returns factors on the modal damping instead. Everything else (the surrogate's frequencies, the
+likelihood, the fit, the evidence, the report) is shared. A new effect is a new file here with a
+class registered by ``@CANDIDATES.register("<label>")``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from shm_ros.core.plugins import KindRegistry
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A candidate parameter with a physical, bounded prior (uniform on [lo, hi], or log-uniform)."""
+
+    name: str
+    lo: float
+    hi: float
+    null: float | None = None  # value at which the candidate reduces to the nominal model
+    log: bool = False  # log-uniform prior
+    unit: str = ""
+
+
+@dataclass
+class Context:
+    """What a candidate may depend on, per window (analysis windows in time order)."""
+
+    times_s: np.ndarray  # (W,) seconds since the first window
+    covariates: dict[str, np.ndarray]  # temperature_c, rms_accel_m_s2, pga_m_s2, ... (W,) NaN = missing
+    start_epoch_s: float = 0.0  # POSIX time of times_s == 0 (for ISO times in the verdict)
+    hints: dict[str, Any] = field(default_factory=dict)  # from locate: knee guess, change window, ...
+
+
+@dataclass
+class Modification:
+    """A candidate's effect for a batch: factors (B, W) per group name; ``damping`` (B, W) or None."""
+
+    groups: dict[str, np.ndarray]
+    damping: np.ndarray | None = None
+
+
+class Candidate(ABC):
+    """Base class of every candidate physics (see module docstring)."""
+
+    name: ClassVar[str]  # registry label, set by the registry
+    vocabulary: ClassVar[str]  # docs/interfaces.md §5 name
+    explanation: ClassVar[str] = ""  # plain words for an engineer
+
+    def __init__(self, group: str, context: Context):
+        self.group = group  # the parameter group it acts on (see groups.py), e.g. "EI", "EI:2", "bearings"
+        self.context = context
+
+    @property
+    def label(self) -> str:
+        return f"{self.vocabulary}/{self.name}/{self.group}"
+
+    @abstractmethod
+    def params(self) -> list[ParamSpec]:
+        ...
+
+    @abstractmethod
+    def modify(self, theta: np.ndarray) -> Modification:
+        """theta (B, p) -> factors per window."""
+
+    @abstractmethod
+    def form(self, theta: np.ndarray) -> str:
+        """Plain-words form with the fitted values, theta (p,)."""
+
+    def time(self, theta: np.ndarray) -> float | None:
+        """Seconds since the first window at which the effect starts, if it starts at a moment."""
+        return None
+
+    def key_parameter(self) -> str:
+        """The parameter whose interval must exclude its null value for the candidate to be accepted."""
+        return self.params()[0].name
+
+    def describe(self, theta: np.ndarray) -> dict[str, float]:
+        return {p.name: float(v) for p, v in zip(self.params(), np.asarray(theta, float), strict=True)}
+
+
+CANDIDATES: KindRegistry[Candidate] = KindRegistry("explain candidate", "shm_ros.core.explain.candidates")

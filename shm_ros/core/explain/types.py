@@ -1,0 +1,131 @@
+"""What explain produces: the verdict of docs/interfaces.md §5 as typed dataclasses."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class Mismatch:
+    """Where model and data disagree (before any candidate is added)."""
+
+    modes: list[int]  # tracked mode numbers whose misfit is structured (not noise)
+    sensors: list[str]
+    covariates: dict[str, float]  # correlation of the misfit with each covariate
+    summary: str
+    details: dict[str, Any] = field(default_factory=dict)  # per-mode tests, change points, patterns
+
+
+@dataclass
+class FitScores:
+    frequency_rmse_pct: float
+    mac_mean: float | None = None
+    damping_rmse_pct: float | None = None  # percentage points of damping ratio
+    nrms_pct: float | None = None  # time-domain candidates
+
+    def to_dict(self) -> dict[str, float]:
+        d = {"frequency_rmse_pct": self.frequency_rmse_pct, "mac_mean": self.mac_mean,
+             "damping_rmse_pct": self.damping_rmse_pct, "nrms_pct": self.nrms_pct}
+        return {k: float(v) for k, v in d.items() if v is not None}
+
+
+@dataclass
+class CandidateResult:
+    """One candidate fitted to the data, accepted or not."""
+
+    name: str  # vocabulary name (docs/interfaces.md §5)
+    label: str  # the candidate's own label, e.g. "temperature_dependent_stiffness/bilinear/deck"
+    form: str  # plain words with the fitted values, e.g. "bilinear, knee at -0.5 degC"
+    where: str  # region, parameter group or mode list
+    parameters: dict[str, float]  # MAP of the candidate's own parameters
+    intervals: dict[str, tuple[float, float]]  # 95 % credible interval per parameter
+    log_evidence_gain: float  # ln Z(candidate) - ln Z(nominal), primary estimator
+    log_evidence_gain_check: float | None  # the same by the second, independent estimator
+    log_evidence_gain_err: float  # standard error of the primary estimate
+    prior_sensitivity: dict[str, float]  # gain when prior widths are halved / doubled
+    time: str | None = None  # ISO 8601, for an effect that starts at a moment
+    accepted: bool = False
+    reasons: list[str] = field(default_factory=list)  # why accepted / rejected, plain words
+    explanation: str = ""  # what the effect is, for an engineer
+    fit_after: FitScores | None = None
+    held_out_after: FitScores | None = None
+    tied_with: list[str] = field(default_factory=list)  # labels the data cannot tell apart from this one
+    extra: dict[str, Any] = field(default_factory=dict)  # figures' data (fitted curve, ...)
+
+    def entry(self) -> dict[str, Any]:
+        """The ``missing_physics`` entry of verdict.json."""
+        out: dict[str, Any] = {"name": self.name, "form": self.form, "parameters": dict(self.parameters),
+                               "log_evidence_gain": float(self.log_evidence_gain), "where": self.where,
+                               "label": self.label, "explanation": self.explanation,
+                               "intervals": {k: [float(a), float(b)] for k, (a, b) in self.intervals.items()}}
+        if self.time is not None:
+            out["time"] = self.time
+        if self.tied_with:
+            out["tied_with"] = list(self.tied_with)
+        return out
+
+
+@dataclass
+class Verdict:
+    mismatch: Mismatch
+    missing_physics: list[CandidateResult]  # accepted, most supported first
+    tried: list[CandidateResult]  # every candidate fitted (accepted or not), for the report's table
+    fit_before: FitScores
+    fit_after: FitScores
+    held_out_before: FitScores
+    held_out_after: FitScores
+    unexplained: dict[str, Any] | None = None  # the catch-all beat every named candidate: where / when
+    threshold: dict[str, Any] = field(default_factory=dict)  # the acceptance threshold and its calibration
+    notes: list[str] = field(default_factory=list)
+    figures: dict[str, Any] = field(default_factory=dict)  # numbers behind the report's figures
+
+    def to_dict(self) -> dict[str, Any]:
+        m = self.mismatch
+        out: dict[str, Any] = {
+            "mismatch": {"modes": list(m.modes), "sensors": list(m.sensors),
+                         "covariates": {k: float(v) for k, v in m.covariates.items()}, "summary": m.summary},
+            "missing_physics": [c.entry() for c in self.missing_physics],
+            "fit": {"before": self.fit_before.to_dict(), "after": self.fit_after.to_dict(),
+                    "held_out": {"before": self.held_out_before.to_dict(),
+                                 "after": self.held_out_after.to_dict()}},
+            "candidates": [{**c.entry(), "accepted": c.accepted, "reasons": list(c.reasons),
+                            "log_evidence_gain_check": c.log_evidence_gain_check,
+                            "log_evidence_gain_err": c.log_evidence_gain_err,
+                            "prior_sensitivity": dict(c.prior_sensitivity)} for c in self.tried],
+            "threshold": dict(self.threshold),
+            "notes": list(self.notes),
+        }
+        if self.unexplained is not None:
+            out["unexplained_structure"] = dict(self.unexplained)
+        return out
+
+
+@dataclass
+class Baseline:
+    """The calibrated nominal model against the data, per window and tracked mode.
+
+    ``log_residual[w, k] = ln f_obs - ln f_model`` for tracked mode ``mode_numbers[k]`` paired with
+    model mode ``model_index[k]`` (modes that pair with none are in ``unpaired`` and have no column).
+    """
+
+    mode_numbers: list[int]
+    model_index: list[int]
+    log_residual: np.ndarray  # (W, K)
+    f_model: np.ndarray  # (K,) baseline model frequencies, Hz
+    sensitivities: dict[str, np.ndarray]  # group -> (K,) d ln f / d ln(group factor) at the baseline
+    theta: dict[str, float]  # the calibrated nominal parameters
+    unpaired: list[dict[str, Any]] = field(default_factory=list)  # as posterior.json unmodelled_modes
+    train: np.ndarray | None = None  # (W,) bool: windows used to fit; the others are held out
+
+
+@dataclass
+class Proposal:
+    """A candidate that locate asks the engine to fit: registry label, group, and why."""
+
+    candidate: str  # CANDIDATES label
+    group: str  # parameter group (groups.py names: EI, EI:k, bearings, bearings_rot, mass, mass:k, damper)
+    reason: str  # plain words: what in the residuals suggests it
+    hints: dict[str, Any] = field(default_factory=dict)  # e.g. {"knee_c": -0.4}, {"change_index": 512}
