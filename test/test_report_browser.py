@@ -77,9 +77,28 @@ def report(campaign, tmp_path_factory):
         tracking=tracked, posterior=post,
         prediction=PredictionInputs([{"quantity": "midspan deflection", "unit": "mm", "mean": 1.2,
                                       "ci95_low": 1.0, "ci95_high": 1.4}]),
-        explain=ExplainInputs([{"term": "temperature-dependent bearing stiffness", "log_bayes_factor": 2.3}]))
+        explain=_explain_inputs(ExplainInputs, tracked))
     out = tmp_path_factory.mktemp("report")
     return build_report(inputs, out), tracked
+
+
+def _explain_inputs(cls, tracked):
+    """A verdict with its series on the tracked table's windows (the section's figures need them)."""
+    obs = tracked.observations
+    f = obs.frequencies_hz
+    r = np.log(f / np.nanmean(f, axis=0))
+    verdict = {"mismatch": {"modes": list(obs.mode_numbers), "sensors": [], "covariates": {},
+                            "summary": "frequencies scatter about their mean"},
+               "missing_physics": [],
+               "fit": {"before": {"frequency_rmse_pct": 0.5}, "after": {"frequency_rmse_pct": 0.5},
+                       "held_out": {"before": {}, "after": {}}},
+               "candidates": [{"name": "temperature_dependent_stiffness", "where": "EI", "form": "linear",
+                               "log_evidence_gain": 1.0, "accepted": False, "reasons": ["below threshold"]}]}
+    series = {"times_s": obs.times, "mode_numbers": obs.mode_numbers, "log_residual_before": r,
+              "log_residual_after": r, "train": np.arange(obs.n_windows) % 4 != 3,
+              "covariates": {k: v for k, v in obs.covariates.items()},
+              "form": {"x": [0.0, 1.0], "y": [1.0, 1.0], "x_label": "x", "y_label": "factor"}}
+    return cls(verdict, series)
 
 
 def test_report_opens_in_chromium(report, tmp_path):

@@ -1,11 +1,12 @@
 """`shm-ros report --out DIR [--windows DIR] [--modes modes.json] [--tracking DIR|CSV]
-[--posterior DIR|posterior.json [--samples samples.npz]] [--truth truth.json]`.
+[--posterior DIR|posterior.json [--samples samples.npz]] [--verdict DIR] [--truth truth.json]`.
 
 Builds one report from the files the other commands wrote, with a section for each stage given:
 data health (``shm-ros ingest``'s folder), identification (``shm-ros identify``'s modes JSON;
 stabilization diagrams too when ``--windows`` holds the windows' samples), tracking (``shm-ros
 track``'s folder or its ``tracked_modes.csv``), posterior (``shm-ros update``'s folder or its
-``posterior.json`` with ``samples.npz``), against the simulator's ``truth.json``.
+``posterior.json`` with ``samples.npz``), explanation (``shm-ros explain``'s folder), against the
+simulator's ``truth.json``.
 
 Writes ``DIR/report.html`` (self-contained: opens offline, figures embedded), ``DIR/report.md``
 and ``DIR/figures/`` (each PNG with a CSV or JSON of its numbers next to it).
@@ -26,6 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tracking", help="output folder of `shm-ros track` (or its tracked_modes.csv)")
     p.add_argument("--posterior", help="output folder of `shm-ros update` (or its posterior.json)")
     p.add_argument("--samples", help="samples.npz of `shm-ros update` (default: next to posterior.json)")
+    p.add_argument("--verdict", help="output folder of `shm-ros explain` (or its verdict.json)")
     p.add_argument("--truth", help="truth.json of `shm-ros simulate`")
     p.add_argument("--diagrams", type=int, default=3,
                    help="stabilization diagrams recomputed from --windows samples (default 3; 0 = none)")
@@ -65,6 +67,14 @@ def run(args: argparse.Namespace) -> int:
         if args.posterior:
             inputs.posterior = load_posterior(args.posterior, args.samples)
             inputs.facts["posterior"] = args.posterior
+        if args.verdict:
+            from shm_ros.report.inputs import ExplainInputs
+
+            try:
+                inputs.explain = ExplainInputs.from_files(args.verdict)
+            except (OSError, ValueError) as exc:
+                raise ReportInputError(f"{args.verdict}: {exc}") from None
+            inputs.facts["verdict"] = args.verdict
         if args.truth:
             inputs.truth = load_json(args.truth)
             inputs.facts["truth"] = args.truth

@@ -72,32 +72,16 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
     window with the strongest input as an input/output acceleration record."""
     from shm_ros.io.recording import windows_from_bag
 
-    windows, _ = windows_from_bag(args.bag, spec, args.window or 600.0)
-    if not windows:
-        raise ValueError(f"{args.bag}: no usable window in the recording")
     observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
     if args.likelihood == "time":
+        windows, _ = windows_from_bag(args.bag, spec, args.window or 600.0)
+        if not windows:
+            raise ValueError(f"{args.bag}: no usable window in the recording")
         return _acceleration_record(args, [i.sensor for i in model.inputs], windows, observed)
-    from threadpoolctl import threadpool_limits
+    from shm_ros.io.tracked_source import tracked_observations_from_bag
 
-    from shm_ros.core.bayes.tracked import observations_from_tracking
-    from shm_ros.core.identify import identify_window
-
-    estimates = []
-    with threadpool_limits(1, "blas"):  # same result whatever the machine's thread count
-        for w in windows:
-            try:
-                estimates.append(identify_window(w))
-            except (ValueError, np.linalg.LinAlgError) as exc:
-                print(f"shm-ros update: note: window {w.window_id}: not identified ({exc})",
-                      file=sys.stderr)
-    if estimates:  # auto: input-output SSI when the structure's input sensor is recorded
-        print(f"shm-ros update: note: windows identified with {', '.join(sorted({e.method for e in estimates}))}",
-              file=sys.stderr)
-    try:  # the tracker's defaults, as `shm-ros track`
-        return observations_from_tracking(estimates, observed)
-    except ValueError as exc:
-        raise ValueError(f"{args.bag}: {exc}") from None
+    return tracked_observations_from_bag(args.bag, spec, observed, args.window,
+                                         lambda text: print(f"shm-ros update: note: {text}", file=sys.stderr))
 
 
 def _acceleration_record(args, inputs, windows, observed):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -134,11 +135,20 @@ class PredictionInputs:
 
 @dataclass
 class ExplainInputs:
-    """Placeholder until the explanation stage exists: one row per candidate explanation of what
-    the calibrated model misses (e.g. term, evidence, weight) and remarks."""
+    """What ``shm-ros explain`` wrote: ``verdict`` (verdict.json, docs/interfaces.md §5) and ``series``
+    (explain_series.json: per window times, covariates, residuals before / after, training mask,
+    fitted forms), plus remarks."""
 
-    rows: list[dict[str, Any]]
+    verdict: dict[str, Any]
+    series: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+
+    @classmethod
+    def from_files(cls, path: str | Path) -> ExplainInputs:
+        from shm_ros.io.verdict_files import read_verdict
+
+        verdict, series = read_verdict(path)
+        return cls(verdict, series, list(verdict.get("notes", [])))
 
 
 @dataclass

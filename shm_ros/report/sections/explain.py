@@ -1,13 +1,21 @@
-"""Explanation (missing physics): shown when that stage's results are given (its inputs are a
-placeholder, :class:`~shm_ros.report.inputs.ExplainInputs`, until that stage exists)."""
+"""Explanation (missing physics): the verdict of ``shm-ros explain`` (docs/explain.md).
+
+What the engineer needs to see: where the misfit was and what it followed (residuals against each
+covariate and against time, before and after adding the selected physics, held-out windows marked),
+the selected physics in its fitted form (e.g. stiffness against temperature with the knee), every
+candidate tried with its support, and the fit before / after / on held-out windows.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
-from shm_ros.report.document import Section
+import numpy as np
+
+from shm_ros.report.document import Figure, Section, Table
 from shm_ros.report.inputs import ReportInputs
-from shm_ros.report.sections._rows import rows_section
+from shm_ros.report.sections._common import figure_json, plain, pyplot
 
 
 class ExplainSection:
@@ -19,8 +27,148 @@ class ExplainSection:
         x = inputs.explain
         if x is None:
             return None
-        return rows_section(self.key, self.title, f"{len(x.rows)} candidate explanations of what the "
-                            "calibrated model misses.", x.rows, x.notes, fig_dir)
+        v, series = x.verdict, x.series
+        s = Section(self.key, self.title, _paragraphs(v), notes=list(x.notes))
+        s.tables.append(_fit_table(v))
+        tried = v.get("candidates") or v.get("missing_physics") or []
+        if tried:
+            s.tables.append(_candidates_table(tried))
+        s.figures += _figures(v, series, fig_dir)
+        return s
+
+
+def _paragraphs(v: dict[str, Any]) -> list[str]:
+    out = [f"Mismatch: {v.get('mismatch', {}).get('summary', '–')}"]
+    found = v.get("missing_physics", [])
+    if not found:
+        out.append("Missing physics: none — the calibrated nominal model explains the recordings "
+                   "within their scatter (no candidate cleared the acceptance threshold).")
+    for i, m in enumerate(found, 1):
+        where = f" at {m['where']}" if m.get("where") else ""
+        when = f", from {m['time']}" if m.get("time") else ""
+        tied = f" (the data cannot tell it from: {', '.join(m['tied_with'])})" if m.get("tied_with") else ""
+        out.append(f"{i}. {m['name']}{where}{when}: {m.get('form', '')}; log evidence gain "
+                   f"{m.get('log_evidence_gain', float('nan')):.1f} nats{tied}. {m.get('explanation', '')}")
+    u = v.get("unexplained_structure")
+    if u:
+        out.append(f"Unexplained structure: a catch-all discrepancy beats every named candidate ({u}).")
+    thr = v.get("threshold") or {}
+    if thr:
+        out.append(f"Acceptance threshold: {thr.get('log_bayes_factor', thr.get('value', '–'))} nats "
+                   f"({thr.get('source', thr.get('calibration', 'shipped calibration'))}).")
+    return out
+
+
+def _fit_table(v: dict[str, Any]) -> Table:
+    f = v.get("fit", {})
+    rows = []
+    for label, d in (("all windows, before", f.get("before", {})), ("all windows, after", f.get("after", {})),
+                     ("held out, before", f.get("held_out", {}).get("before", {})),
+                     ("held out, after", f.get("held_out", {}).get("after", {}))):
+        rows.append([label, d.get("frequency_rmse_pct"), d.get("mac_mean"), d.get("damping_rmse_pct"),
+                     d.get("nrms_pct")])
+    return Table(["fit", "frequency RMSE %", "mean MAC", "damping RMSE (points)", "NRMS %"], rows,
+                 "Fit of the model before and after adding the accepted physics")
+
+
+def _candidates_table(tried: list[dict[str, Any]]) -> Table:
+    rows = [[c.get("name"), c.get("where"), c.get("form"), c.get("log_evidence_gain"),
+             c.get("log_evidence_gain_err"), c.get("log_evidence_gain_check"), c.get("accepted"),
+             "; ".join(c.get("reasons", []))] for c in sorted(
+                 tried, key=lambda c: -float(c.get("log_evidence_gain") or -np.inf))]
+    return Table(["candidate", "where", "fitted form", "log evidence gain", "± (s.e.)", "second estimator",
+                  "accepted", "why"], rows, "Every candidate tried, most supported first")
+
+
+def _arr(series: dict[str, Any], key: str) -> np.ndarray | None:
+    v = series.get(key)
+    if v is None:
+        return None
+    return np.asarray(v, dtype=float)
+
+
+def _figures(v: dict[str, Any], series: dict[str, Any], fig_dir: Path) -> list[Figure]:
+    figs: list[Figure] = []
+    before, after = _arr(series, "log_residual_before"), _arr(series, "log_residual_after")
+    t = _arr(series, "times_s")
+    if before is None or t is None or before.ndim != 2:
+        return figs
+    after = before if after is None else after
+    train = np.asarray(series.get("train", np.ones(t.size, bool)), dtype=bool)
+    modes = series.get("mode_numbers") or list(range(1, before.shape[1] + 1))
+    covs = {k: np.asarray(c, dtype=float) for k, c in (series.get("covariates") or {}).items()
+            if np.isfinite(np.asarray(c, dtype=float)).sum() > 2}
+    figs.append(_time_figure(t, before, after, train, modes, fig_dir))
+    if covs:
+        figs.append(_covariate_figure(covs, before, after, modes, fig_dir))
+    form = series.get("form")
+    if form and form.get("x") is not None:
+        figs.append(_form_figure(form, fig_dir))
+    return figs
+
+
+def _time_figure(t, before, after, train, modes, fig_dir) -> Figure:
+    plt = pyplot()
+    k = before.shape[1]
+    fig, axes = plt.subplots(k, 1, figsize=(9, 1.6 * k + 0.6), sharex=True, squeeze=False)
+    days = (t - t[0]) / 86400.0
+    for j, ax in enumerate(axes[:, 0]):
+        ax.plot(days, 100 * before[:, j], ".", ms=2, color="0.6", label="before")
+        ax.plot(days[train], 100 * after[train, j], ".", ms=2, color="tab:blue", label="after (fitted)")
+        ax.plot(days[~train], 100 * after[~train, j], ".", ms=3, color="tab:orange", label="after (held out)")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_ylabel(f"mode {modes[j]}\n%")
+    axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
+    axes[-1, 0].set_xlabel("days from the first window")
+    fig.suptitle("frequency misfit ln(f_obs / f_model) against time, before and after", fontsize=9)
+    fig.tight_layout()
+    data = {"days": days, "train": train, "mode_numbers": modes, "residual_before_pct": 100 * before,
+            "residual_after_pct": 100 * after}
+    return figure_json(fig, fig_dir, "explain_residuals_time",
+                       "Frequency misfit of every tracked mode against time, before (grey) and after adding the "
+                       "accepted physics (blue: windows used to fit it; orange: held-out windows)", plain(data))
+
+
+def _covariate_figure(covs, before, after, modes, fig_dir) -> Figure:
+    plt = pyplot()
+    names = list(covs)
+    k = before.shape[1]
+    fig, axes = plt.subplots(k, len(names), figsize=(3.4 * len(names) + 1, 1.6 * k + 0.6), squeeze=False,
+                             sharey="row")
+    for i, name in enumerate(names):
+        c = covs[name]
+        for j in range(k):
+            ax = axes[j, i]
+            ax.plot(c, 100 * before[:, j], ".", ms=2, color="0.6")
+            ax.plot(c, 100 * after[:, j], ".", ms=2, color="tab:blue")
+            ax.axhline(0, color="k", lw=0.5)
+            if i == 0:
+                ax.set_ylabel(f"mode {modes[j]}\n%")
+        axes[-1, i].set_xlabel(name)
+    fig.suptitle("frequency misfit against each covariate: before (grey), after (blue)", fontsize=9)
+    fig.tight_layout()
+    data = {"covariates": covs, "mode_numbers": modes, "residual_before_pct": 100 * before,
+            "residual_after_pct": 100 * after}
+    return figure_json(fig, fig_dir, "explain_residuals_covariates",
+                       "What the misfit follows: every mode's misfit against each covariate, before and after",
+                       plain(data))
+
+
+def _form_figure(form: dict[str, Any], fig_dir: Path) -> Figure:
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6, 3.4))
+    x, y = np.asarray(form["x"], float), np.asarray(form["y"], float)
+    ax.plot(x, y, color="tab:blue")
+    if form.get("lower") is not None and form.get("upper") is not None:
+        ax.fill_between(x, np.asarray(form["lower"], float), np.asarray(form["upper"], float),
+                        color="tab:blue", alpha=0.2, lw=0, label="95 % band")
+        ax.legend(fontsize=7)
+    ax.set_xlabel(form.get("x_label", "x"))
+    ax.set_ylabel(form.get("y_label", "factor"))
+    ax.set_title(form.get("title", "fitted form of the selected physics"), fontsize=9)
+    fig.tight_layout()
+    return figure_json(fig, fig_dir, "explain_form", form.get("title", "Fitted form of the selected physics"),
+                       plain(form))
 
 
 BUILDER = ExplainSection()
