@@ -11,7 +11,7 @@ Runtime dependencies are listed twice on purpose: here for pip, in ``package.xml
 from setuptools import find_packages, setup
 
 package_name = "shm_ros"
-NODES = ("ingest", "identify", "track", "update", "predict", "recorder")
+NODES = ("ingest", "identify", "track", "update", "predict", "explain", "recorder")
 
 setup(
     name=package_name,

@@ -36,6 +36,8 @@ class PipelineRecord:
     # ResponsePrediction messages: window_id, channel_names, measured, nrms_pct, n_samples,
     # predicted_mean and predicted_std (row-major samples x channels)
     predictions: list[dict[str, Any]] = field(default_factory=list)
+    # Verdict messages: summary, missing physics (name, where, form, log_evidence_gain), fit figures
+    verdicts: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -51,6 +53,17 @@ class GraphRun:
     wall_s: float = 0.0
     diagnostic_rows: list[dict[str, Any]] = field(default_factory=list)
     predictions: list[dict[str, Any]] = field(default_factory=list)
+    verdicts: list[dict[str, Any]] = field(default_factory=list)
+
+
+def verdict_record(msg: Any) -> dict[str, Any]:
+    """A ``Verdict`` message as a dict (the fields a reader of the run needs)."""
+    return {"summary": msg.summary, "mismatch_modes": list(msg.mismatch_modes),
+            "missing_physics": [{"name": m.name, "where": m.where, "form": m.form,
+                                 "parameters": dict(zip(m.parameter_names, m.parameter_values, strict=False)),
+                                 "log_evidence_gain": m.log_evidence_gain} for m in msg.missing_physics],
+            "before_frequency_rmse_pct": msg.before_frequency_rmse_pct,
+            "after_frequency_rmse_pct": msg.after_frequency_rmse_pct}
 
 
 def read_pipeline_bag(path: Path) -> PipelineRecord:
@@ -81,6 +94,8 @@ def read_pipeline_bag(path: Path) -> PipelineRecord:
                                     "measured": list(msg.measured), "nrms_pct": list(msg.nrms_pct),
                                     "n_samples": int(msg.n_samples), "predicted_mean": list(msg.predicted_mean),
                                     "predicted_std": list(msg.predicted_std)})
+        elif m.topic == topics.VERDICT:
+            rec.verdicts.append(verdict_record(msg))
         elif m.topic == topics.DIAGNOSTICS:
             rec.diagnostics += [f"{s.name}: {s.message}" for s in msg.status if s.level != 0]
             for st in msg.status:
@@ -93,8 +108,8 @@ def read_pipeline_bag(path: Path) -> PipelineRecord:
 
 def analysis_nodes(structure: str | Path, window_s: float, *, identify: dict | None = None,
                    track: dict | None = None, update: dict | None = None,
-                   predict: dict | None = None) -> list[NodeSpec]:
-    """ingest + identify, and track / update / predict when their parameters are given."""
+                   predict: dict | None = None, explain: dict | None = None) -> list[NodeSpec]:
+    """ingest + identify, and track / update / predict / explain when their parameters are given."""
     nodes = [NodeSpec("ingest", "ingest", {"structure": str(structure), "window_s": float(window_s)}),
              NodeSpec("identify", "identify", dict(identify or {}))]
     if track is not None:
@@ -103,6 +118,8 @@ def analysis_nodes(structure: str | Path, window_s: float, *, identify: dict | N
         nodes.append(NodeSpec("update", "update", {"structure": str(structure), **update}))
     if predict is not None:
         nodes.append(NodeSpec("predict", "predict", {"structure": str(structure), **predict}))
+    if explain is not None:
+        nodes.append(NodeSpec("explain", "explain", {"structure": str(structure), **explain}))
     return nodes
 
 
@@ -110,12 +127,13 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
                          window_s: float, expected_windows: int | None = None,
                          identify: dict | None = None, track: dict | None = None,
                          update: dict | None = None, predict: dict | None = None,
-                         expected_predictions: int | None = None, timeout_s: float = 600.0,
+                         explain: dict | None = None, expected_predictions: int | None = None, timeout_s: float = 600.0,
                          log: Callable[[str], None] = print) -> GraphRun:
     """Start the analysis nodes and a recorder as processes, replay ``bag``, wait until every
     window is identified (and tracked, and in a posterior, and ``expected_predictions`` predicted,
-    when those nodes run), stop, collect."""
-    nodes = analysis_nodes(structure, window_s, identify=identify, track=track, update=update, predict=predict)
+    when those nodes run, and explained by the explain node), stop, collect."""
+    nodes = analysis_nodes(structure, window_s, identify=identify, track=track, update=update, predict=predict,
+                           explain=explain)
     return run_graph(bag, nodes, workdir, expected_windows=expected_windows,
                      expected_predictions=expected_predictions, timeout_s=timeout_s, log=log)
 
@@ -145,6 +163,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         watcher = Node("shm_graph_watch")
         seen: dict[str, set[str]] = {"estimates": set(), "tracked": set(), "predicted": set()}
         posterior_windows = [0]
+        explained_windows = [0]
 
         def on_posterior(m: Any) -> None:
             posterior_windows[0] = max(posterior_windows[0], int(m.n_windows))
@@ -165,9 +184,11 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
 
         def on_diagnostics(m: Any) -> None:
             for st in m.status:
+                values = {kv.key: kv.value for kv in st.values}
                 if st.name == "ingest: status":
-                    values = {kv.key: kv.value for kv in st.values}
                     window_readers[0] = int(values.get("window_readers", 0))
+                elif st.name == "explain: verdict" and "windows" in values:
+                    explained_windows[0] = max(explained_windows[0], int(values["windows"]))
 
         from diagnostic_msgs.msg import DiagnosticArray
 
@@ -188,7 +209,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                 and watcher.count_publishers(topics.INGEST_RECEIVED) >= 1
                 and watcher.count_subscribers(topics.MODAL_ESTIMATES) >= estimate_readers + 1
                 and ("track" not in kinds or watcher.count_publishers(topics.TRACKED_MODES) >= 1)
-                and (not tracked_update or watcher.count_subscribers(topics.TRACKED_MODES) >= 3)  # + recorder, watcher
+                and (not (tracked_update or "explain" in kinds)  # + recorder, watcher
+                     or watcher.count_subscribers(topics.TRACKED_MODES) >= 2 + tracked_update + ("explain" in kinds))
                 and ("update" not in kinds or watcher.count_publishers(topics.POSTERIOR) >= 1)
                 and ("predict" not in kinds or watcher.count_publishers(topics.PREDICTION) >= 1)):
             rclpy.spin_once(watcher, timeout_sec=0.2)
@@ -201,7 +223,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
             return (len(seen["estimates"]) >= expected_windows
                     and ("track" not in kinds or len(seen["tracked"]) >= expected_windows)
                     and ("update" not in kinds or posterior_windows[0] >= expected_windows)
-                    and ("predict" not in kinds or len(seen["predicted"]) >= (expected_predictions or 0)))
+                    and ("predict" not in kinds or len(seen["predicted"]) >= (expected_predictions or 0))
+                    and ("explain" not in kinds or explained_windows[0] >= expected_windows))
 
         bar = Progress("graph", every_s=5.0)
         end = time.monotonic() + timeout_s
@@ -221,7 +244,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         log(f"identified {len(seen['estimates'])} windows"
             + (f", tracked {len(seen['tracked'])}" if "track" in kinds else "")
             + (f", posterior from {posterior_windows[0]} windows" if "update" in kinds else "")
-            + (f", predicted {len(seen['predicted'])}" if "predict" in kinds else ""))
+            + (f", predicted {len(seen['predicted'])}" if "predict" in kinds else "")
+            + (f", explained {explained_windows[0]}" if "explain" in kinds else ""))
         time.sleep(1.0)  # let the recorder write the last messages
         watcher.destroy_node()
     finally:
@@ -229,4 +253,4 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         code = sup.stop_all()
     rec = read_pipeline_bag(out_bag)
     return GraphRun(result, rec.windows, rec.estimates, rec.diagnostics, out_bag, code, rec.tracked,
-                    rec.posteriors, time.monotonic() - t0, rec.diagnostic_rows, rec.predictions)
+                    rec.posteriors, time.monotonic() - t0, rec.diagnostic_rows, rec.predictions, rec.verdicts)

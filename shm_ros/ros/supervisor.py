@@ -26,7 +26,7 @@ from typing import Any
 
 import yaml
 
-NODE_KINDS = ("ingest", "identify", "track", "update", "predict", "recorder")
+NODE_KINDS = ("ingest", "identify", "track", "update", "predict", "explain", "recorder")
 
 
 def node_process(kind: str, params: dict[str, Any], name: str | None = None,

@@ -1,0 +1,161 @@
+"""explain: tracked modes in, verdicts on missing physics out (docs/explain.md, docs/interfaces.md §5).
+
+Accumulates the track node's ``/shm/tracked_modes`` (one row per window; a row sent again counts
+once). Once ``min_windows`` rows have arrived, and again after every ``min_new_windows`` new rows or
+when a replay ends (``/shm/replay/done``), it explains all rows so far in a worker process
+(:mod:`shm_ros.ros.explain_worker`, the executor never waits) and publishes a ``Verdict`` on
+``/shm/verdict`` (latched) when it is the first or when the set of accepted physics changed, i.e.
+when the support for a missing effect crossed its threshold. ``output_dir`` gets verdict.json, the
+figures' numbers and report.html after every run.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+
+from shm_ros.core.config import option
+from shm_ros.core.explain.config import ExplainConfig
+from shm_ros.ros import explain_worker, topics
+from shm_ros.ros.convert import tracked_row_from_msg
+from shm_ros.ros.diagnostics import Diagnostics
+from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.params import load_config
+from shm_ros.ros.qos import latched_qos, stream_qos
+from shm_ros.ros.timers import steady_timer
+from shm_ros.ros.worker_pool import WorkerPool
+
+
+@dataclass
+class ExplainNodeConfig:
+    structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
+    min_windows: int = option(24, "tracked windows received before the first run")
+    min_new_windows: int = option(144, "new tracked windows before the next run (144: a day of 10-minute windows)")
+    output_dir: str | None = option(None, "directory of verdict.json and report.html, rewritten after "
+                                    "every run (unset: not written)")
+
+
+def verdict_to_msg(v: dict[str, Any]) -> Any:
+    """verdict.json's content -> ``shm_interfaces/msg/Verdict``."""
+    from shm_interfaces.msg import MissingPhysics, Verdict
+
+    msg = Verdict()
+    m = v["mismatch"]
+    msg.mismatch_modes = [int(k) for k in m["modes"]]
+    msg.mismatch_sensors = [str(s) for s in m["sensors"]]
+    msg.covariate_names = list(m["covariates"])
+    msg.covariate_correlations = [float(x) for x in m["covariates"].values()]
+    msg.summary = str(m["summary"])
+    for e in v["missing_physics"]:
+        params = {k: float(x) for k, x in e.get("parameters", {}).items()}
+        msg.missing_physics.append(MissingPhysics(
+            name=e["name"], form=str(e.get("form", "")), where=str(e.get("where", "")),
+            parameter_names=list(params), parameter_values=list(params.values()),
+            log_evidence_gain=float(e["log_evidence_gain"])))
+    f, nan = v["fit"], float("nan")
+    msg.before_frequency_rmse_pct = float(f["before"].get("frequency_rmse_pct", nan))
+    msg.before_mac_mean = float(f["before"].get("mac_mean", nan))
+    msg.after_frequency_rmse_pct = float(f["after"].get("frequency_rmse_pct", nan))
+    msg.after_mac_mean = float(f["after"].get("mac_mean", nan))
+    msg.held_out_before_frequency_rmse_pct = float(f["held_out"]["before"].get("frequency_rmse_pct", nan))
+    msg.held_out_after_frequency_rmse_pct = float(f["held_out"]["after"].get("frequency_rmse_pct", nan))
+    return msg
+
+
+class ExplainNode(Node):
+    """Parameters: every option of :class:`ExplainConfig` and of :class:`ExplainNodeConfig`."""
+
+    def __init__(self, name: str = "explain", parameters: dict[str, Any] | None = None) -> None:
+        super().__init__(name, parameter_overrides=overrides(parameters))
+        self.config = load_config(self, ExplainConfig)
+        self.settings = load_config(self, ExplainNodeConfig)
+        if not self.settings.structure:
+            raise SystemExit(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
+        from shm_ros.core.models import build_model
+        from shm_ros.io.structure import load_structure
+
+        build_model(load_structure(self.settings.structure))  # a bad file stops the node at once
+        self.rows: dict[str, Any] = {}
+        self.used = 0
+        self.flush = False  # a replay ended: from now on, run on whatever new rows have arrived
+        self.future: Any = None
+        self.started = 0.0
+        self.accepted: tuple[str, ...] | None = None
+        self.runs = 0
+        self.diag = Diagnostics(self, "explain", summary=lambda: (
+            "ok", f"{len(self.rows)} windows received, {self.runs} runs"
+            + (", explaining" if self.future is not None else ", idle"), {"received": len(self.rows)}))
+        self.pub: Publisher[Any] = self.create_publisher(
+            topics.message_class(topics.TYPES[topics.VERDICT]), topics.VERDICT, latched_qos())
+        self.create_subscription(topics.message_class(topics.TYPES[topics.TRACKED_MODES]), topics.TRACKED_MODES,
+                                 self._on_row, stream_qos())
+        self.create_subscription(topics.message_class(topics.TYPES[topics.REPLAY_DONE]), topics.REPLAY_DONE,
+                                 self._on_replay_done, latched_qos())
+        self.workers = WorkerPool(explain_worker.init, (self.settings.structure,), explain_worker.ready)
+        steady_timer(self, 0.25, self._poll)
+
+    def destroy_node(self) -> None:
+        self.workers.shutdown()
+        super().destroy_node()
+
+    def _on_row(self, msg: Any) -> None:
+        try:
+            self.rows[msg.window_id] = tracked_row_from_msg(msg)
+        except (ValueError, TypeError) as exc:  # one bad message must not take the node down
+            self.diag.report("warn", f"tracked row {msg.window_id!r} skipped: {exc}", "input")
+
+    def _on_replay_done(self, _msg: Any) -> None:
+        self.flush = True
+
+    def _due(self) -> bool:
+        n = len(self.rows)
+        if n < self.settings.min_windows or n == self.used:
+            return False
+        return self.flush or self.used == 0 or n - self.used >= self.settings.min_new_windows
+
+    def _poll(self) -> None:
+        if self.future is not None and self.future.done():
+            self._collect()
+        if self.future is None and self._due():
+            self.used, self.started = len(self.rows), time.time()
+            self.future = self.workers.submit(explain_worker.run, list(self.rows.values()), self.config,
+                                              self.settings.output_dir)
+            self.diag.report("ok", f"explaining {self.used} windows", "progress")
+        self.diag.publish()
+
+    def _collect(self) -> None:
+        future, self.future = self.future, None
+        took = time.time() - self.started
+        try:
+            verdict, info = future.result()
+        except Exception as exc:  # a failed run (or a lost worker) must not take the node down
+            self.diag.report("error", f"explain with {self.used} windows failed: {exc}", "verdict",
+                             windows=self.used)
+            if "BrokenProcessPool" in type(exc).__name__:
+                self.workers.restart()
+            return
+        self.runs += 1
+        accepted = tuple(e["name"] for e in verdict["missing_physics"])
+        text = ", ".join(accepted) or "nothing missing"
+        self.diag.report("ok", f"{info['n_windows']} windows in {took:.1f} s: {text}", "verdict",
+                         windows=info["n_windows"])
+        if accepted != self.accepted:  # the support for an effect crossed its threshold
+            self.accepted = accepted
+            self.pub.publish(verdict_to_msg(verdict))
+            self.get_logger().info(f"verdict from {info['n_windows']} windows: {text}")
+
+
+def make_node(name: str, parameters: dict[str, Any]) -> ExplainNode:
+    return ExplainNode(name, parameters)
+
+
+def main(args: list[str] | None = None) -> int:
+    return spin(lambda: ExplainNode(), args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
