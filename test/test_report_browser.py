@@ -75,11 +75,23 @@ def report(campaign, tmp_path_factory):
         ingest=IngestInputs.from_windows(ing.windows, ing.diagnostics, ing.dropped),
         identify=IdentifyInputs(estimates, diagrams), truth=json.loads(campaign.truth.read_text()),
         tracking=tracked, posterior=post,
-        prediction=PredictionInputs([{"quantity": "midspan deflection", "unit": "mm", "mean": 1.2,
-                                      "ci95_low": 1.0, "ci95_high": 1.4}]),
+        prediction=_prediction_inputs(PredictionInputs),
         explain=_explain_inputs(ExplainInputs, tracked))
     out = tmp_path_factory.mktemp("report")
     return build_report(inputs, out), tracked
+
+
+def _prediction_inputs(cls):
+    """One event's prediction.json entry and traces (the section draws them with their band)."""
+    t = np.arange(400) / 50.0
+    y = np.sin(2 * np.pi * 1.1 * t) * np.exp(-0.1 * t)
+    chan = {"quantity": "acceleration", "measured": True, "mean": y, "lower": y - 0.1, "upper": y + 0.1,
+            "nominal": 1.2 * y, "values": y + 0.02}
+    payload = {"model": "updated", "summary": {"n_events": 1, "nrms_pct_median": 8.0, "nrms_pct_nominal_median": 21.0},
+               "table3": [{"window_id": "e1", "accel_floor4": 8.0, "accel_floor4_nominal": 21.0}],
+               "events": [{"window_id": "e1", "channels": [{"name": "f4", "measured": True, "nrms_pct": 8.0}]}]}
+    return cls(payload, {"events": [{"window_id": "e1", "fs": 50.0, "strong_s": [1.0, 4.0],
+                                     "channels": {"f4": chan}}]})
 
 
 def _explain_inputs(cls, tracked):

@@ -105,6 +105,9 @@ def run(args: argparse.Namespace) -> int:
     cfg = asdict(config) | {"structure": args.structure, "posterior": args.posterior, "bag": args.bag}
     out.mkdir(parents=True, exist_ok=True)
     doc = jsonio.dump(stamp_output(payload, cfg, config.seed), out / "prediction.json", indent=2)
+    from shm_ros.io.prediction_files import write_prediction_series
+
+    write_prediction_series(out, preds)  # the report's predicted-vs-measured figures
     if not args.no_plots:
         from shm_ros.report.prediction import plot_event
 

@@ -1,11 +1,13 @@
 """`shm-ros report --out DIR [--windows DIR] [--modes modes.json] [--tracking DIR|CSV]
-[--posterior DIR|posterior.json [--samples samples.npz]] [--verdict DIR] [--truth truth.json]`.
+[--posterior DIR|posterior.json [--samples samples.npz]] [--prediction DIR] [--verdict DIR]
+[--truth truth.json]`.
 
 Builds one report from the files the other commands wrote, with a section for each stage given:
 data health (``shm-ros ingest``'s folder), identification (``shm-ros identify``'s modes JSON;
 stabilization diagrams too when ``--windows`` holds the windows' samples), tracking (``shm-ros
 track``'s folder or its ``tracked_modes.csv``), posterior (``shm-ros update``'s folder or its
-``posterior.json`` with ``samples.npz``), explanation (``shm-ros explain``'s folder), against the
+``posterior.json`` with ``samples.npz``), prediction (``shm-ros predict``'s folder),
+explanation (``shm-ros explain``'s folder), against the
 simulator's ``truth.json``.
 
 Writes ``DIR/report.html`` (self-contained: opens offline, figures embedded), ``DIR/report.md``
@@ -27,6 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tracking", help="output folder of `shm-ros track` (or its tracked_modes.csv)")
     p.add_argument("--posterior", help="output folder of `shm-ros update` (or its posterior.json)")
     p.add_argument("--samples", help="samples.npz of `shm-ros update` (default: next to posterior.json)")
+    p.add_argument("--prediction", help="output folder of `shm-ros predict` (or its prediction.json)")
     p.add_argument("--verdict", help="output folder of `shm-ros explain` (or its verdict.json)")
     p.add_argument("--truth", help="truth.json of `shm-ros simulate`")
     p.add_argument("--diagrams", type=int, default=3,
@@ -67,6 +70,14 @@ def run(args: argparse.Namespace) -> int:
         if args.posterior:
             inputs.posterior = load_posterior(args.posterior, args.samples)
             inputs.facts["posterior"] = args.posterior
+        if args.prediction:
+            from shm_ros.report.inputs import PredictionInputs
+
+            try:
+                inputs.prediction = PredictionInputs.from_files(args.prediction)
+            except (OSError, ValueError) as exc:
+                raise ReportInputError(f"{args.prediction}: {exc}") from None
+            inputs.facts["prediction"] = args.prediction
         if args.verdict:
             from shm_ros.report.inputs import ExplainInputs
 

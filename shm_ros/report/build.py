@@ -36,5 +36,7 @@ def build_report(inputs: ReportInputs, out_dir: str | Path) -> ReportFiles:
     facts = {"generated": datetime.now(timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z"),
              "shm_ros": __version__, **inputs.facts,
              "sections": ", ".join(s.title for s in sections) or "none (no stage output was given)"}
-    html, md = Report(inputs.title, facts, sections).write(out)
+    from shm_ros.report.summary import summary_sentences
+
+    html, md = Report(inputs.title, facts, sections, summary_sentences(inputs)).write(out)
     return ReportFiles(html, md, [f for s in sections for f in s.figures], [s.key for s in sections])

@@ -90,10 +90,11 @@ class Report:
     """A title, a table of facts, and the sections of the stages that ran."""
 
     def __init__(self, title: str, facts: dict[str, Any] | None = None,
-                 sections: list[Section] | None = None) -> None:
+                 sections: list[Section] | None = None, summary: list[str] | None = None) -> None:
         self.title = title
         self.facts = dict(facts or {})
         self.sections = list(sections or [])
+        self.summary = list(summary or [])  # plain sentences shown first (report/summary.py)
 
     def write(self, out_dir: str | Path) -> tuple[Path, Path]:
         """Write ``report.html`` and ``report.md`` into ``out_dir``; returns their paths."""
@@ -112,6 +113,10 @@ class Report:
                  f"<meta name=\"viewport\" content=\"width=device-width,initial-scale=1\">"
                  f"<title>{e(self.title)}</title><style>{_CSS}</style></head><body><main>",
                  f"<h1 id=\"top\">{e(self.title)}</h1>"]
+        if self.summary:
+            items = "".join(f"<li>{e(x)}</li>" for x in self.summary)
+            parts.append("<section class=\"summary\"><h2 id=\"section-summary\">Summary</h2>"
+                         f"<ul>{items}</ul></section>")
         if self.facts:
             rows = "".join(f"<tr><th>{e(str(k))}</th><td class=\"t\">{e(format_cell(v))}</td></tr>"
                            for k, v in self.facts.items())
@@ -145,6 +150,8 @@ class Report:
 
     def to_markdown(self, base_dir: Path) -> str:
         lines = [f"# {self.title}", ""]
+        if self.summary:
+            lines += ["## Summary", "", *[f"- {_md(x)}" for x in self.summary], ""]
         if self.facts:
             lines += ["| | |", "|---|---|"]
             lines += [f"| {_md(str(k))} | {_md(format_cell(v))} |" for k, v in self.facts.items()]

@@ -126,11 +126,19 @@ class IdentifyInputs:
 
 @dataclass
 class PredictionInputs:
-    """Placeholder until the prediction stage exists (docs/interfaces.md §7): one row per
-    predicted quantity (e.g. name, unit, mean, ci95_low, ci95_high, observed) and remarks."""
+    """What ``shm-ros predict`` wrote: ``payload`` (prediction.json, docs/interfaces.md §7) and
+    ``series`` (prediction_series.json: per event and location the traces and bands), plus remarks."""
 
-    rows: list[dict[str, Any]]
+    payload: dict[str, Any]
+    series: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+
+    @classmethod
+    def from_files(cls, path: str | Path) -> PredictionInputs:
+        from shm_ros.io.prediction_files import read_prediction
+
+        payload, series = read_prediction(path)
+        return cls(payload, series, [str(e) for e in payload.get("errors", [])])
 
 
 @dataclass
