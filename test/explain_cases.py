@@ -26,8 +26,10 @@ added_mass                          one span / floor (mass:k) or the whole deck 
                                     3-10 % of that mass, intermittent (rush hours, below a temperature,
                                     after a time)
 support_flexibility                 soil springs under the bearings / a foundation on soil (the
-                                    simulator's effect, constant): the most affected in-plane mode drops
-                                    by 2-8 %
+                                    simulator's effect) whose stiffness changes: scour at a time (the
+                                    most affected mode moves 1.5-5 %) or frozen ground below a knee
+                                    temperature (2-5 % peak-to-peak); a constant soil spring alone is
+                                    absorbed by the calibration within the model-form error
 stiffness_change_at_time            EI:k or EI steps at a window in 30-75 % of the campaign, the most
                                     affected mode moves 1.5-5 %; on top of a mild linear temperature
                                     dependence of the deck (-0.1 to -0.3 %/degC of stiffness)
@@ -135,6 +137,8 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
         shift = tm.info["floor_shift"]
         for k in range(n_units):
             tm.groups[f"mass:{k + 1}"] = [names.index(f"floor{k + 1 + shift}_mass")]
+        if shift:  # the foundation's soil spring is the truth's story 1
+            tm.groups["foundation"] = [names.index("story1")]
     W = n_windows
     cond = [camp.conditions(i) for i in range(W)]
     temp_true = np.array([c.temperature_c for c in cond])
@@ -164,7 +168,7 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
     base_factors = [camp.factors(i) for i in range(W)]
 
     def factors_for(scale: float) -> list[dict[str, float]]:
-        if effect in ("clean", "unmodelled_modes", "support_flexibility", "amplitude_dependent_damping"):
+        if effect in ("clean", "unmodelled_modes", "amplitude_dependent_damping"):
             return [dict(f) for f in base_factors]
         return _effect_factors(scale)
 
@@ -210,6 +214,17 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
         else:
             spec["t_ref_c"] = float(np.mean(temp_true))
             size_target = float(rng.uniform(1.15 * MIN_COVARIATE_PTP, 0.05))
+    elif effect == "support_flexibility":  # the soil's stiffness changes: scour at a time, or frost
+        mode = str(rng.choice(["scour", "frozen"]))
+        spec = {"group": truth.where, "mode": mode, **truth.parameters}
+        if mode == "scour":
+            spec.update(at_index=int(rng.integers(int(0.3 * W), int(0.75 * W))), direction=-1.0)
+            truth.change_index = spec["at_index"]
+            size_target = float(rng.uniform(1.15 * MIN_STEP, 0.05))
+        else:
+            spec["knee_c"] = float(np.quantile(temp_true, rng.uniform(0.3, 0.6)))
+            truth.knee_c = spec["knee_c"]
+            size_target = float(rng.uniform(1.15 * MIN_COVARIATE_PTP, 0.05))
     elif effect == "amplitude_dependent_damping":
         spec = {"rise": float(rng.uniform(0.4, 1.2))}
         a_lo, a_hi = np.quantile(rms, [0.01, 0.99])
@@ -241,6 +256,12 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
                 f["EI"] = f.get("EI", 1.0) * (1.0 + spec["alpha_per_c"] * (temp_true[i] - spec["t_ref_c"]))
                 if i >= spec["at_index"]:
                     f[g] = f.get(g, 1.0) * max(1.0 + spec["direction"] * scale, 0.2)
+            elif effect == "support_flexibility":
+                if spec["mode"] == "scour":
+                    v = max(1.0 - scale, 0.05) if i >= spec["at_index"] else 1.0
+                else:  # frozen ground stiffens below the knee
+                    v = 1.0 + scale * max(spec["knee_c"] - temp_true[i], 0.0)
+                f[g] = f.get(g, 1.0) * v
             elif effect == "damper_stiffness":
                 if spec["mode"] == "failure":
                     f["damper"] = max(1.0 - scale, 0.0) if i >= spec["at_index"] else 1.0
@@ -253,11 +274,15 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
     if size_target > 0:
         scale = {"temperature_dependent_stiffness": size_target / max(np.ptp(temp_true), 1.0),
                  "amplitude_dependent_stiffness": 2 * size_target / max(np.ptp(rms), 1e-9),
-                 "stiffness_change_at_time": 2 * size_target, "damper_stiffness": size_target}[effect]
+                 "stiffness_change_at_time": 2 * size_target, "damper_stiffness": size_target,
+                 "support_flexibility": size_target}[effect]
         if effect == "damper_stiffness" and spec["mode"] == "temperature":
             scale = size_target / max(np.ptp(temp_true), 1.0)
         if effect == "damper_stiffness" and spec["mode"] == "failure":
             scale = min(0.5, 4 * size_target)
+        if effect == "support_flexibility":
+            scale = (min(0.5, 4 * size_target) if spec["mode"] == "scour"
+                     else 20 * size_target / max(np.ptp(temp_true), 1.0))
     factors = factors_for(scale)
     f_true, z_true, phi_true = _table_truth(solve, factors)
     n_ip = len(ip)
@@ -266,7 +291,8 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
             return _ptp_size(f, None)
         # a step's own part: the truth with and without it at the same conditions
         g = spec["group"]
-        v = max(1.0 - scale, 0.0) if g == "damper" else max(1.0 + spec["direction"] * scale, 0.2)
+        v = (max(1.0 - scale, 0.0) if g == "damper" else max(1.0 - scale, 0.05) if g in ("bearings", "foundation")
+             else max(1.0 + spec["direction"] * scale, 0.2))
         return float(np.max(np.abs(np.log(solve({g: v})[0][:n_ip] / solve({})[0][:n_ip]))))
 
     size = measure(f_true[:, :n_ip])
@@ -274,19 +300,15 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
         if size_target <= 0 or abs(size / size_target - 1.0) < 0.1:
             break
         scale *= size_target / max(size, 1e-6)
-        if effect == "damper_stiffness" and spec["mode"] == "failure":
-            scale = min(scale, 1.0)
+        if (effect == "damper_stiffness" and spec["mode"] == "failure") or spec.get("mode") == "scour":
+            scale = min(scale, 0.95)
         factors = factors_for(scale)
         f_true, z_true, phi_true = _table_truth(solve, factors)
         size = measure(f_true[:, :n_ip])
-    if effect in ("support_flexibility",):
-        ref = simulate_campaign(named_scenario(kind, n_windows=1, seed=seed)).truth_model.system({})[1]
-        f_ref = ref.frequencies_hz[ref.in_plane()][:n_ip]
-        size = float(np.max(np.abs(np.log(f_true[0, :n_ip] / f_ref))))
     if effect == "added_mass":
         size = _ptp_size(f_true[:, :n_ip], None)
     truth.size = float(size)
-    if effect not in ("amplitude_dependent_damping", "support_flexibility", "clean", "unmodelled_modes"):
+    if effect not in ("amplitude_dependent_damping", "clean", "unmodelled_modes"):
         truth.where = spec["group"]
         truth.parameters = {k: v for k, v in spec.items() if k != "group"}
         truth.parameters["scale"] = float(scale)
@@ -408,3 +430,148 @@ def _ptp_size(f: np.ndarray, _at: int | None) -> float:
     """Largest peak-to-peak relative change of a mode (1st-99th percentile, robust to one window)."""
     lf = np.log(f)
     return float(np.max(np.quantile(lf, 0.99, axis=0) - np.quantile(lf, 0.01, axis=0)))
+
+
+# -- a baseline of the analysis model against a case (for locate's tests) ----------------------
+
+def baseline_for(case: Case, n_model_modes: int = 12):
+    """:class:`shm_ros.core.explain.types.Baseline` of the nominal model against ``case.obs``: the
+    file's parameters at their MAP (per-mode misfit 2 % of model-form error, the file's priors) on
+    the windows' median frequencies, tracked modes paired once by frequency and MAC
+    (``gated_pairing``), residuals ``ln f_obs - ln f_model`` and each parameter group's modal
+    sensitivities ``d ln f / d ln factor`` by central differences of the structure file."""
+    from scipy.optimize import minimize
+
+    from shm_ros.core.bayes.pairing import PairingGate, gated_pairing
+    from shm_ros.core.explain.types import Baseline
+    from shm_ros.core.models import build_model
+    from shm_ros.core.structure import structure_from_dict
+
+    obs = case.obs
+    spec = structure_from_dict(copy.deepcopy(case.structure))
+    model = build_model(spec)
+    S = model.sensor_matrix(list(obs.sensor_ids))
+    f_med = np.nanmedian(obs.frequencies_hz, axis=0)
+    ref = obs.reference_shapes()
+    sol = model.modes(None, n_model_modes)
+    pairing = gated_pairing(f_med, ref, sol.frequencies_hz, S @ sol.shapes, PairingGate(0.2, 0.8), obs.mode_numbers)
+    kk, jj = pairing.observed, pairing.model_index
+    priors = [(p.name, 1.0, float(p.prior.params.get("std", 0.1))) for p in spec.parameters]
+
+    def cost(x: np.ndarray) -> float:
+        f = model.modes(np.exp(x), n_model_modes).frequencies_hz[jj]
+        return float(np.sum((np.log(f_med[kk] / f) / 0.02) ** 2) + np.sum((x / [max(s, 0.05) for _, _, s in priors]) ** 2))
+
+    x = minimize(cost, np.zeros(len(priors)), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-3}).x
+    theta = np.exp(x)
+    f_model = model.modes(theta, n_model_modes).frequencies_hz[jj]
+    resid = np.log(obs.frequencies_hz[:, kk]) - np.log(f_model)[None]
+    sens = group_sensitivities(case.structure, theta, [p[0] for p in priors], jj, n_model_modes)
+    return Baseline(mode_numbers=[obs.mode_numbers[k] for k in kk], model_index=[int(j) for j in jj],
+                    log_residual=resid, f_model=f_model, sensitivities=sens,
+                    theta={n: float(v) for (n, _, _), v in zip(priors, theta, strict=True)},
+                    unpaired=[u.to_dict() for u in pairing.unmodelled])
+
+
+def group_sensitivities(structure: dict[str, Any], theta: np.ndarray, names: list[str], jj: np.ndarray,
+                        n_modes: int, h: float = 0.01) -> dict[str, np.ndarray]:
+    """d ln f / d ln factor of the model modes ``jj`` for every parameter group (groups.py names),
+    by central differences of the structure file at the calibrated parameters; groups that are 0 in
+    the file (a foundation, damper braces) are differentiated at a reference value (their factor
+    is then additive: x - 1 = value / reference)."""
+    from shm_ros.core.models import build_model
+    from shm_ros.core.structure import structure_from_dict
+
+    base = copy.deepcopy(structure)
+    for p, v in zip(base.get("parameters", []), theta, strict=False):  # bake the calibrated values in
+        _scale_path(base, p["applies_to"], float(v))
+    base.pop("parameters", None)
+
+    def freqs(d: dict[str, Any]) -> np.ndarray:
+        return build_model(structure_from_dict(copy.deepcopy(d)), include_parameters=False).modes(
+            None, n_modes).frequencies_hz
+
+    edits: dict[str, Any] = {}
+    if base["kind"] == "girder":
+        g = base["girder"]
+        n = len(g["spans"])
+        sec = g["section"]
+        g["section"] = [dict(sec) for _ in range(n)] if isinstance(sec, dict) else sec
+        edits["EI"] = lambda d, f: [s.update(E=s["E"] * f) for s in d["girder"]["section"]]
+        edits["mass"] = lambda d, f: [s.update(rho=s["rho"] * f) for s in d["girder"]["section"]]
+        for k in range(n):
+            edits[f"EI:{k + 1}"] = lambda d, f, k=k: d["girder"]["section"][k].update(E=d["girder"]["section"][k]["E"] * f)
+            edits[f"mass:{k + 1}"] = lambda d, f, k=k: d["girder"]["section"][k].update(
+                rho=d["girder"]["section"][k]["rho"] * f)
+        edits["bearings"] = lambda d, f: [b.update(k_vertical=b["k_vertical"] * f) for b in d["girder"]["bearings"]]
+    else:
+        fl = base["shear_building"]["floors"]
+        edits["EI"] = lambda d, f: [x.update(stiffness=x["stiffness"] * f) for x in d["shear_building"]["floors"]]
+        edits["mass"] = lambda d, f: [x.update(mass=x["mass"] * f) for x in d["shear_building"]["floors"]]
+        for k in range(len(fl)):
+            edits[f"EI:{k + 1}"] = lambda d, f, k=k: d["shear_building"]["floors"][k].update(
+                stiffness=d["shear_building"]["floors"][k]["stiffness"] * f)
+            edits[f"mass:{k + 1}"] = lambda d, f, k=k: d["shear_building"]["floors"][k].update(
+                mass=d["shear_building"]["floors"][k]["mass"] * f)
+    out: dict[str, np.ndarray] = {}
+    for gname, edit in edits.items():
+        lo, hi = copy.deepcopy(base), copy.deepcopy(base)
+        edit(lo, 1 - h)
+        edit(hi, 1 + h)
+        out[gname] = (np.log(freqs(hi)) - np.log(freqs(lo)))[jj] / (np.log1p(h) - np.log1p(-h))
+    if base["kind"] == "shear_building":  # a foundation floor on soil at a reference stiffness, and braces
+        out["foundation"] = _foundation_sensitivity(base, freqs, jj, h)
+        dampers = base["shear_building"].get("dampers") or []
+        if dampers:
+            lo = copy.deepcopy(base)
+            hi = copy.deepcopy(base)
+            for d in dampers:  # a reference brace: 30 % of the story's stiffness, in parallel
+                s = int(max(d["between"])) - 1
+                hi["shear_building"]["floors"][s]["stiffness"] *= 1 + 0.3 * h
+            out["damper"] = (np.log(freqs(hi)) - np.log(freqs(lo)))[jj] / h
+    return out
+
+
+def _foundation_sensitivity(base: dict[str, Any], freqs, jj: np.ndarray, h: float) -> np.ndarray:
+    fl = base["shear_building"]["floors"]
+    total = sum(f["mass"] for f in fl)
+    out = []
+    for f in (1 - h, 1 + h):
+        d = copy.deepcopy(base)
+        d["shear_building"]["floors"].insert(0, {"mass": 0.15 * total, "stiffness": 3.0 * fl[0]["stiffness"] * f})
+        d["shear_building"].pop("dampers", None)
+        for s in d["sensors"]:
+            s["at"]["floor"] = int(s["at"]["floor"]) + 1 if int(s["at"]["floor"]) > 0 else 0
+        d.pop("input", None)
+        out.append(np.log(freqs(d)))
+    # the foundation adds a mode below the first: compare the building's modes (skip none: the sway
+    # mode of a stiff soil sits above the building's lowest modes, so ranks hold for the low modes)
+    return ((out[1] - out[0])[jj]) / (np.log1p(h) - np.log1p(-h))
+
+
+def _scale_path(d: dict[str, Any], path: str, v: float) -> None:
+    """Multiply the values at a parameter's ``applies_to`` path (``a.b[0,1].c``, ``a.b[*].c``) by v."""
+    import re
+
+    def walk(node: Any, parts: list[str]) -> None:
+        head, rest = parts[0], parts[1:]
+        m = re.fullmatch(r"(\w+)(?:\[([^\]]*)\])?", head)
+        assert m is not None, path
+        key, idx = m.group(1), m.group(2)
+        if idx is None:
+            if not rest:
+                node[key] = float(node[key]) * v
+            else:
+                walk(node[key], rest)
+            return
+        seq = node[key]
+        if isinstance(seq, dict):  # one section for every span
+            seq = node[key] = [dict(seq) for _ in range(len(node.get("spans", [])) or 1)]
+        picks = range(len(seq)) if idx == "*" else [int(i) for i in idx.split(",")]
+        for i in picks:
+            if not rest:
+                seq[i] = float(seq[i]) * v
+            else:
+                walk(seq[i], rest)
+
+    walk(d, path.split("."))
