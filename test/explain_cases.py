@@ -373,7 +373,7 @@ def _amplitudes(rng: np.random.Generator, kind: str, hour: np.ndarray, W: int) -
     profile = np.array([traffic_profile(h) for h in hour]) if kind == "girder" else np.ones(W)
     wind = np.ones(W)
     for _ in range(int(rng.integers(1, 3))):
-        c, half = rng.integers(0, W), rng.integers(40, 120)
+        c, half = int(rng.integers(0, W)), int(rng.integers(40, 120))
         wind[max(0, c - half):c + half] += float(rng.uniform(1.5, 3.0))
     rms = base * (0.7 * profile + 0.3 * wind if kind == "girder" else wind) * np.exp(0.25 * rng.standard_normal(W))
     pga = np.zeros(W)
@@ -460,7 +460,8 @@ def baseline_for(case: Case, n_model_modes: int = 12):
 
     def cost(x: np.ndarray) -> float:
         f = model.modes(np.exp(x), n_model_modes).frequencies_hz[jj]
-        return float(np.sum((np.log(f_med[kk] / f) / 0.02) ** 2) + np.sum((x / [max(s, 0.05) for _, _, s in priors]) ** 2))
+        prior = np.sum((x / [max(s, 0.05) for _, _, s in priors]) ** 2)
+        return float(np.sum((np.log(f_med[kk] / f) / 0.02) ** 2) + prior)
 
     x = minimize(cost, np.zeros(len(priors)), method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-3}).x
     theta = np.exp(x)
@@ -500,7 +501,8 @@ def group_sensitivities(structure: dict[str, Any], theta: np.ndarray, names: lis
         edits["EI"] = lambda d, f: [s.update(E=s["E"] * f) for s in d["girder"]["section"]]
         edits["mass"] = lambda d, f: [s.update(rho=s["rho"] * f) for s in d["girder"]["section"]]
         for k in range(n):
-            edits[f"EI:{k + 1}"] = lambda d, f, k=k: d["girder"]["section"][k].update(E=d["girder"]["section"][k]["E"] * f)
+            edits[f"EI:{k + 1}"] = lambda d, f, k=k: d["girder"]["section"][k].update(
+                E=d["girder"]["section"][k]["E"] * f)
             edits[f"mass:{k + 1}"] = lambda d, f, k=k: d["girder"]["section"][k].update(
                 rho=d["girder"]["section"][k]["rho"] * f)
         edits["bearings"] = lambda d, f: [b.update(k_vertical=b["k_vertical"] * f) for b in d["girder"]["bearings"]]
