@@ -6,8 +6,8 @@ sensitivities by central differences of the structure file).
 Thresholds. A hit is the true (candidate, group) among locate's first four proposals. In a
 development run of 6 seeds x 7 effects (seeds 300-305, 576 windows) locate hit 41 of 42 cases; the
 miss was a temperature-dependent damper read as a foundation's (both stiffen the lower stories). CI
-runs 14 cases and requires at least 11 hits: with a true hit rate of 0.9 (below the observed 0.98)
-the binomial probability of fewer than 11 hits in 14 is 0.9 %. Clean tables (no effect) must give no proposal at
+runs 14 cases and requires at least 10 hits: with a true hit rate of 0.9 (below the observed 0.98)
+the binomial probability of fewer than 10 hits in 14 is 0.9 %. Clean tables (no effect) must give no proposal at
 all: locate's per-family threshold is a chi-square tail of 1e-6 after a Bonferroni factor for its
 profile, so a false proposal in 4 clean tables has probability below 1e-4.
 """
@@ -55,7 +55,7 @@ def test_locate_proposes_the_true_candidate_and_group():
         for p in props:  # every proposal names a registered candidate (or is damping's own group)
             assert p.candidate in CANDIDATES.names() or p.candidate in ("temperature_linear", "temperature_bilinear",
                                                                       "step")
-    assert sum(hits) >= 11, [(c[1], h) for c, h in zip(cases, hits, strict=True)]
+    assert sum(hits) >= 10, [(c[1], h) for c, h in zip(cases, hits, strict=True)]
 
 
 def test_clean_tables_give_no_proposal_and_out_of_plane_modes_are_unmodelled():
