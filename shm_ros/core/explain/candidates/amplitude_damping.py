@@ -18,7 +18,7 @@ class AmplitudeDamping(Candidate):
     def params(self) -> list[ParamSpec]:
         _, a = amplitude(self.context)
         top = max(float(np.nanmax(a)) if a.size else 1.0, 1e-9)
-        return [ParamSpec("damping_per_accel", 1e-2 / top, 1e2 / top, null=0.0, log=True, unit="s^2/m")]
+        return [ParamSpec("damping_per_accel", 0.0, 1e2 / top, null=0.0, unit="s^2/m")]
 
     def modify(self, theta: np.ndarray) -> Modification:
         k = np.atleast_2d(np.asarray(theta, float))[:, 0]

@@ -18,10 +18,10 @@ class AmplitudeStiffness(Candidate):
 
     def params(self) -> list[ParamSpec]:
         # softening per unit amplitude 1 / a_ref: log-uniform over the amplitudes that matter
-        # (a_ref from 100 x to 1/100 x the largest amplitude seen), null = no softening
+        # up to a_ref = 1/100 of the largest amplitude seen; uniform so that 0 (no softening) is inside
         _, a = amplitude(self.context)
         top = max(float(np.nanmax(a)) if a.size else 1.0, 1e-9)
-        return [ParamSpec("softening_per_accel", 1e-2 / top, 1e2 / top, null=0.0, log=True, unit="s^2/m")]
+        return [ParamSpec("softening_per_accel", 0.0, 1e2 / top, null=0.0, unit="s^2/m")]
 
     def modify(self, theta: np.ndarray) -> Modification:
         k = np.atleast_2d(np.asarray(theta, float))[:, 0]
