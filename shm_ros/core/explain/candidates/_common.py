@@ -1,0 +1,31 @@
+"""Helpers shared by candidate files: covariates of the context, hour of the day, windows by hints."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Context
+
+
+def covariate(context: Context, name: str) -> np.ndarray:
+    """(W,) covariate with missing values filled by linear interpolation (zeros if it is absent)."""
+    x = np.asarray(context.covariates.get(name, np.zeros(len(context.times_s))), float).copy()
+    bad = ~np.isfinite(x)
+    if bad.all():
+        return np.zeros_like(x)
+    if bad.any():
+        i = np.arange(x.size)
+        x[bad] = np.interp(i[bad], i[~bad], x[~bad])
+    return x
+
+
+def amplitude(context: Context) -> tuple[str, np.ndarray]:
+    """The amplitude covariate the hints name, else rms_accel_m_s2, else pga_m_s2."""
+    name = str(context.hints.get("covariate", ""))
+    if name not in ("rms_accel_m_s2", "pga_m_s2"):
+        name = "rms_accel_m_s2" if "rms_accel_m_s2" in context.covariates else "pga_m_s2"
+    return name, covariate(context, name)
+
+
+def hour_utc(context: Context) -> np.ndarray:
+    return ((context.start_epoch_s + np.asarray(context.times_s, float)) % 86400.0) / 3600.0

@@ -1,0 +1,54 @@
+"""Added mass: a mass on the deck / a floor, always there or only some of the time.
+
+When the mass is there comes from locate's hints: ``when = "hours"`` (a window of the day, e.g.
+jammed traffic at rush hours, ``hours_utc``), ``"below"`` (below a temperature, e.g. snow or ice,
+``below_c``), ``"after"`` (from a window on, e.g. new equipment or ballast, ``change_index``);
+without a hint it is always there. The one parameter is the added fraction of the group's mass.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._common import covariate, hour_utc
+from .base import CANDIDATES, Candidate, Modification, ParamSpec
+
+
+@CANDIDATES.register("added_mass")
+class AddedMass(Candidate):
+    vocabulary = "added_mass"
+    explanation = ("Mass that the model does not include (traffic standing on the deck, snow, ice, new "
+                   "equipment) lowers every frequency a little, most in the modes that move that part.")
+
+    def params(self) -> list[ParamSpec]:
+        return [ParamSpec("mass_fraction", 0.0, 0.5, null=0.0, unit="fraction of the group's mass")]
+
+    def active(self) -> np.ndarray:
+        """(W,) 1 where the mass is there."""
+        h, W = self.context.hints, len(self.context.times_s)
+        when = str(h.get("when", "always"))
+        if when == "hours" and "hours_utc" in h:
+            a, b = (float(v) for v in h["hours_utc"])
+            return (((hour_utc(self.context) - a) % 24.0) < ((b - a) % 24.0)).astype(float)
+        if when == "below" and "below_c" in h:
+            return (covariate(self.context, "temperature_c") < float(h["below_c"])).astype(float)
+        if when == "after" and "change_index" in h:
+            return (np.arange(W) >= int(h["change_index"])).astype(float)
+        return np.ones(W)
+
+    def modify(self, theta: np.ndarray) -> Modification:
+        frac = np.atleast_2d(np.asarray(theta, float))[:, 0]
+        return Modification(groups={self.group: 1.0 + frac[:, None] * self.active()[None, :]})
+
+    def form(self, theta: np.ndarray) -> str:
+        h = self.context.hints
+        when = {"hours": f"between {h.get('hours_utc', ['?', '?'])[0]} and {h.get('hours_utc', ['?', '?'])[1]} h UTC",
+                "below": f"below {h.get('below_c', float('nan')):.1f} degC",
+                "after": f"from window {h.get('change_index')}"}.get(str(h.get("when", "")), "always")
+        return f"{100 * float(np.ravel(theta)[0]):.1f} % of the {self.group} mass added {when}"
+
+    def time(self, theta: np.ndarray) -> float | None:
+        h = self.context.hints
+        if h.get("when") == "after" and "change_index" in h:
+            return float(self.context.times_s[int(h["change_index"])])
+        return None

@@ -1,0 +1,66 @@
+"""Support flexibility: the bearings' springs (girder, group ``bearings``) or the foundation's soil
+(building, group ``foundation``) are softer than the file says, and their stiffness may change.
+
+Parameters: the log of a constant stiffness factor, and, when locate hints at it, a change: a
+stiffening below a knee temperature (frozen ground, ``covariate = temperature_c`` with ``knee_c``)
+or a step from a window on (scour, settlement: ``change_index``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._common import covariate
+from .base import CANDIDATES, Candidate, Modification, ParamSpec
+
+
+@CANDIDATES.register("support_springs")
+class SupportSprings(Candidate):
+    vocabulary = "support_flexibility"
+    explanation = ("The supports give way more than the model assumes (soil under the bearings or the "
+                   "foundation); when the soil freezes, is scoured or settles, the stiffness changes too.")
+
+    def _change(self) -> str:
+        h = self.context.hints
+        if "change_index" in h:
+            return "step"
+        if h.get("covariate") == "temperature_c" and "knee_c" in h:
+            return "frost"
+        return "none"
+
+    def params(self) -> list[ParamSpec]:
+        out = [ParamSpec("ln_stiffness_factor", float(np.log(0.2)), float(np.log(5.0)), null=0.0)]
+        change = self._change()
+        if change == "step":
+            out.insert(0, ParamSpec("ln_step", float(np.log(0.1)), float(np.log(3.0)), null=0.0))
+        elif change == "frost":
+            out.insert(0, ParamSpec("frost_per_c", 0.0, 1.0, null=0.0, unit="1/degC"))
+        return out
+
+    def modify(self, theta: np.ndarray) -> Modification:
+        th = np.atleast_2d(np.asarray(theta, float))
+        h, W = self.context.hints, len(self.context.times_s)
+        change = self._change()
+        base = np.exp(th[:, -1])[:, None] * np.ones((1, W))
+        if change == "step":
+            on = (np.arange(W) >= int(h["change_index"])).astype(float)
+            base = base * np.exp(th[:, 0][:, None] * on[None, :])
+        elif change == "frost":
+            below = np.maximum(float(h["knee_c"]) - covariate(self.context, "temperature_c"), 0.0)
+            base = base * (1.0 + th[:, 0][:, None] * below[None, :])
+        return Modification(groups={self.group: base})
+
+    def form(self, theta: np.ndarray) -> str:
+        th = np.ravel(theta)
+        s = f"{self.group} stiffness x{np.exp(th[-1]):.2f}"
+        change = self._change()
+        if change == "step":
+            s += f", x{np.exp(th[0]):.2f} from window {self.context.hints['change_index']}"
+        elif change == "frost":
+            s += f", +{100 * th[0]:.1f} %/degC below {self.context.hints['knee_c']:.1f} degC"
+        return s
+
+    def time(self, theta: np.ndarray) -> float | None:
+        if self._change() == "step":
+            return float(self.context.times_s[int(self.context.hints["change_index"])])
+        return None
