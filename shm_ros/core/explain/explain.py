@@ -21,7 +21,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from datetime import datetime, timezone
-from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
@@ -34,7 +33,7 @@ from shm_ros.core.structure import StructureSpec
 
 from .candidates.base import CANDIDATES, Candidate, Context, ParamSpec
 from .config import ExplainConfig
-from .fit import FitResult, fit
+from .fit import Box, FitResult, fit, nested_check
 from .groups import GroupModel, build_groups
 from .likelihood import S_RANGE, CandidateLikelihood, catch_all_gain
 from .select import decide, shipped_threshold
@@ -168,7 +167,7 @@ def default_proposals(groups: GroupModel) -> list[Proposal]:
 
 def _locate(obs, baseline, context, config, groups) -> tuple[Mismatch, list[Proposal], list[str]]:
     try:
-        from .locate import locate  # type: ignore[attr-defined]  # written alongside; optional here
+        from .locate import locate
     except ImportError:
         props = default_proposals(groups)
         return (Mismatch(modes=list(baseline.mode_numbers), sensors=list(obs.sensor_ids), covariates={},
@@ -253,8 +252,9 @@ def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoc
         held_out_after=held_after)
     res.extra.update({"key_parameter": key, "gain_at_map": fr.gain_map, "evaluations": fr.n_eval,
                       "check_method": fr.check_method, "check_err": fr.check_err})
-    if c.time(fr.theta_map) is not None:
-        res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, c.time(fr.theta_map)))
+    t0 = c.time(fr.theta_map)
+    if t0 is not None:
+        res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, t0))
     return res
 
 
@@ -311,11 +311,6 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
         res.extra["proposal_reason"] = p.reason
         spec_key = next(s for s in job.specs if s.name == cand.key_parameter())
         keys[res.label] = (spec_key.name, spec_key.null)
-        if config.nested_check and res.log_evidence_gain > threshold:
-            from .fit import Box, nested_check
-
-            res.log_evidence_gain_check, err = nested_check(job.gain, Box(job.specs), config.n_live, config.seed + i)
-            res.extra.update({"check_method": "nested sampling (dynesty)", "check_err": err})
         if config.surrogate_check:
             mod = cand.modify(fr.theta_map[None])
             if mod.groups:
@@ -345,6 +340,17 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
                                        f"(smooth function of covariates and time: {catch:.1f} nats vs best "
                                        f"named {best_named:.1f})")}
     accepted = decide(tried, keys, threshold, held_before.frequency_rmse_pct, catch, config.tie_nats)
+    if config.nested_check:  # the second, independent estimator for every accepted candidate
+        for i, c in enumerate(accepted):
+            say(f"evidence check of {c.label}", 0.95)
+            job = jobs[c.label][0]
+            c.log_evidence_gain_check, err = nested_check(job.gain, Box(job.specs), config.n_live, config.seed + i)
+            c.extra.update({"check_method": "nested sampling (dynesty)", "check_err": err})
+            tol = max(0.5, 3.0 * math.hypot(c.log_evidence_gain_err, err))
+            c.extra["check_agrees"] = bool(abs(c.log_evidence_gain_check - c.log_evidence_gain) <= tol)
+            if not c.extra["check_agrees"]:
+                notes.append(f"{c.label}: the two evidence estimators differ by "
+                             f"{abs(c.log_evidence_gain_check - c.log_evidence_gain):.2f} nats (> {tol:.2f})")
     fit_after, held_after = fit_before, held_before
     if accepted:
         fit_after = accepted[0].fit_after or fit_before

@@ -167,8 +167,8 @@ class _Proposal:
             self.chol = np.linalg.cholesky(self.cov)
         self.hist = []
         for i in np.flatnonzero(self.grid):
-            h = np.bincount(np.minimum((u[:, i] * N_GRID).astype(int), N_GRID - 1), weights=w, minlength=N_GRID)
-            h = np.convolve(h, np.ones(3) / 3, mode="same") + 1e-3 / N_GRID  # neighbours and a floor
+            cnt = np.bincount(np.minimum((u[:, i] * N_GRID).astype(int), N_GRID - 1), weights=w, minlength=N_GRID)
+            h = np.convolve(cnt, np.ones(3) / 3, mode="same") + 1e-3 / N_GRID  # neighbours and a floor
             self.hist.append(h / h.sum())
 
     _NU = 5.0
