@@ -291,8 +291,10 @@ def fit(fn: GainFn, specs: list[ParamSpec], *, seed: int = 0, n_is: int = 3000, 
             b2 = box.scaled(f)
             u2 = np.clip(b2.to_unit(th), -1, 2)
             keep = np.all((u2 >= 0) & (u2 <= 1), axis=1)
-            w2 = ev.w[keep] if keep.sum() >= 10 else np.ones(len(ev.w))
-            u2 = u2[keep] if keep.sum() >= 10 else rng.random((len(ev.w), box.dim))
+            if keep.sum() >= 10 and ev.w[keep].sum() > 0:
+                w2, u2 = ev.w[keep], u2[keep]
+            else:  # the posterior lies outside the narrower box: start from the prior
+                w2, u2 = np.ones(len(ev.w)), rng.random((len(ev.w), box.dim))
             e2 = importance_evidence(fn, b2, u2, w2 / w2.sum(), rng, n_is // 2)
             n_eval += e2.n_eval
             sens[label] = float(e2.log_z)

@@ -14,7 +14,8 @@ candidate's change ``D_wk(theta) = ln f_model(theta) - ln f_baseline`` (:mod:`.s
   the directions of their sensitivities), so a candidate whose average shifts all modes like the
   nominal stiffness does is not penalised for it.
 * ``eta_k`` ~ N(0, tau^2): the analysis model's sensitivity of mode k to the effect is itself off by
-  a model-form error (tau = 10 % by default); integrated out (Laplace, exact in eta given sigma).
+  a model-form error (tau = 10 % by default); integrated out (Laplace, exact in eta given sigma),
+  with eta held within 3 tau.
 * ``eps_wk`` ~ N(0, sigma_k^2): identification scatter, sigma_k^2 inverse-gamma (shape a, mode
   ``noise_guess^2``) and integrated out in closed form: ``-(a + m/2) ln(b + SSW/2)``.
 
@@ -36,6 +37,7 @@ import numpy as np
 
 S_RANGE = (1e-4, 0.2)  # model-form offset scale, relative frequency, log-uniform
 N_S = 41
+ETA_MAX = 3.0  # |eta| <= 3 tau
 
 
 def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
@@ -84,7 +86,8 @@ class _Part:
         eta = np.zeros_like(S0)
         for _ in range(3):  # eta given sigma^2, sigma^2 given eta (converges in a few steps)
             prec = A / sig2 + 1.0 / tau ** 2
-            eta = (c / sig2) / prec
+            # at most 3 tau: with thousands of windows a free eta could even flip the effect's sign
+            eta = np.clip((c / sig2) / prec, -ETA_MAX * tau, ETA_MAX * tau)
             ssw = np.maximum(S0 - 2.0 * eta * c + eta ** 2 * A, 0.0)
             sig2 = (self.b + 0.5 * ssw) / (alpha + 1.0)
         prec = A / sig2 + 1.0 / tau ** 2
