@@ -24,7 +24,7 @@ setup(
         ("share/" + package_name + "/launch", ["launch/pipeline.launch.py"]),
         ("lib/" + package_name, [f"executables/{n}" for n in NODES]),
     ],
-    package_data={"shm_ros": ["py.typed"]},
+    package_data={"shm_ros": ["py.typed", "core/explain/*.json"]},
     python_requires=">=3.10",
     install_requires=["numpy", "scipy", "PyYAML", "rosbags", "mcap", "zstandard", "lz4", "emcee",
                       "dynesty", "arviz", "matplotlib", "threadpoolctl", "obspy",

@@ -29,6 +29,9 @@ class ParamSpec:
     null: float | None = None  # value at which the candidate reduces to the nominal model
     log: bool = False  # log-uniform prior
     unit: str = ""
+    # a parameter the likelihood is not smooth in (a knee, a change time): the fit scans it on a grid
+    # and the evidence integrates it with a piecewise-constant proposal instead of a Gaussian one
+    grid: bool = False
 
 
 @dataclass
@@ -55,6 +58,8 @@ class Candidate(ABC):
     name: ClassVar[str]  # registry label, set by the registry
     vocabulary: ClassVar[str]  # docs/interfaces.md §5 name
     explanation: ClassVar[str] = ""  # plain words for an engineer
+    # groups tried when nothing (locate) says where to look; "EI:*" = every numbered EI group
+    default_groups: ClassVar[tuple[str, ...]] = ("EI",)
 
     def __init__(self, group: str, context: Context):
         self.group = group  # the parameter group it acts on (see groups.py), e.g. "EI", "EI:2", "bearings"

@@ -1,0 +1,378 @@
+"""The whole chain: tracked-modes table + nominal structure -> :class:`~.types.Verdict`.
+
+1. **Baseline.** The tracked modes are paired once with the nominal model's modes (frequency and
+   MAC gates, :func:`shm_ros.core.bayes.pairing.gated_pairing`); modes that pair with none are
+   ``unmodelled_modes``. The nominal parameters are calibrated to the training windows' mean
+   frequencies (MAP: their priors and per-mode model-form offsets of unknown scale) and then kept
+   fixed: the per-mode offsets absorb constant misfit, and the mean part of the candidates'
+   likelihood integrates out a linearised re-calibration (:mod:`.likelihood`).
+2. **Split.** Windows fall in blocks (a day, or W/8 windows); every ``held_out_every``-th block is
+   held out of every fit and scores it afterwards.
+3. **Locate** (:mod:`.locate`, when present) proposes candidates and groups from the residuals;
+   without it every registered candidate is tried on its default groups.
+4. **Fit** every proposal (:mod:`.fit`: MAP, evidence by importance sampling, intervals, prior
+   sensitivity) on the surrogate (:mod:`.surrogate`), the catch-all in closed form; the nested-sampling
+   check for those that clear the threshold.
+5. **Select** (:mod:`.select`) and score the fit before / after, on training and held-out windows.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from datetime import datetime, timezone
+
+import numpy as np
+from scipy.optimize import minimize
+
+from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.bayes.pairing import PairingGate, gated_pairing
+from shm_ros.core.bayes.priors import priors_from_specs
+from shm_ros.core.models import build_model
+from shm_ros.core.structure import StructureSpec
+
+from .candidates.base import CANDIDATES, Candidate, Context, ParamSpec
+from .config import ExplainConfig
+from .fit import Box, FitResult, fit, nested_check
+from .groups import GroupModel, build_groups
+from .likelihood import S_RANGE, CandidateLikelihood, catch_all_gain
+from .select import decide, shipped_threshold
+from .surrogate import Surrogate
+from .types import Baseline, CandidateResult, FitScores, Mismatch, Proposal, Verdict
+
+Progress = Callable[[str, float], None]
+
+
+# -- baseline ----------------------------------------------------------------------------------------
+
+def split(times_s: np.ndarray, config: ExplainConfig) -> np.ndarray:
+    """Training mask (W,): every ``held_out_every``-th block of windows is held out."""
+    W = len(times_s)
+    if config.block_windows > 0:
+        block = np.arange(W) // config.block_windows
+    elif times_s[-1] - times_s[0] >= 4 * 86400.0:
+        block = ((times_s - times_s[0]) // 86400.0).astype(int)
+    else:
+        block = np.arange(W) // max(W // 8, 1)
+    return (block % config.held_out_every) != config.held_out_every - 1
+
+
+def _model_modes(model, theta: np.ndarray, n: int, sensors: list[str]):
+    sol = model.modes(theta, n)
+    phi = None
+    if sensors:
+        try:
+            phi = model.sensor_matrix(sensors) @ sol.shapes
+        except KeyError:
+            phi = None
+    return sol.frequencies_hz, phi
+
+
+def calibrate_baseline(obs: ModalObservations, spec: StructureSpec, train: np.ndarray,
+                       config: ExplainConfig) -> tuple[Baseline, np.ndarray]:
+    """Pair, calibrate the nominal parameters (MAP), pair again; returns the baseline and the
+    nominal parameters' log-frequency sensitivities (K, p)."""
+    model = build_model(spec)
+    n_model = min(obs.n_modes + 4, model.n_dof)
+    sensors = list(obs.sensor_ids) if obs.has_shapes else []
+    gate = PairingGate(config.frequency_gate, config.mac_gate)
+    f_mean = np.nanmean(obs.frequencies_hz[train], axis=0)
+    ref = obs.reference_shapes()
+
+    def pairing(theta):
+        f, phi = _model_modes(model, theta, n_model, sensors)
+        return gated_pairing(f_mean, ref if phi is not None else None, f, phi, gate, obs.mode_numbers)
+
+    names = [p.name for p in spec.parameters]
+    theta0 = model.nominal_theta()
+    pr = pairing(theta0)
+    if names:
+        prior = priors_from_specs(spec.parameters)
+        s2 = np.exp(np.linspace(np.log(S_RANGE[0]), np.log(S_RANGE[1]), 41)) ** 2
+
+        def neg_post(lx):
+            th = np.exp(lx)
+            f = model.modes(th, n_model).frequencies_hz[pr.model_index]
+            y = np.log(f_mean[pr.observed]) - np.log(f)
+            ll = -0.5 * len(y) * np.log(2 * np.pi * s2) - 0.5 * float(y @ y) / s2
+            mx = ll.max()
+            lp = float(prior.logpdf(th[None])[0]) + float(np.sum(lx))  # density of ln theta
+            return -(mx + math.log(np.mean(np.exp(ll - mx))) + lp)
+
+        res = minimize(neg_post, np.zeros(len(names)), method="Nelder-Mead",
+                       options={"xatol": 1e-6, "fatol": 1e-8, "maxfev": 400 * len(names)})
+        theta = np.exp(res.x)
+        pr2 = pairing(theta)
+        if not pr2.same_as(pr):
+            pr = pr2
+            res = minimize(neg_post, res.x, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-8})
+            theta = np.exp(res.x)
+    else:
+        theta = theta0
+    f_model, _ = _model_modes(model, theta, n_model, [])
+    kept = pr.observed
+    mi = pr.model_index
+    logres = np.log(obs.frequencies_hz[:, kept]) - np.log(f_model[mi])[None]
+    J = np.zeros((len(kept), len(names)))
+    for j in range(len(names)):  # d ln f / d ln theta_j by central differences
+        e = np.zeros(len(names))
+        e[j] = 1e-4
+        fp = model.modes(theta * np.exp(e), n_model).frequencies_hz[mi]
+        fm = model.modes(theta * np.exp(-e), n_model).frequencies_hz[mi]
+        J[:, j] = (np.log(fp) - np.log(fm)) / 2e-4
+    seen = np.mean(np.isfinite(obs.frequencies_hz), axis=0)
+    unpaired = []
+    for u in pr.unmodelled:
+        d = u.to_dict()
+        if u.mode is not None and u.mode in obs.mode_numbers:
+            d["fraction_of_windows"] = float(seen[obs.mode_numbers.index(u.mode)])
+        unpaired.append(d)
+    unpaired += [dict(u) for u in obs.unmodelled_modes]
+    base = Baseline(mode_numbers=[obs.mode_numbers[k] for k in kept], model_index=[int(i) for i in mi],
+                    log_residual=logres, f_model=f_model[mi], sensitivities={},
+                    theta=dict(zip(names, (float(t) for t in theta), strict=True)), unpaired=unpaired, train=train)
+    return base, J
+
+
+# -- scores ------------------------------------------------------------------------------------------
+
+def _rmse_pct(res: np.ndarray) -> float:
+    v = res[np.isfinite(res)]
+    return float(100.0 * np.sqrt(np.mean(np.expm1(v) ** 2))) if v.size else float("nan")
+
+
+def scores(r: np.ndarray, delta: np.ndarray | None, train: np.ndarray) -> tuple[FitScores, FitScores]:
+    """Frequency RMSE (%) on the training and held-out windows of residuals ``r`` (W, K) after the
+    change ``delta`` (W, K), each mode's constant offset taken from the training windows."""
+    e = r if delta is None else r - delta
+    off = np.nanmean(e[train], axis=0)
+    e = e - off
+    return FitScores(_rmse_pct(e[train])), FitScores(_rmse_pct(e[~train]))
+
+
+# -- proposals ---------------------------------------------------------------------------------------
+
+def default_proposals(groups: GroupModel) -> list[Proposal]:
+    out = []
+    for name in CANDIDATES.names():
+        cls = CANDIDATES.get(name)
+        for pattern in getattr(cls, "default_groups", ("EI",)):
+            if pattern.endswith(":*"):
+                gs = [g for g in groups.names() if g.startswith(pattern[:-1])]
+            else:
+                gs = [pattern] if pattern in groups.groups else []
+            out += [Proposal(name, g, "tried on its default group (no residual analysis)") for g in gs]
+    return out
+
+
+def _locate(obs, baseline, context, config, groups) -> tuple[Mismatch, list[Proposal], list[str]]:
+    try:
+        from .locate import locate
+    except ImportError:
+        props = default_proposals(groups)
+        return (Mismatch(modes=list(baseline.mode_numbers), sensors=list(obs.sensor_ids), covariates={},
+                         summary="residual analysis not available: every candidate tried"), props,
+                ["locate is not available: every registered candidate was tried on its default groups"])
+    mismatch, props = locate(obs, baseline, context, config)
+    return mismatch, [p for p in props if p.group in groups.groups and p.candidate in CANDIDATES], []
+
+
+# -- catch-all ---------------------------------------------------------------------------------------
+
+def catch_all_basis(context: Context) -> tuple[np.ndarray, list[str]]:
+    """Smooth functions of the covariates and of time (W, p), and what each column is."""
+    t = np.asarray(context.times_s, dtype=float)
+    cols, names = [], []
+    span = max(float(t[-1] - t[0]), 1.0)
+    cols.append((t - t[0]) / span)
+    names.append("time trend")
+    for q in (0.2, 0.4, 0.6, 0.8):
+        cols.append((t >= t[0] + q * span).astype(float))
+        names.append(f"step at {q:.0%} of the campaign")
+    for key in ("temperature_c", "rms_accel_m_s2", "pga_m_s2"):
+        v = context.covariates.get(key)
+        if v is None or not np.isfinite(v).any() or np.nanstd(v) == 0:
+            continue
+        v = np.asarray(v, dtype=float)
+        if key != "temperature_c":
+            v = np.log(np.maximum(v, np.nanmin(v[v > 0]) if (v > 0).any() else 1e-9))
+        v = np.where(np.isfinite(v), v, np.nanmedian(v))
+        cols.append(v)
+        names.append(key)
+        for q in (0.25, 0.5, 0.75):
+            c = float(np.quantile(v, q))
+            cols.append(np.minimum(v - c, 0.0))
+            names.append(f"{key} below {c:.3g}")
+    return np.column_stack(cols), names
+
+
+# -- one candidate -----------------------------------------------------------------------------------
+
+def _iso(epoch: float, t: float | None) -> str | None:
+    if t is None:
+        return None
+    return datetime.fromtimestamp(epoch + t, tz=timezone.utc).isoformat().replace("+00:00", "Z")
+
+
+class _Job:
+    """A candidate bound to the data: its gain function on the training windows."""
+
+    def __init__(self, cand: Candidate, sur: Surrogate, lik: CandidateLikelihood, train: np.ndarray):
+        self.cand, self.sur, self.lik, self.train = cand, sur, lik, train
+        self.specs: list[ParamSpec] = cand.params()
+
+    def deltas(self, theta: np.ndarray, windows: np.ndarray | None = None):
+        mod = self.cand.modify(np.atleast_2d(theta))
+        sel = slice(None) if windows is None else windows
+        d = None
+        if mod.groups:
+            from .candidates.base import Modification
+
+            d = self.sur.delta(Modification({g: x[:, sel] for g, x in mod.groups.items()}))
+        dd = None if mod.damping is None else np.log(np.maximum(mod.damping[:, sel], 1e-9))[..., None]
+        return d, dd
+
+    def gain(self, theta: np.ndarray) -> np.ndarray:
+        d, dd = self.deltas(theta, self.train)
+        return self.lik.gain(d, dd)
+
+
+def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch: float) -> CandidateResult:
+    c = job.cand
+    d_all, _ = job.deltas(fr.theta_map)
+    delta = None if d_all is None else d_all[0]
+    fit_after, held_after = scores(r_all, delta, train)
+    key = c.key_parameter()
+    res = CandidateResult(
+        name=c.vocabulary, label=c.label, form=c.form(fr.theta_map), where=c.group,
+        parameters=c.describe(fr.theta_map), intervals=fr.intervals,
+        log_evidence_gain=float(fr.evidence.log_z), log_evidence_gain_check=fr.check,
+        log_evidence_gain_err=float(fr.evidence.err), prior_sensitivity=dict(fr.prior_sensitivity),
+        time=_iso(epoch, c.time(fr.theta_map)), explanation=c.explanation, fit_after=fit_after,
+        held_out_after=held_after)
+    res.extra.update({"key_parameter": key, "gain_at_map": fr.gain_map, "evaluations": fr.n_eval,
+                      "check_method": fr.check_method, "check_err": fr.check_err})
+    t0 = c.time(fr.theta_map)
+    if t0 is not None:
+        res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, t0))
+    return res
+
+
+# -- entry point -------------------------------------------------------------------------------------
+
+def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig | None = None,
+            progress: Progress | None = None) -> Verdict:
+    """Which physics the nominal model is missing, fitted and compared by evidence (module docstring)."""
+    config = config or ExplainConfig()
+    say = progress or (lambda stage, frac: None)
+    obs, dropped = obs.without_empty_modes()
+    notes = [f"mode {m} has no frequency in any window; left out" for m in dropped]
+    order = np.argsort(obs.times)
+    obs = obs.subset(order)
+    times_s = obs.times - obs.times[0]
+    epoch = float(obs.times[0]) if obs.time_kind == "iso" else 0.0
+    train = split(times_s, config)
+    say("baseline", 0.0)
+    base, J = calibrate_baseline(obs, spec, train, config)
+    groups = build_groups(spec, base.theta)
+    sur = Surrogate(groups, base.model_index)
+    base.sensitivities = sur.sensitivities()
+    kept = [obs.mode_numbers.index(m) for m in base.mode_numbers]
+    r_all = base.log_residual
+    # keep the baseline's pairing frequencies consistent with the group model (the same matrices)
+    r_all = r_all + np.log(base.f_model)[None] - sur.log_f_base[None]
+    rd_all = None
+    if obs.damping is not None:
+        rd_all = np.log(np.where(obs.damping[:, kept] > 0, obs.damping[:, kept], np.nan))
+    context = Context(times_s=times_s, covariates={k: np.asarray(v, float) for k, v in obs.covariates.items()},
+                      start_epoch_s=epoch)
+    lik = CandidateLikelihood(r_all[train], J, None if rd_all is None else rd_all[train],
+                              tau=config.effect_form_error, noise_guess=config.noise_guess,
+                              damping_noise_guess=config.damping_noise_guess)
+    fit_before, held_before = scores(r_all, None, train)
+    mismatch, proposals, more = _locate(obs, base, context, config, groups)
+    notes += more
+    threshold_info = shipped_threshold()
+    threshold = float(config.threshold if config.threshold is not None else threshold_info["log_bayes_factor"])
+    if config.threshold is not None:
+        threshold_info = {**threshold_info, "log_bayes_factor": threshold, "provisional": False,
+                          "note": "set in the configuration"}
+    tried: list[CandidateResult] = []
+    keys: dict[str, tuple[str, float | None]] = {}
+    jobs: dict[str, tuple[_Job, FitResult]] = {}
+    for i, p in enumerate(proposals):
+        say(f"fit {p.candidate} on {p.group}", (i + 0.5) / max(len(proposals), 1))
+        ctx = Context(context.times_s, context.covariates, context.start_epoch_s, dict(p.hints))
+        cand = CANDIDATES.get(p.candidate)(p.group, ctx)
+        job = _Job(cand, sur, lik, train)
+        fr = fit(job.gain, job.specs, seed=config.seed + i, n_is=config.n_importance,
+                 sensitivity=config.prior_sensitivity)
+        res = _result(job, fr, r_all, train, epoch)
+        res.extra["proposal_reason"] = p.reason
+        spec_key = next(s for s in job.specs if s.name == cand.key_parameter())
+        keys[res.label] = (spec_key.name, spec_key.null)
+        if config.surrogate_check:
+            mod = cand.modify(fr.theta_map[None])
+            if mod.groups:
+                res.extra["surrogate_error"] = sur.check(mod)
+                if res.extra["surrogate_error"] > config.surrogate_tolerance:
+                    notes.append(f"{res.label}: surrogate frequency error {res.extra['surrogate_error']:.1e} "
+                                 f"exceeds {config.surrogate_tolerance:.0e}")
+        tried.append(res)
+        jobs[res.label] = (job, fr)
+    catch = None
+    unexplained = None
+    if config.catch_all:
+        basis, names = catch_all_basis(context)
+        per_mode, fitted = catch_all_gain(r_all[train], basis[train], config.noise_guess)
+        catch = float(per_mode.sum())
+        best_named = max((c.log_evidence_gain for c in tried), default=-math.inf)
+        if catch > threshold and catch > best_named:
+            strong = [base.mode_numbers[k] for k in np.argsort(per_mode)[::-1] if per_mode[k] > threshold]
+            amp = np.nanmax(np.abs(fitted), axis=1)
+            tt = times_s[train]
+            hot = tt[amp >= np.nanquantile(amp, 0.9)] if np.isfinite(amp).any() else tt
+            unexplained = {"modes": strong, "log_evidence_gain": catch, "best_named_gain": best_named,
+                           "when": {"from": _iso(epoch, float(hot.min())) if epoch else float(hot.min()),
+                                    "to": _iso(epoch, float(hot.max())) if epoch else float(hot.max())},
+                           "basis": names,
+                           "summary": (f"structured misfit in modes {strong} that no candidate explains "
+                                       f"(smooth function of covariates and time: {catch:.1f} nats vs best "
+                                       f"named {best_named:.1f})")}
+    accepted = decide(tried, keys, threshold, held_before.frequency_rmse_pct, catch, config.tie_nats)
+    if config.nested_check:  # the second, independent estimator for every accepted candidate
+        for i, c in enumerate(accepted):
+            say(f"evidence check of {c.label}", 0.95)
+            job = jobs[c.label][0]
+            c.log_evidence_gain_check, err = nested_check(job.gain, Box(job.specs), config.n_live, config.seed + i)
+            c.extra.update({"check_method": "nested sampling (dynesty)", "check_err": err})
+            tol = max(0.5, 3.0 * math.hypot(c.log_evidence_gain_err, err))
+            c.extra["check_agrees"] = bool(abs(c.log_evidence_gain_check - c.log_evidence_gain) <= tol)
+            if not c.extra["check_agrees"]:
+                notes.append(f"{c.label}: the two evidence estimators differ by "
+                             f"{abs(c.log_evidence_gain_check - c.log_evidence_gain):.2f} nats (> {tol:.2f})")
+    fit_after, held_after = fit_before, held_before
+    if accepted:
+        fit_after = accepted[0].fit_after or fit_before
+        held_after = accepted[0].held_out_after or held_before
+    # observed modes no model mode pairs with, seen in enough windows
+    for u in base.unpaired:
+        frac = u.get("fraction_of_windows")
+        if frac is not None and frac < config.min_unpaired_fraction:
+            continue
+        accepted.append(CandidateResult(
+            name="unmodelled_modes", label=f"unmodelled_modes/mode{u.get('mode')}", form="a mode the model class lacks",
+            where=f"observed mode {u.get('mode')} at {u['frequency_hz']:.3f} Hz", parameters={}, intervals={},
+            log_evidence_gain=0.0, log_evidence_gain_check=None, log_evidence_gain_err=0.0, prior_sensitivity={},
+            accepted=True, reasons=[f"no model mode pairs with it ({u.get('reason')})"],
+            explanation="The structure has a mode the model cannot have (e.g. a lateral or torsional mode of "
+                        "a plane model): the model class, not its parameters, is incomplete.",
+            extra={"unmodelled": u}))
+    say("done", 1.0)
+    return Verdict(mismatch=mismatch, missing_physics=accepted, tried=tried, fit_before=fit_before,
+                   fit_after=fit_after, held_out_before=held_before, held_out_after=held_after,
+                   unexplained=unexplained,
+                   threshold={**threshold_info, "catch_all_gain": catch}, notes=notes,
+                   figures={"baseline_theta": base.theta, "train_windows": int(train.sum()),
+                            "held_out_windows": int((~train).sum()),
+                            "modes": list(base.mode_numbers), "model_modes": [i + 1 for i in base.model_index]})

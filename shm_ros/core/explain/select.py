@@ -1,0 +1,88 @@
+"""Which fitted candidates explain the data: threshold, held-out windows, null excluded, ties, catch-all.
+
+A candidate is accepted when all three hold:
+
+1. its evidence gain over the nominal model clears the **threshold**: the 99th percentile of the
+   largest gain over all candidates on clean replicates (no effect, the simulator's default model-form
+   error), calibrated once offline by ``bench/calibrate_explain.py`` and shipped as
+   ``threshold.json`` next to this module (``provisional`` there until the calibration has run);
+2. the frequency misfit on the **held-out windows** (never used in the fit) is smaller with it;
+3. the 95 % interval of its **key parameter** excludes the value at which it is the nominal model.
+
+Accepted candidates within ``tie_nats`` of the most supported one are reported together
+(``tied_with``, with their relative support ``exp(gain)`` normalised over the tied set): the data
+cannot tell them apart. The **catch-all** (a smooth function of the covariates and of time per mode,
+:func:`.likelihood.catch_all_gain`) beating every named candidate means the misfit has structure none
+of them explains: nothing is accepted and ``unexplained`` says where (modes) and when.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from importlib import resources
+from typing import Any
+
+from .types import CandidateResult
+
+THRESHOLD_FILE = "threshold.json"
+
+
+def shipped_threshold() -> dict[str, Any]:
+    """The calibrated acceptance threshold shipped with the package (``threshold.json``)."""
+    text = resources.files("shm_ros.core.explain").joinpath(THRESHOLD_FILE).read_text()
+    return dict(json.loads(text))
+
+
+def null_excluded(c: CandidateResult, key: str, null: float | None) -> bool:
+    if null is None or key not in c.intervals:
+        return True
+    lo, hi = c.intervals[key]
+    return not lo <= null <= hi
+
+
+def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | None]], threshold: float,
+           held_out_before: float, catch_all: float | None, tie_nats: float) -> list[CandidateResult]:
+    """Mark ``accepted`` and ``reasons`` on every result; the accepted ones, most supported first.
+
+    ``keys[label] = (key parameter, null value)``; ``held_out_before``: frequency RMSE (%) of the
+    nominal model on the held-out windows; ``catch_all``: the catch-all's gain (None: not fitted).
+    """
+    for c in results:
+        key, null = keys[c.label]
+        held = c.held_out_after.frequency_rmse_pct if c.held_out_after is not None else math.inf
+        checks = [
+            (c.log_evidence_gain > threshold,
+             f"evidence gain {c.log_evidence_gain:.1f} nats vs threshold {threshold:.1f}"),
+            (held < held_out_before,
+             f"held-out frequency RMSE {held:.3f} % vs {held_out_before:.3f} % without it"),
+            (null_excluded(c, key, null),
+             f"95 % interval of {key} {_iv(c.intervals.get(key))} "
+             + ("excludes" if null_excluded(c, key, null) else "includes") + f" the null value {null}"),
+        ]
+        c.accepted = all(ok for ok, _ in checks)
+        c.reasons = [("passed: " if ok else "failed: ") + why for ok, why in checks]
+    passing = sorted((c for c in results if c.accepted), key=lambda c: -c.log_evidence_gain)
+    if catch_all is not None and (not results or catch_all > max(c.log_evidence_gain for c in results)):
+        for c in passing:
+            c.accepted = False
+            c.reasons.append(f"failed: a smooth function of the covariates per mode (the catch-all, gain "
+                             f"{catch_all:.1f} nats) fits better than every named candidate")
+        return []
+    if not passing:
+        return []
+    best = passing[0]
+    tied = [c for c in passing if best.log_evidence_gain - c.log_evidence_gain <= tie_nats]
+    z = [math.exp(c.log_evidence_gain - best.log_evidence_gain) for c in tied]
+    for c, zi in zip(tied, z, strict=True):
+        c.tied_with = [o.label for o in tied if o is not c]
+        c.extra["relative_support"] = zi / sum(z)
+    for c in passing[len(tied):]:
+        c.accepted = False
+        c.reasons.append(f"failed: {best.label} explains the same misfit better "
+                         f"({best.log_evidence_gain - c.log_evidence_gain:.1f} nats)")
+    return tied
+
+
+def _iv(iv: tuple[float, float] | None) -> str:
+    return "n/a" if iv is None else f"[{iv[0]:.4g}, {iv[1]:.4g}]"

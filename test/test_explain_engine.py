@@ -1,0 +1,84 @@
+"""The explain engine end to end on the simulator's truth (outside the analysis model's class).
+
+Two tables from :mod:`explain_engine_synth` at reduced size (192 ten-minute windows, 32 h): one with
+the simulator's ``temperature_bilinear`` effect on the deck (knee 0 degC, -0.2 %/degC above,
+-5.2 %/degC below), one clean. The multi-seed statistics of the acceptance criteria (>= 40 random
+cases, >= 50 clean seeds) run in bench/calibrate_explain.py and on xlocate's case generator; here one
+seed each checks that the chain can name the effect and stays silent without one.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from explain_engine_synth import engine_table  # noqa: E402
+
+from shm_ros.core.explain.config import ExplainConfig  # noqa: E402
+from shm_ros.core.explain.explain import explain, split  # noqa: E402
+from shm_ros.core.explain.select import shipped_threshold  # noqa: E402
+
+N_WINDOWS = 192
+
+
+@pytest.fixture(scope="module")
+def bilinear_verdict():
+    obs, spec, truth = engine_table(3, N_WINDOWS, ("temperature_bilinear", {}))
+    return explain(obs, spec, ExplainConfig(n_importance=2000)), truth
+
+
+def test_names_the_bilinear_temperature_effect(bilinear_verdict):
+    v, truth = bilinear_verdict
+    top = v.missing_physics[0]
+    assert top.name == "temperature_dependent_stiffness"
+    assert top.label.split("/")[1] == "temperature_bilinear"
+    knee = truth["effect"]["parameters"]["knee_c"]
+    assert abs(top.parameters["knee_c"] - knee) <= 1.5
+    below = truth["effect"]["parameters"]["below_per_c"]
+    assert abs(top.parameters["below_per_c"] - below) <= 0.25 * abs(below)
+    # the fit improves: RMSE at least halved, on the held-out windows too
+    assert v.fit_after.frequency_rmse_pct <= 0.5 * v.fit_before.frequency_rmse_pct
+    assert v.held_out_after.frequency_rmse_pct < v.held_out_before.frequency_rmse_pct
+    # the key parameter's interval excludes the null, the threshold is cleared, the check agrees
+    lo, hi = top.intervals["below_per_c"]
+    assert hi < 0.0
+    assert top.log_evidence_gain > v.threshold["log_bayes_factor"]
+    assert top.log_evidence_gain_check is not None
+    tol = max(0.5, 3 * np.hypot(top.log_evidence_gain_err, top.extra["check_err"]))
+    assert abs(top.log_evidence_gain_check - top.log_evidence_gain) <= tol
+    assert set(top.prior_sensitivity) == {"halved", "doubled"}
+    assert top.extra["surrogate_error"] < 1e-4
+    assert v.unexplained is None
+
+
+def test_verdict_is_serialisable(bilinear_verdict):
+    import json
+
+    v, _ = bilinear_verdict
+    d = json.loads(json.dumps(v.to_dict()))
+    assert d["missing_physics"][0]["name"] == "temperature_dependent_stiffness"
+    assert d["fit"]["held_out"]["after"]["frequency_rmse_pct"] < d["fit"]["held_out"]["before"]["frequency_rmse_pct"]
+    assert len(d["candidates"]) == len(v.tried) >= 3
+
+
+def test_clean_table_raises_no_alarm():
+    obs, spec, _ = engine_table(4, N_WINDOWS, None)
+    v = explain(obs, spec, ExplainConfig(n_importance=1000, prior_sensitivity=False))
+    physics = [c for c in v.missing_physics if c.name != "unmodelled_modes"]
+    assert physics == [], [(c.label, c.log_evidence_gain) for c in physics]
+    assert v.unexplained is None
+    assert max(c.log_evidence_gain for c in v.tried) < v.threshold["log_bayes_factor"]
+
+
+def test_held_out_blocks_and_threshold_file():
+    t = np.arange(8 * 144) * 600.0
+    train = split(t, ExplainConfig())
+    assert 0.7 < train.mean() < 0.8  # every 4th day held out
+    assert not train[3 * 144:4 * 144].any() and train[:3 * 144].all()
+    th = shipped_threshold()
+    assert th["log_bayes_factor"] > 0 and "command" in th
