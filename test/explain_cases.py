@@ -344,7 +344,8 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
     if kind == "building":
         covs["pga_m_s2"] = pga
     obs = ModalObservations(times=sc.start_epoch_s + t_s, mode_numbers=numbers, frequencies_hz=f_obs,
-                            shapes=phi[:, :, rows], sensor_ids=sensors, damping=z_obs, covariates=covs)
+                            shapes=phi[:, :, rows], sensor_ids=sensors, damping=z_obs, covariates=covs,
+                            time_kind="iso")
     return Case(kind=kind, seed=seed, obs=obs, structure=structure, truth=truth, f_true=f_true,
                 start_epoch_s=float(sc.start_epoch_s + t_s[0]), factors=factors)
 

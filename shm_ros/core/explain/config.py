@@ -1,28 +1,32 @@
-"""Settings of one explain run (every field has a default; plain data)."""
+"""Settings of one explain run: the ``shm-ros explain`` options and the explain node's parameters."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from shm_ros.core.config import option
+
 
 @dataclass
 class ExplainConfig:
-    held_out_every: int = 4  # every 4th block of windows is held out of the fit
-    block_windows: int = 0  # windows per block (0: one day of windows, or W / 8 if shorter)
-    threshold: float | None = None  # log Bayes factor a candidate must clear (None: the shipped calibration)
-    tie_nats: float = 2.0  # accepted candidates within this of the best are reported together
-    effect_form_error: float = 0.1  # tau: per-mode model-form error of an effect's size
-    noise_guess: float = 0.003  # prior mode of the relative frequency scatter per window
-    damping_noise_guess: float = 0.2  # prior mode of the relative damping scatter per window
-    n_importance: int = 3000  # importance draws of the evidence
-    nested_check: bool = True  # second evidence estimator (nested sampling) for candidates that clear the threshold
-    n_live: int = 150
-    prior_sensitivity: bool = True
-    catch_all: bool = True
-    second_round: bool = True  # after accepting one effect, fit the others on top of it
-    surrogate_check: bool = True  # check the surrogate against the exact model at the MAP's factors
-    surrogate_tolerance: float = 1e-4
-    frequency_gate: float = 0.2  # pairing of tracked modes with model modes
-    mac_gate: float = 0.8
-    min_unpaired_fraction: float = 0.5  # an unpaired mode seen in at least this share of windows is reported
-    seed: int = 0
+    held_out_every: int = option(4, "every n-th block of windows is held out of the fit and scores it")
+    block_windows: int = option(0, "windows per block (0: one day of windows, or W / 8 if shorter)")
+    threshold: float | None = option(None, "log Bayes factor a candidate must clear (unset: the shipped "
+                                     "calibration, threshold.json)")
+    tie_nats: float = option(2.0, "accepted candidates within this many nats of the best are reported together")
+    effect_form_error: float = option(0.1, "per-mode model-form error of an effect's size (relative)")
+    noise_guess: float = option(0.003, "prior mode of the relative frequency scatter per window")
+    damping_noise_guess: float = option(0.2, "prior mode of the relative damping scatter per window")
+    n_importance: int = option(3000, "importance draws of the evidence")
+    nested_check: bool = option(True, "second evidence estimator (nested sampling) for accepted candidates")
+    n_live: int = option(150, "live points of the nested-sampling check")
+    prior_sensitivity: bool = option(True, "report the evidence with prior widths halved and doubled")
+    catch_all: bool = option(True, "fit the catch-all discrepancy (reports unexplained structure)")
+    second_round: bool = option(True, "after accepting one effect, fit the others on top of it")
+    surrogate_check: bool = option(True, "check the surrogate against the exact model at each fit")
+    surrogate_tolerance: float = option(1e-4, "largest relative frequency error of the surrogate")
+    frequency_gate: float = option(0.2, "pairing of tracked modes with model modes: relative frequency gate")
+    mac_gate: float = option(0.8, "pairing of tracked modes with model modes: MAC gate")
+    min_unpaired_fraction: float = option(0.5, "an unpaired mode seen in at least this share of windows is "
+                                          "reported as unmodelled")
+    seed: int = option(0, "random seed (the same seed gives the same verdict)")

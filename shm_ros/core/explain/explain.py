@@ -173,7 +173,9 @@ def _locate(obs, baseline, context, config, groups) -> tuple[Mismatch, list[Prop
         return (Mismatch(modes=list(baseline.mode_numbers), sensors=list(obs.sensor_ids), covariates={},
                          summary="residual analysis not available: every candidate tried"), props,
                 ["locate is not available: every registered candidate was tried on its default groups"])
-    mismatch, props = locate(obs, baseline, context, config)
+    from .locate import LocateConfig
+
+    mismatch, props = locate(obs, baseline, context, LocateConfig(min_unpaired_fraction=config.min_unpaired_fraction))
     return mismatch, [p for p in props if p.group in groups.groups and p.candidate in CANDIDATES], []
 
 

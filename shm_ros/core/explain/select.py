@@ -9,7 +9,9 @@ A candidate is accepted when all three hold:
 2. the frequency misfit on the **held-out windows** (never used in the fit) is smaller with it;
 3. the 95 % interval of its **key parameter** excludes the value at which it is the nominal model.
 
-Accepted candidates within ``tie_nats`` of the most supported one are reported together
+Accepted candidates within ``tie_nats`` of the most supported one, or whose best fits are within
+``tie_nats`` of its best fit (the data cannot tell them apart; their evidences then differ by prior
+volume only), are reported together
 (``tied_with``, with their relative support ``exp(gain)`` normalised over the tied set): the data
 cannot tell them apart. The **catch-all** (a smooth function of the covariates and of time per mode,
 :func:`.likelihood.catch_all_gain`) beating every named candidate means the misfit has structure none
@@ -72,7 +74,11 @@ def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | No
     if not passing:
         return []
     best = passing[0]
-    tied = [c for c in passing if best.log_evidence_gain - c.log_evidence_gain <= tie_nats]
+    # the data cannot tell two candidates apart when their best fits are equally good (e.g. a uniform
+    # added mass and a uniform stiffness loss move every frequency alike): their evidences then differ
+    # only by their priors' volumes, which is no reason to name one of them
+    tied = [c for c in passing if best.log_evidence_gain - c.log_evidence_gain <= tie_nats
+            or abs(_fit_gain(best) - _fit_gain(c)) <= tie_nats]
     z = [math.exp(c.log_evidence_gain - best.log_evidence_gain) for c in tied]
     for c, zi in zip(tied, z, strict=True):
         c.tied_with = [o.label for o in tied if o is not c]
@@ -82,6 +88,10 @@ def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | No
         c.reasons.append(f"failed: {best.label} explains the same misfit better "
                          f"({best.log_evidence_gain - c.log_evidence_gain:.1f} nats)")
     return tied
+
+
+def _fit_gain(c: CandidateResult) -> float:
+    return float(c.extra.get("gain_at_map", c.log_evidence_gain))
 
 
 def _iv(iv: tuple[float, float] | None) -> str:

@@ -1,0 +1,98 @@
+"""`shm-ros explain`: what physics the nominal model is missing (docs/interfaces.md §5, docs/explain.md).
+
+    shm-ros explain --structure S.yaml (--modes TABLE.csv | --bag BAG) --out DIR [--window S]
+
+Calibrates the structure file's parameters on the tracked modes (``--bag``: identified and tracked
+first, as ``shm-ros update --bag``), analyses what remains (what it co-varies with, where it acts,
+modes no model mode can pair with), fits the candidate physics that the residuals point to,
+compares them by evidence with the nominal model and keeps those that clear the shipped threshold
+and improve the held-out windows. Writes ``DIR/verdict.json``, ``DIR/explain_series.json`` (the
+figures' numbers) and ``DIR/report.html``; prints the verdict.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.options import add_options
+    from shm_ros.core.explain.config import ExplainConfig
+
+    p = sub.add_parser("explain", help="locate the mismatch, name the missing physics, show the fit improve",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--structure", required=True, help="structure file (YAML, docs/interfaces.md §2)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--modes", help="tracked-modes table (CSV, docs/interfaces.md §4)")
+    src.add_argument("--bag", help="recording (rosbag2); identified and tracked first")
+    p.add_argument("--window", type=float, default=None, help="--bag: window length, s (default 600)")
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--no-report", action="store_true", help="skip report.html")
+    add_options(p.add_argument_group("explain (ExplainConfig; the explain node's parameters of the same names)"),
+                ExplainConfig)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
+    from shm_ros.commands.options import config_from_args
+    from shm_ros.core.explain.config import ExplainConfig
+    from shm_ros.core.explain.explain import explain
+    from shm_ros.core.models import build_model
+    from shm_ros.core.progress import Progress
+    from shm_ros.io.structure import load_structure
+    from shm_ros.io.verdict_files import write_verdict
+
+    out = Path(args.out)
+    try:
+        config = config_from_args(ExplainConfig, args)
+        spec = load_structure(args.structure)
+        if args.modes:
+            from shm_ros.io.tables import read_tracked_modes
+
+            obs = read_tracked_modes(args.modes)
+        else:
+            from shm_ros.io.tracked_source import tracked_observations_from_bag
+
+            model = build_model(spec)
+            observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
+            obs = tracked_observations_from_bag(
+                args.bag, spec, observed, args.window,
+                lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))
+        verdict = explain(obs, spec, config, progress=Progress("explain", every_s=2.0))
+    except Exception as exc:  # file, table, structure and model errors name their source
+        print(f"shm-ros explain: error: {exc}", file=sys.stderr)
+        return 2
+    cfg = asdict(config) | {"structure": args.structure, "modes": args.modes, "bag": args.bag}
+    path = write_verdict(out, verdict, cfg, getattr(config, "seed", None))
+    if not args.no_report:
+        from shm_ros.report.build import build_report
+        from shm_ros.report.inputs import ExplainInputs, ReportInputs
+
+        inputs = ReportInputs(title=f"shm_ros explain: {spec.name}")
+        inputs.explain = ExplainInputs.from_files(out)
+        inputs.facts["structure"] = args.structure
+        build_report(inputs, out)
+    print(format_verdict(verdict.to_dict()))
+    print(f"wrote {path}")
+    return 0
+
+
+def format_verdict(v: dict) -> str:
+    """A few lines for the terminal: mismatch summary, accepted physics, fit before / after."""
+    lines = [f"mismatch: {v['mismatch']['summary']}"]
+    if not v["missing_physics"]:
+        lines.append("missing physics: none (the nominal model explains the data)")
+    for i, m in enumerate(v["missing_physics"], 1):
+        where = f" at {m['where']}" if m.get("where") else ""
+        when = f" from {m['time']}" if m.get("time") else ""
+        lines.append(f"{i}. {m['name']}{where}{when}: {m['form']} (log evidence gain {m['log_evidence_gain']:.1f})")
+    f = v["fit"]
+    lines.append(f"frequency RMSE {f['before'].get('frequency_rmse_pct', float('nan')):.2f} % -> "
+                 f"{f['after'].get('frequency_rmse_pct', float('nan')):.2f} %; held out "
+                 f"{f['held_out']['before'].get('frequency_rmse_pct', float('nan')):.2f} % -> "
+                 f"{f['held_out']['after'].get('frequency_rmse_pct', float('nan')):.2f} %")
+    return "\n".join(lines)

@@ -1,0 +1,101 @@
+"""Scoring one explain verdict against its case's truth (the acceptance criteria of docs/explain.md).
+
+Per case: the right top name (the first entry other than ``unmodelled_modes``; a tie that the
+verdict reports, ``tied_with``, counts when the truth is among the tied names), its key parameter
+against the truth (knee within 1.5 degC, change window within 6 windows, spring / mass / slope /
+damper parameter within 25 %), the frequency RMSE at least halved (damping RMSE for
+``amplitude_dependent_damping``), the held-out windows improved; for ``unmodelled_modes`` at least
+3 of 4 of the out-of-class modes listed; for a clean case no entry other than ``unmodelled_modes``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+KNEE_C, WINDOWS, REL = 1.5, 6, 0.25
+
+
+@dataclass
+class Score:
+    name: str
+    top: str | None
+    top_ok: bool
+    checks: dict[str, bool] = field(default_factory=dict)
+    details: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.top_ok and all(self.checks.values())
+
+
+def _rel(a: float, b: float) -> bool:
+    return abs(a - b) <= REL * abs(b)
+
+
+def top_entry(v: dict[str, Any]) -> dict[str, Any] | None:
+    return next((m for m in v["missing_physics"] if m["name"] != "unmodelled_modes"), None)
+
+
+def parameter_checks(name: str, top: dict[str, Any], truth: Any, times: np.ndarray) -> dict[str, bool]:
+    """The key parameters of the top entry against the case's truth."""
+    p, t = top["parameters"], truth.parameters
+    out: dict[str, bool] = {}
+    if truth.knee_c is not None and "knee_c" in p:
+        out["knee"] = abs(p["knee_c"] - truth.knee_c) <= KNEE_C
+    if truth.change_index is not None and top.get("change_window") is not None:
+        out["time"] = abs(int(top["change_window"]) - int(truth.change_index)) <= WINDOWS
+    if name == "temperature_dependent_stiffness":
+        if t.get("form") == "bilinear" and "below_per_c" in p:
+            out["slope"] = _rel(p["below_per_c"] + p.get("alpha_per_c", 0.0), -t["scale"] * (1 + t["above_ratio"]))
+        elif "alpha_per_c" in p:
+            out["slope"] = _rel(p["alpha_per_c"], -t["scale"])
+    elif name == "amplitude_dependent_stiffness" and "softening_per_accel" in p:
+        out["slope"] = _rel(p["softening_per_accel"], t["scale"])
+    elif name == "amplitude_dependent_damping" and "damping_per_accel" in p:
+        out["slope"] = _rel(p["damping_per_accel"], 1.0 / t["accel_ref_m_s2"])
+    elif name == "added_mass" and "mass_fraction" in p:
+        out["mass"] = _rel(p["mass_fraction"], t["fraction"])
+    elif name == "support_flexibility":
+        if "ln_step" in p and t.get("mode") == "scour":
+            out["spring"] = _rel(float(np.expm1(p["ln_step"])), -t["scale"])
+        elif "frost_per_c" in p and t.get("mode") == "frozen":
+            out["spring"] = _rel(p["frost_per_c"], t["scale"])
+    elif name == "damper_stiffness":
+        if "after_factor" in p and t.get("mode") == "failure":
+            out["damper"] = _rel(1.0 - p["after_factor"], t["scale"])
+        elif "per_c" in p and t.get("mode") == "temperature":
+            out["damper"] = _rel(p["per_c"], -t["scale"])
+    return out
+
+
+def score(verdict: dict[str, Any], case: Any) -> Score:
+    truth = case.truth
+    name = truth.name
+    top = top_entry(verdict)
+    fit = verdict["fit"]
+    if name in ("clean", "unmodelled_modes"):
+        listed = {int(m["where"].split()[2]) for m in verdict["missing_physics"] if m["name"] == "unmodelled_modes"}
+        s = Score(name, top and top["name"], top is None)
+        oop = list(truth.out_of_plane_modes)
+        if name == "unmodelled_modes":
+            s.checks["listed"] = len(set(oop[:4]) & listed) >= min(3, len(oop[:4]))
+        s.details["listed"] = sorted(listed)
+        return s
+    names = [top["name"], *[lab.split("/")[0] for lab in top.get("tied_with", [])]] if top else []
+    s = Score(name, top and top["name"], name in names)
+    s.details["tied"] = top.get("tied_with", []) if top else []
+    if not s.top_ok or top is None:
+        return s
+    s.checks.update(parameter_checks(name, top, truth, case.obs.times))
+    key = "damping_rmse_pct" if name == "amplitude_dependent_damping" else "frequency_rmse_pct"
+    b, a = fit["before"].get(key), fit["after"].get(key)
+    if b is not None and a is not None:
+        s.checks["halved"] = a <= 0.5 * b
+    hb, ha = fit["held_out"]["before"].get(key), fit["held_out"]["after"].get(key)
+    if hb is not None and ha is not None:
+        s.checks["held_out"] = ha < hb
+    s.details.update(before=b, after=a, held_before=hb, held_after=ha, parameters=top["parameters"])
+    return s
