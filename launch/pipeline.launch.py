@@ -21,6 +21,7 @@ def generate_launch_description():
         Node(package="shm_ros", executable="identify", name="identify", parameters=[params_file], output="screen"),
         Node(package="shm_ros", executable="track", name="track", parameters=[params_file], output="screen"),
         Node(package="shm_ros", executable="update", name="update", parameters=[params_file], output="screen"),
+        Node(package="shm_ros", executable="predict", name="predict", parameters=[params_file], output="screen"),
         Node(package="shm_ros", executable="recorder", name="recorder", parameters=[params_file],
              output="screen"),
     ])

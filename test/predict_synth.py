@@ -91,16 +91,27 @@ def analysis_structure(simulated: dict[str, Any], err: tuple[float, float]) -> d
 
 def _true_drift(camp: Any, sw: Any, floors: tuple[int, ...]) -> np.ndarray:
     """Top-story drift (m) of the truth: its own linear system driven by the true ground motion
-    (the window's ambient start and unmeasured wind left out), read at the hidden sensors of the
-    two top floors (off the stiffness centre like every sensor: the drift there includes the twist)."""
+    (the window's ambient start and unmeasured wind left out), at the plan position of the top
+    floor's hidden sensor (off the stiffness centre like every sensor: the drift there includes the
+    story's twist). A story drift is the relative motion of two floors at one plan point: the floor
+    below is read at the top sensor's plan position too, not at its own (misplaced) sensor, whose
+    offset would add that floor's whole rotation times the two sensors' plan distance."""
     from dataclasses import replace
 
     n = max(floors)
     ids = list(sw.sensor_ids)
-    sys, _ = camp.truth_model.system(camp.factors(sw.index))
+    tm = camp.truth_model
+    top, below = ids.index(f"h{n}"), ids.index(f"h{n - 1}")
+    xy = tm.info["sensor_xy_m"]
+    saved = xy[below].copy()
+    xy[below] = xy[top]
+    try:
+        sys, _ = tm.system(camp.factors(sw.index))
+    finally:
+        xy[below] = saved
     disp = replace(sys, C=sys.shapes, D=np.zeros_like(sys.D), participation=None, residue=None)
     u = np.zeros((sw.accel.shape[0], sys.B.shape[1]))
     u[:, 0] = sw.accel[:, ids.index("g0")]
     x = disp.simulate(u, 1.0 / sw.fs)
-    rows = camp.truth_model.signal_rows()  # x, y, z rows per sensor: the measured direction's
-    return x[:, rows[ids.index(f"h{n}")]] - x[:, rows[ids.index(f"h{n - 1}")]]
+    rows = tm.signal_rows()  # x, y, z rows per sensor: the measured direction's
+    return x[:, rows[top]] - x[:, rows[below]]

@@ -36,7 +36,7 @@ def test_params_file_gives_every_node_the_parameters_it_has_under_shm_ros_run(tm
 
     cwd = _workdir(tmp_path)
     nodes = _nodes()
-    assert set(nodes) == {"ingest", "identify", "track", "update", "recorder"}
+    assert set(nodes) == {"ingest", "identify", "track", "update", "predict", "recorder"}
     graph = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", "pipeline.yaml", "--no-restart"],
                              cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                              start_new_session=True)

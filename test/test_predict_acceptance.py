@@ -11,15 +11,17 @@
    the top story's drift are compared with the simulator's truth.
 
 Seeds: SHM_FULL=1 pools 10 seeds and applies the issue's criteria to the pooled values; measured
-there (truth eccentricity 1-2 % of the plan): median updated NRMS 7.1 % (limit 20 %), updated/nominal
-at most 0.56 (limit < 1), strong-motion coverage 0.913 (limits 0.80-0.99), peaks inside 0.908 (limit
-0.80), floor 5 / drift NRMS at most 21.0 % (limit 20 %: so the full size fails this criterion by
-1 point on its worst value; which seed and event that is has not been traced yet).
-CI runs seed 0 alone: median NRMS 8.7 %, updated/nominal at most 0.56, coverage 0.897, peaks 10 of 12,
-floor 5 / drift at most 14.0 %. The NRMS, ratio and
+there (truth eccentricity 1-2 % of the plan; joint likelihood with the AR(2) residual model; unmeasured
+floors expanded): median updated NRMS 9.1 % (limit 20 %), updated/nominal at most 0.61 (limit < 1),
+strong-motion coverage 0.896 (limits 0.80-0.99), peaks inside 0.900 (limit 0.80), floor 5 / drift
+NRMS at most 16.2 % (limit 20 %). The truth's top-story drift is read at one plan point (the top
+hidden sensor's): differencing the two top hidden sensors at their own, misplaced, plan positions
+added floor 7's whole rotation times their 0.1-1 m plan distance (seed 7: 17.7 % of the drift) and
+made the worst value 21.0 %.
+CI runs seed 0 alone (see the printed line for its numbers). The NRMS, ratio and
 hidden-floor criteria keep their limits. The peak criterion counts 12 peaks (4 channels x 3
-events): at the rate 0.833 measured before the truth's eccentricity was reduced (the lower of the
-two), P(fewer than 7 of 12 inside) = 0.008 (binomial), so CI asks for >= 7 of 12, which a correct
+events): at the rate 0.833 measured before the truth's eccentricity was reduced (the lowest seen),
+P(fewer than 7 of 12 inside) = 0.008 (binomial), so CI asks for >= 7 of 12, which a correct
 method passes with probability 0.99. The coverage limits 0.80-0.99 are kept (seed 0 pools ~8000
 strong-motion samples).
 """
@@ -131,7 +133,8 @@ def test_calibrated_prediction_of_other_events(seeds):
     peaks = np.mean(np.concatenate([r["peaks"] for r in res]))
     hidden = np.concatenate([r["hidden"] for r in res])
     print(f"median NRMS {np.median(nrms):.2f} %, max updated/nominal {ratio.max():.3f}, strong coverage "
-          f"{coverage:.3f}, peaks inside {peaks:.3f}, floor 5 / drift NRMS max {hidden.max():.2f} %")
+          f"{coverage:.3f}, peaks inside {peaks:.3f}, NRMS max floor 5 {hidden[0::2].max():.2f} %, "
+          f"top drift {hidden[1::2].max():.2f} %")
     assert np.median(nrms) <= 20.0
     assert np.all(ratio < 1.0)
     assert 0.80 <= coverage <= 0.99

@@ -77,13 +77,20 @@ class PredictNode(Node):
         from shm_ros.io.structure import load_structure
 
         self.structure: str = self.settings.structure
-        build_model(load_structure(self.structure))  # a bad file stops the node at once
+        model = build_model(load_structure(self.structure))  # a bad file stops the node at once
+        # a structure without a measured input ('input'/'inputs') has nothing to drive a prediction
+        # with: the node stays up (a graph may list it for every structure) and predicts nothing
+        self.enabled = bool(model.inputs)
+        if not self.enabled:
+            self.get_logger().info(f"structure {self.structure} declares no measured input ('input'/'inputs'): "
+                                   "predictions are off, windows are ignored")
         self.windows: OrderedDict[str, Any] = OrderedDict()
         self.queue: deque = deque()
         self.future: Future | None = None
         self.done = 0
         self.diag = Diagnostics(self, "predict", summary=lambda: (
-            "ok", f"{self.done} predictions, {len(self.queue)} waiting", {"predicted": self.done}))
+            "ok", f"{self.done} predictions, {len(self.queue)} waiting" if self.enabled
+            else "off: the structure declares no measured input", {"predicted": self.done}))
         self.pub: Publisher[Any] = self.create_publisher(topics.message_class(topics.TYPES[topics.PREDICTION]),
                                          topics.PREDICTION, stream_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS,
@@ -93,7 +100,7 @@ class PredictNode(Node):
         self.create_subscription(topics.message_class("std_msgs/msg/String"), REQUEST, self._on_request,
                                  stream_qos())
         self._workers: set = set()
-        self.pool = self._new_pool()
+        self.pool: ProcessPoolExecutor | None = self._new_pool() if self.enabled else None
         steady_timer(self, 0.1, self._poll)
 
     def _new_pool(self) -> ProcessPoolExecutor:
@@ -105,7 +112,8 @@ class PredictNode(Node):
         return pool
 
     def destroy_node(self) -> None:
-        self.pool.shutdown(wait=False, cancel_futures=True)
+        if self.pool is not None:
+            self.pool.shutdown(wait=False, cancel_futures=True)
         for proc in self._workers:
             if proc.is_alive():
                 proc.terminate()
@@ -113,6 +121,8 @@ class PredictNode(Node):
         super().destroy_node()
 
     def _on_window(self, msg: Any) -> None:
+        if not self.enabled:
+            return
         w = window_from_msg(msg)
         self.windows[w.window_id] = w
         while len(self.windows) > max(1, self.settings.keep_windows):
@@ -123,7 +133,8 @@ class PredictNode(Node):
     def _on_request(self, msg: Any) -> None:
         w = self.windows.get(str(msg.data))
         if w is None:
-            self.diag.report("warn", f"request for window {msg.data!r}: not among the last windows", "request")
+            why = "predictions are off (no measured input)" if not self.enabled else "not among the last windows"
+            self.diag.report("warn", f"request for window {msg.data!r}: {why}", "request")
         else:
             self.queue.append(w)
 
@@ -143,7 +154,7 @@ class PredictNode(Node):
                 self.diag.report("ok", f"{pred.window_id}: NRMS floor 4 {row.get('accel_floor4')}, "
                                  f"floor 8 {row.get('accel_floor8')}", "prediction")
             self.diag.publish()
-        if self.future is None and self.queue:
+        if self.future is None and self.queue and self.pool is not None:
             w = self.queue.popleft()
             self.future = self.pool.submit(predict_worker.run, w, self.config, self.settings.posterior)
 

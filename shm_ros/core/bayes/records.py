@@ -1,10 +1,13 @@
 """One time-domain likelihood over several records (events) at once.
 
-Calibrating on several earthquakes is one likelihood: the records are independent given theta and
-share the prediction-error variance of each channel, so the per-channel sums of squares and sample
-counts simply add up (marginalised or sampled as in :mod:`.timedomain`). The responses of a batch
-of parameter sets (an ensemble sampler's walkers) are computed together
-(:func:`shm_ros.core.predict.batch.batch_responses`: one discretisation per set).
+Calibrating on several earthquakes is one likelihood: the records are independent given theta, so
+it is built from one :class:`~.timedomain.TimeDomainLikelihood` per record (the same residual
+model: an AR(p) per channel whose coefficients each record fixes once at the white-noise MAP,
+``fix_ar``). The records share the prediction-error variance of each channel, so their innovation
+sums of squares and counts add up before the variance is marginalised or sampled (as in
+:mod:`.timedomain`). The responses of a batch of parameter sets (an ensemble sampler's walkers)
+are computed together (:func:`shm_ros.core.predict.batch.batch_responses`: one discretisation per
+set) and handed to each record's likelihood.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from .likelihoods import (
     log_variance_initial,
     log_variance_logprior,
 )
-from .timedomain import AccelerationRecord
+from .timedomain import AccelerationRecord, TimeDomainLikelihood
 
 
 @dataclass
@@ -50,26 +53,27 @@ class RecordSet:
 
 
 class JointTimeDomainLikelihood:
-    """The time-domain likelihood of a :class:`RecordSet` (same interface as ``TimeDomainLikelihood``)."""
+    """The time-domain likelihood of a :class:`RecordSet` (same interface as ``TimeDomainLikelihood``):
+    the per-record likelihoods in :attr:`parts`, their innovation sums of squares pooled per channel."""
 
     def __init__(self, model: AffineModel, data: RecordSet, *, variance: str = "marginal",
-                 error_prior_shape: float = 1.0, error_guess: float = 0.1, chunk: int = 64):
+                 error_prior_shape: float = 1.0, error_guess: float = 0.1, ar_order: int = 2, chunk: int = 64):
         if variance not in ("marginal", "sampled"):
             raise ValueError(f"variance must be 'marginal' or 'sampled', got {variance!r}")
-        known = set(model.sensor_rows) | set(model.sensor_dofs)
-        missing = [c for c in data.channel_ids if c not in known]
-        if missing:
-            raise ValueError(f"channel(s) {missing} of the records are not output sensors of model '{model.name}'")
         from shm_ros.core.response import sensor_outputs
 
+        self.parts = [TimeDomainLikelihood(model, r, variance=variance, error_prior_shape=error_prior_shape,
+                                           error_guess=error_guess, ar_order=ar_order) for r in data.records]
         self.model, self.data, self.variance, self.chunk = model, data, variance, chunk
+        self.ar_order = int(ar_order)
         self.outputs = sensor_outputs(model, data.channel_ids)
         self.n = sum(r.outputs.shape[0] for r in data.records)
         y2 = sum(np.sum(r.outputs ** 2, axis=0) for r in data.records)
         self.rms = np.sqrt(y2 / self.n)
         rms = np.where(self.rms > 0, self.rms, 1.0)
+        # one variance per channel for all records: its prior from the pooled RMS
         self.priors = [InverseGamma.weak(error_guess * r, error_prior_shape) for r in rms]
-        self.variance_names = [f"sigma2_accel_{c}" for c in data.channel_ids]
+        self.variance_names = list(self.parts[0].variance_names)
         self.extra_names = [f"log_{n}" for n in self.variance_names] if variance == "sampled" else []
         self.n_theta = model.n_parameters
 
@@ -77,15 +81,34 @@ class JointTimeDomainLikelihood:
     def n_extra(self) -> int:
         return len(self.extra_names)
 
-    def residual_ss(self, thetas: np.ndarray) -> np.ndarray:
-        """(B, channels) sums of squared residuals over every record."""
+    @property
+    def n_innovations(self) -> int:
+        return sum(p.n_innovations for p in self.parts)
+
+    @property
+    def ar_coef(self) -> list[np.ndarray] | None:
+        """Every record's AR coefficients once fixed (:meth:`fix_ar`), else None."""
+        coefs = [p.ar_coef for p in self.parts]
+        return None if any(c is None for c in coefs) else [c for c in coefs if c is not None]
+
+    def fix_ar(self, theta: np.ndarray) -> None:
+        """Each record's residual AR model, estimated once at ``theta`` (the white-noise MAP)."""
+        for p in self.parts:
+            p.fix_ar(theta)
+
+    def _responses(self, thetas: np.ndarray, record: AccelerationRecord):
         from shm_ros.core.predict.batch import batch_responses
 
-        thetas = np.atleast_2d(thetas)
+        return batch_responses(self.model, thetas, record.inputs, record.dt, self.outputs, chunk=self.chunk)
+
+    def residual_ss(self, thetas: np.ndarray) -> np.ndarray:
+        """(B, channels) innovation sums of squares, summed over the records."""
+        thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
         ss = np.zeros((thetas.shape[0], len(self.outputs)))
-        for r in self.data.records:
-            for a, Y in batch_responses(self.model, thetas, r.inputs, r.dt, self.outputs, chunk=self.chunk):
-                ss[a:a + Y.shape[0]] += np.sum((Y - r.outputs.T[None]) ** 2, axis=2)
+        for part in self.parts:
+            for a, Y in self._responses(thetas, part.record):
+                for b in range(Y.shape[0]):
+                    ss[a + b] += part.innovation_ss(Y[b].T)
         return ss
 
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
@@ -101,27 +124,28 @@ class JointTimeDomainLikelihood:
         if not ok.any():
             return out
         ss = self.residual_ss(x[ok, :self.n_theta])
+        N = self.n_innovations
         if self.variance == "marginal":
-            out[ok] = sum(ig_marginal_loglik(ss[:, j], self.n, p) for j, p in enumerate(self.priors))
+            out[ok] = sum(ig_marginal_loglik(ss[:, j], N, p) for j, p in enumerate(self.priors))
         else:
             s2 = np.exp(x[ok, self.n_theta:])
-            out[ok] = np.sum(-0.5 * self.n * np.log(2 * np.pi * s2) - 0.5 * ss / s2, axis=1)
+            out[ok] = np.sum(-0.5 * N * np.log(2 * np.pi * s2) - 0.5 * ss / s2, axis=1)
         return out
 
     def variance_estimates(self, theta: np.ndarray) -> dict[str, float]:
         ss = self.residual_ss(np.asarray(theta, dtype=float))[0]
-        return {n: float(ig_posterior_mean(s, self.n, p))
+        N = self.n_innovations
+        return {n: float(ig_posterior_mean(s, N, p))
                 for n, s, p in zip(self.variance_names, ss, self.priors, strict=True)}
 
     def fit(self, theta: np.ndarray) -> dict:
         """NRMS per channel over all records (the building paper's eq. 28), and each channel's RMS."""
-        from shm_ros.core.predict.batch import batch_responses
         from shm_ros.core.predict.signals import strong_motion
 
         th = np.atleast_2d(np.asarray(theta, dtype=float))
         ss, ss_s, y2_s = (np.zeros(len(self.outputs)) for _ in range(3))
         for r in self.data.records:
-            res = next(batch_responses(self.model, th, r.inputs, r.dt, self.outputs))[1][0] - r.outputs.T
+            res = next(self._responses(th, r))[1][0] - r.outputs.T
             s = strong_motion(r.inputs[0])
             ss += np.sum(res ** 2, axis=1)
             ss_s += np.sum(res[:, s] ** 2, axis=1)

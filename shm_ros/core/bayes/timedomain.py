@@ -162,8 +162,13 @@ class TimeDomainLikelihood:
     def residual_ss(self, theta: np.ndarray) -> np.ndarray:
         """Per channel: the sum of squared innovations of the residual's AR(p) model, whose
         coefficients are held fixed (:meth:`fix_ar`; zero, i.e. white, until then)."""
+        return self.innovation_ss(self.predict(theta))
+
+    def innovation_ss(self, predicted: np.ndarray) -> np.ndarray:
+        """Per channel: the sum of squared innovations of ``outputs - predicted`` ((N, c), e.g. one
+        of a batch of responses computed elsewhere) under the fixed AR coefficients."""
         coef = self.ar_coef if self.ar_coef is not None else np.zeros((len(self.record.channel_ids), self.ar_order))
-        return ar_innovation_ss(self.record.outputs - self.predict(theta), self.ar_order, coef)
+        return ar_innovation_ss(self.record.outputs - predicted, self.ar_order, coef)
 
     def fix_ar(self, theta: np.ndarray) -> None:
         """Estimate the residual's AR coefficients once, at ``theta`` (the white-noise MAP), and keep

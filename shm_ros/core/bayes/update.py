@@ -30,6 +30,7 @@ from .model_error import ModelErrorLikelihood
 from .observations import ModalObservations
 from .pairing import DEFAULT_MAC_GATE, ModePairing, PairingGate, UnmodelledMode, pair_with_model, select_modes
 from .priors import JointPrior, Prior, PriorError, priors_from_specs
+from .records import JointTimeDomainLikelihood
 from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance, run_sampler
 from .timedomain import TimeDomainLikelihood
 
@@ -279,12 +280,12 @@ def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig, *, pre
     passes its gated pairing and the data restricted to the paired modes).
     """
     if config.likelihood == "time":
-        from .records import JointTimeDomainLikelihood, RecordSet
+        from .records import RecordSet
         from .timedomain import AccelerationRecord, TimeDomainLikelihood
 
         if isinstance(data, RecordSet):  # several events, one joint likelihood
-            return JointTimeDomainLikelihood(model, data, variance=config.variance,
-                                             error_prior_shape=config.ig_shape), None
+            return JointTimeDomainLikelihood(model, data, variance=config.variance, error_prior_shape=config.ig_shape,
+                                             ar_order=config.residual_ar_order), None
 
         if not isinstance(data, AccelerationRecord):
             raise TypeError("likelihood 'time' needs an AccelerationRecord (input and output "
@@ -395,7 +396,8 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
         scale = np.concatenate([prior_std, np.ones(n_extra)])
         x_map, lp_map = find_map(log_post, starts, scale, seed=config.seed)
-        if attempt == 0 and isinstance(lik, TimeDomainLikelihood) and lik.ar_order and lik.ar_coef is None:
+        if attempt == 0 and isinstance(lik, TimeDomainLikelihood | JointTimeDomainLikelihood) and lik.ar_order \
+                and lik.ar_coef is None:
             # time domain: the residual's AR model is estimated once, at the white-noise MAP
             lik.fix_ar(x_map[:d])
             starts_theta = np.vstack([x_map[None, :d], starts_theta])

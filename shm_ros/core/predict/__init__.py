@@ -11,7 +11,7 @@ uncertainty, at measured and unmeasured floors (docs/predict.md, docs/interfaces
 """
 
 from .batch import batch_responses
-from .config import Baseline, PredictConfig
+from .config import Baseline, PredictConfig, Unmeasured
 from .draws import PosteriorDraws, draws_from_posterior, nominal_draws
 from .predict import ChannelPrediction, EventPrediction, predict_event, prediction_outputs
 from .record import EventRecord, event_from_window
@@ -19,4 +19,4 @@ from .scores import event_json, format_table3, summary_json, table3_row
 
 __all__ = ["Baseline", "ChannelPrediction", "EventPrediction", "EventRecord", "PosteriorDraws", "PredictConfig",
            "batch_responses", "draws_from_posterior", "event_from_window", "event_json", "format_table3",
-           "nominal_draws", "predict_event", "prediction_outputs", "summary_json", "table3_row"]
+           "Unmeasured", "nominal_draws", "predict_event", "prediction_outputs", "summary_json", "table3_row"]

@@ -15,6 +15,13 @@ class Baseline(enum.StrEnum):
     LINEAR = "linear"  # a straight line fitted to the pre-event part (offset and slow drift)
 
 
+class Unmeasured(enum.StrEnum):
+    """How accelerations at unmeasured floors are predicted (see :mod:`.expansion`)."""
+
+    MODEL = "model"  # the model's output alone
+    EXPANDED = "expanded"  # the model's output plus the measured residual expanded on its mode shapes
+
+
 @dataclass
 class PredictConfig:
     """Every field has a default; all are plain data."""
@@ -31,11 +38,15 @@ class PredictConfig:
     envelope_s: float = option(2.0, "window of the local mean square that scales the model error in time")
     relative_error: float = option(0.1, "model error relative to the response RMS when the posterior "
                                    "carries no time-domain calibration (modal posterior, nominal model)")
+    unmeasured: str = option(Unmeasured.EXPANDED.value, "unmeasured floors' accelerations: the model's output "
+                             "alone, or plus the measured floors' residual expanded on the model's mode shapes",
+                             choices=Unmeasured)
     chunk: int = option(32, "draws simulated at once (memory: chunk x states x samples complex values)")
     threads: int = option(1, "threads simulating chunks of draws concurrently (the numbers do not depend on it)")
 
     def validate(self) -> PredictConfig:
         check_choice("predict", "baseline", self.baseline, Baseline)
+        check_choice("predict", "unmeasured", self.unmeasured, Unmeasured)
         if self.n_draws < 0:
             raise ValueError(f"predict: n_draws must be >= 0, got {self.n_draws}")
         if not 0.0 < self.level < 1.0:

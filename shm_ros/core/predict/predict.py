@@ -6,9 +6,11 @@ window's start after the baseline correction of every record (:mod:`.signals`). 
 posterior-predictive distribution of a channel at a sample is the mixture over draws of
 ``N(y_draw(t), sigma_draw^2(t))`` (error model: :mod:`.draws`); its mean and variance are exact
 and the band is mean +- z std. Peak intervals are quantiles of each draw's peak of
-``y_draw + e_draw`` plus one error draw at its time (see ``_noisy_peaks``). Unmeasured floors and interstory drifts
-are outputs of the same model (every floor is a DOF of the full model, so no expansion is needed);
-drifts are model displacements consistent with the measured input, never integrated records.
+``y_draw + e_draw`` plus one error draw at its time (see ``_noisy_peaks``). Unmeasured floors and
+interstory drifts are outputs of the same model (every floor is a DOF of the full model); with
+``unmeasured: expanded`` (default) the unmeasured floors' accelerations also get the measured
+floors' residual expanded on the model's mode shapes (:mod:`.expansion`), the same for every draw.
+Drifts are model displacements consistent with the measured input, never integrated records.
 """
 
 from __future__ import annotations
@@ -23,8 +25,9 @@ from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import Output, Quantity, drift_outputs, node_row, sensor_outputs
 
 from .batch import batch_responses, single_blas_thread
-from .config import PredictConfig
+from .config import PredictConfig, Unmeasured
 from .draws import PosteriorDraws, nominal_draws
+from .expansion import expansion_matrix
 from .record import EventRecord
 from .signals import baseline_correct, local_mean_square, nrms_pct, pre_event_end, strong_motion
 
@@ -117,6 +120,8 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
 
     y_nom = one(model.nominal_theta())
     y_map = one(draws.theta_map)
+    hidden, corr = _expanded_residual(model, draws.theta_map, spec, nm, y, y_map, cfg)
+    y_map[hidden] += corr
     # error model (see .draws): floor from the pre-event residual, relative part in time
     s0 = np.zeros(len(outs))
     for c in range(nm):
@@ -133,6 +138,7 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     S2 = np.zeros((len(outs), N))
     peaks = np.empty((draws.n, len(outs)))
     for a, Y in batch_responses(model, draws.theta, u, dt, outs, chunk=cfg.chunk, threads=cfg.threads):
+        Y[:, hidden] += corr[None]
         S1 += Y.sum(axis=0)
         S2 += np.einsum("bon,bon->on", Y, Y)
         peaks[a:a + Y.shape[0]] = _noisy_peaks(Y, s0, rel2[a:a + Y.shape[0]], lms, rng)
@@ -155,6 +161,23 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
         channels.append(ch)
     return EventPrediction(record.window_id, record.start_ns, fs, record.pga_m_s2, record.is_event, channels,
                            strong, n_pre, draws.n, draws.source, list(record.notes) + list(draws.notes))
+
+
+def _expanded_residual(model: AffineModel, theta: np.ndarray, spec: list[tuple[Output, str]], nm: int,
+                       y: np.ndarray, y_map: np.ndarray, cfg: PredictConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the unmeasured acceleration outputs and the correction (k, N) they get: the
+    residual of the measured channels recorded everywhere, expanded on the model's mode shapes
+    (:mod:`.expansion`); none with ``unmeasured: model``."""
+    N = y.shape[0]
+    hidden = np.array([c for c in range(nm, len(spec)) if spec[c][1] == "acceleration"], dtype=int)
+    full = [c for c in range(nm) if np.all(np.isfinite(y[:, c]))]
+    if Unmeasured(cfg.unmeasured) == Unmeasured.MODEL or not full or not hidden.size:
+        return np.zeros(0, dtype=int), np.zeros((0, N))
+    rows = np.stack([o.row for o, _ in spec])
+    if np.any(rows[full + hidden.tolist(), -1] != 0):  # a channel reading the ground: no mode shape
+        return np.zeros(0, dtype=int), np.zeros((0, N))
+    T = expansion_matrix(model, theta, rows[full, :-1], rows[hidden, :-1])
+    return hidden, T @ (y[:, full].T - y_map[full])
 
 
 def _noisy_peaks(Y: np.ndarray, s0: np.ndarray, rel2: np.ndarray, lms: np.ndarray,
