@@ -76,6 +76,7 @@ class CaseTruth:
     in_plane_modes: list[int] = field(default_factory=list)
     change_index: int | None = None  # first window after a step / the start of an "after" window
     knee_c: float | None = None
+    second: CaseTruth | None = None  # a second effect (``draw_case(..., second_step=True)``)
 
 
 @dataclass
@@ -90,8 +91,13 @@ class Case:
     factors: list[dict[str, float]]  # per window, the truth's group factors
 
 
-def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_windows: int = 864) -> Case:
-    """One random case (``effect``/``kind`` drawn when not given; damper_stiffness is a building)."""
+def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_windows: int = 864,
+              form: str | None = None, second_step: bool = False) -> Case:
+    """One random case (``effect``/``kind`` drawn when not given; damper_stiffness is a building).
+
+    ``form`` fixes a temperature effect's form (linear / bilinear); ``second_step`` adds, after the
+    drawn effect, a stiffness loss of one span / story (or all) at a window in the last 40 % of the
+    campaign, moving the most affected in-plane mode by 1.5-4 % (``truth.second``)."""
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(4242,)))
     effect = effect or str(rng.choice(EFFECTS))
     if effect not in EFFECTS:
@@ -175,7 +181,7 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
     spec: dict[str, Any] = {}
     if effect == "temperature_dependent_stiffness":
         group = "EI" if (kind == "building" or rng.uniform() < 0.7) else f"EI:{int(rng.integers(1, n_units + 1))}"
-        form = str(rng.choice(["linear", "bilinear"]))
+        form = form or str(rng.choice(["linear", "bilinear"]))
         spec = {"group": group, "form": form}
         if form == "bilinear":
             knee = float(np.quantile(temp_true, rng.uniform(0.3, 0.6)))
@@ -305,6 +311,21 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
         factors = factors_for(scale)
         f_true, z_true, phi_true = _table_truth(solve, factors)
         size = measure(f_true[:, :n_ip])
+    if second_step:  # a later stiffness loss on top of the drawn effect
+        srng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(4244,)))
+        g2 = f"EI:{int(srng.integers(1, n_units + 1))}" if srng.uniform() < 0.7 else "EI"
+        at2 = int(srng.integers(int(0.6 * W), int(0.85 * W)))
+        target2 = float(srng.uniform(1.15 * MIN_STEP, 0.04))
+        f0 = solve({})[0][:n_ip]
+        s2 = 2 * target2
+        for _ in range(4):  # the loss's own size at the nominal conditions
+            got = float(np.max(np.abs(np.log(solve({g2: 1.0 - s2})[0][:n_ip] / f0))))
+            s2 = min(0.8, s2 * target2 / max(got, 1e-6))
+        for i in range(at2, W):
+            factors[i] = {**factors[i], g2: factors[i].get(g2, 1.0) * (1.0 - s2)}
+        f_true, z_true, phi_true = _table_truth(solve, factors)
+        truth.second = CaseTruth("stiffness_change_at_time", g2, {"scale": s2, "direction": -1.0}, size=target2,
+                                 change_index=at2)
     if effect == "added_mass":
         size = _ptp_size(f_true[:, :n_ip], None)
     truth.size = float(size)

@@ -239,6 +239,51 @@ class _Job:
         return self.lik.gain(d, dd)
 
 
+class _OnTop(Candidate):
+    """A candidate fitted on top of effects already accepted, those held at their MAP (the second
+    round): its evidence gain over them is ln Z(new | accepted) - ln L(accepted at their MAP).
+    Holding the accepted effects fixed is the approximation that keeps this as cheap as a first-round
+    fit; they are determined far better than the new, smaller effect."""
+
+    def __init__(self, new: Candidate, fixed: list[tuple[Candidate, np.ndarray]]):
+        super().__init__(new.group, new.context)
+        self.new, self.fixed = new, fixed
+        self.vocabulary = new.vocabulary  # type: ignore[misc]  # the instance speaks for the new effect
+        self.name = new.name  # type: ignore[misc]
+        self.explanation = new.explanation  # type: ignore[misc]
+
+    @property
+    def label(self) -> str:
+        return self.new.label
+
+    def params(self) -> list[ParamSpec]:
+        return self.new.params()
+
+    def modify(self, theta: np.ndarray):
+        from .candidates.base import Modification
+
+        m = self.new.modify(theta)
+        B = np.atleast_2d(theta).shape[0]
+        groups = {g: np.array(x, dtype=float) for g, x in m.groups.items()}
+        damping = None if m.damping is None else np.array(m.damping, dtype=float)
+        for cand, th in self.fixed:
+            f = cand.modify(th[None])
+            for g, x in f.groups.items():
+                groups[g] = groups[g] * x if g in groups else np.repeat(x, B, axis=0)
+            if f.damping is not None:
+                damping = f.damping.repeat(B, axis=0) if damping is None else damping * f.damping
+        return Modification(groups, damping)
+
+    def form(self, theta: np.ndarray) -> str:
+        return self.new.form(theta)
+
+    def time(self, theta: np.ndarray) -> float | None:
+        return self.new.time(theta)
+
+    def key_parameter(self) -> str:
+        return self.new.key_parameter()
+
+
 def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch: float) -> CandidateResult:
     c = job.cand
     d_all, _ = job.deltas(fr.theta_map)
@@ -258,6 +303,77 @@ def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoc
     if t0 is not None:
         res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, t0))
     return res
+
+
+# -- second round: more effects on top of the accepted ones --------------------------------------------
+
+MAX_EFFECTS = 3
+
+
+def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config,
+                  say) -> tuple[list[CandidateResult], FitScores, FitScores]:
+    """Greedy forward selection: every other candidate that cleared the threshold alone is refitted on
+    top of the effects accepted so far (held at their MAP); the best one is accepted when its gain
+    over them clears the same threshold, it improves the held-out windows further and its key
+    parameter excludes the null; repeated up to ``MAX_EFFECTS`` effects. Candidates tied with an
+    accepted one, or of the same name and group, are not tried again."""
+    best = accepted[0]
+    fixed = [(jobs[best.label][0].cand, jobs[best.label][1].theta_map)]
+    base_gain = float(jobs[best.label][1].gain_map)
+    done = {best.label, *best.tied_with}
+    fit_after = best.fit_after or FitScores(float("nan"))
+    held_after = best.held_out_after or FitScores(float("nan"))
+    out: list[CandidateResult] = []
+    pool = [c for c in tried if c.label not in done and c.log_evidence_gain > threshold]
+    by_label = {p.candidate + "/" + p.group: p for p in proposals}
+    for _ in range(MAX_EFFECTS - 1):
+        results = []
+        for i, c in enumerate(pool):
+            job0 = jobs[c.label][0]
+            say(f"fit {c.label} on top of {len(fixed)} effect(s)", 0.9)
+            cand = _OnTop(job0.cand, fixed)
+            job = _Job(cand, sur, lik, train)
+            fr = fit(job.gain, job.specs, seed=config.seed + 100 + i, n_is=config.n_importance,
+                     sensitivity=False)
+            res = _result(job, fr, r_all, train, epoch)
+            res.log_evidence_gain = float(fr.evidence.log_z - base_gain)
+            res.extra.update({"on_top_of": [f[0].label for f in fixed], "gain_over_nominal": float(fr.evidence.log_z)})
+            results.append((res, job, fr))
+        if not results:
+            break
+        results.sort(key=lambda t: -t[0].log_evidence_gain)
+        res, job, fr = results[0]
+        key = job.cand.key_parameter()
+        null = next(sp.null for sp in job.specs if sp.name == key)
+        from .select import null_excluded
+
+        held = res.held_out_after.frequency_rmse_pct if res.held_out_after else math.inf
+        ok = (res.log_evidence_gain > threshold and held < held_after.frequency_rmse_pct
+              and null_excluded(res, key, null))
+        res.reasons = [f"{'passed' if res.log_evidence_gain > threshold else 'failed'}: evidence gain "
+                       f"{res.log_evidence_gain:.1f} nats on top of {', '.join(res.extra['on_top_of'])} vs "
+                       f"threshold {threshold:.1f}",
+                       f"{'passed' if held < held_after.frequency_rmse_pct else 'failed'}: held-out frequency "
+                       f"RMSE {held:.3f} % vs {held_after.frequency_rmse_pct:.3f} % without it"]
+        if not ok:
+            break
+        res.accepted = True
+        if config.nested_check:  # the second estimator, of the gain over nominal, less the same base
+            chk, err = nested_check(job.gain, Box(job.specs), config.n_live, config.seed + 200)
+            res.log_evidence_gain_check = float(chk - (res.extra["gain_over_nominal"] - res.log_evidence_gain))
+            tol = max(0.5, 3.0 * math.hypot(res.log_evidence_gain_err, err))
+            res.extra.update({"check_method": "nested sampling (dynesty)", "check_err": err,
+                              "check_agrees": bool(abs(res.log_evidence_gain_check - res.log_evidence_gain) <= tol)})
+        res.extra["proposal_reason"] = getattr(by_label.get(res.label.split("/", 1)[1] if "/" in res.label else ""),
+                                               "reason", "")
+        out.append(res)
+        tried.append(res)
+        fixed.append((job.cand.new, fr.theta_map))  # type: ignore[attr-defined]
+        base_gain = float(fr.gain_map)
+        fit_after, held_after = res.fit_after or fit_after, res.held_out_after or held_after
+        same = {(c.name, c.where) for c in [best, *out]}
+        pool = [c for c in pool if c.label != res.label and (c.name, c.where) not in same]
+    return out, fit_after, held_after
 
 
 # -- entry point -------------------------------------------------------------------------------------
@@ -322,26 +438,7 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
                                  f"exceeds {config.surrogate_tolerance:.0e}")
         tried.append(res)
         jobs[res.label] = (job, fr)
-    catch = None
-    unexplained = None
-    if config.catch_all:
-        basis, names = catch_all_basis(context)
-        per_mode, fitted = catch_all_gain(r_all[train], basis[train], config.noise_guess)
-        catch = float(per_mode.sum())
-        best_named = max((c.log_evidence_gain for c in tried), default=-math.inf)
-        if catch > threshold and catch > best_named:
-            strong = [base.mode_numbers[k] for k in np.argsort(per_mode)[::-1] if per_mode[k] > threshold]
-            amp = np.nanmax(np.abs(fitted), axis=1)
-            tt = times_s[train]
-            hot = tt[amp >= np.nanquantile(amp, 0.9)] if np.isfinite(amp).any() else tt
-            unexplained = {"modes": strong, "log_evidence_gain": catch, "best_named_gain": best_named,
-                           "when": {"from": _iso(epoch, float(hot.min())) if epoch else float(hot.min()),
-                                    "to": _iso(epoch, float(hot.max())) if epoch else float(hot.max())},
-                           "basis": names,
-                           "summary": (f"structured misfit in modes {strong} that no candidate explains "
-                                       f"(smooth function of covariates and time: {catch:.1f} nats vs best "
-                                       f"named {best_named:.1f})")}
-    accepted = decide(tried, keys, threshold, held_before.frequency_rmse_pct, catch, config.tie_nats)
+    accepted = decide(tried, keys, threshold, held_before.frequency_rmse_pct, None, config.tie_nats)
     if config.nested_check:  # the second, independent estimator for every accepted candidate
         for i, c in enumerate(accepted):
             say(f"evidence check of {c.label}", 0.95)
@@ -357,6 +454,38 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     if accepted:
         fit_after = accepted[0].fit_after or fit_before
         held_after = accepted[0].held_out_after or held_before
+    if accepted and config.second_round:
+        more_accepted, fit_after, held_after = _more_effects(
+            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config, say)
+        accepted += more_accepted
+    catch = None
+    unexplained = None
+    if config.catch_all:
+        basis, names = catch_all_basis(context)
+        per_mode, fitted = catch_all_gain(r_all[train], basis[train], config.noise_guess)
+        catch = float(per_mode.sum())
+        # the named model: the accepted effects together (each one's gain is over those before it)
+        best_named = (sum(c.log_evidence_gain for c in [accepted[0], *accepted[1 + len(accepted[0].tied_with):]])
+                      if accepted else max((c.log_evidence_gain for c in tried), default=-math.inf))
+        if catch > threshold and catch > best_named:
+            strong = [base.mode_numbers[k] for k in np.argsort(per_mode)[::-1] if per_mode[k] > threshold]
+            amp = np.nanmax(np.abs(fitted), axis=1)
+            tt = times_s[train]
+            hot = tt[amp >= np.nanquantile(amp, 0.9)] if np.isfinite(amp).any() else tt
+            unexplained = {"modes": strong, "log_evidence_gain": catch, "best_named_gain": best_named,
+                           "when": {"from": _iso(epoch, float(hot.min())) if epoch else float(hot.min()),
+                                    "to": _iso(epoch, float(hot.max())) if epoch else float(hot.max())},
+                           "basis": names,
+                           "summary": (f"structured misfit in modes {strong} that no candidate explains "
+                                       f"(smooth function of covariates and time: {catch:.1f} nats vs best "
+                                       f"named {best_named:.1f})")}
+    if unexplained is not None and accepted:
+        for c in accepted:
+            c.accepted = False
+            c.reasons.append(f"failed: a smooth function of the covariates and time per mode (the catch-all, "
+                             f"{catch:.1f} nats) fits better than the named effects together")
+        accepted = []
+        fit_after, held_after = fit_before, held_before
     # observed modes no model mode pairs with, seen in enough windows
     for u in base.unpaired:
         frac = u.get("fraction_of_windows")

@@ -63,6 +63,8 @@ class CandidateResult:
                                "intervals": {k: [float(a), float(b)] for k, (a, b) in self.intervals.items()}}
         if self.time is not None:
             out["time"] = self.time
+        if "change_window" in self.extra:
+            out["change_window"] = int(self.extra["change_window"])  # first window after the change
         if self.tied_with:
             out["tied_with"] = list(self.tied_with)
         return out
