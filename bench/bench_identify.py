@@ -28,6 +28,7 @@ import os
 import sys
 import time
 import tracemalloc
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -85,6 +86,7 @@ def _pyoma(window: Window, method: str, sel_freq: list[float]):
     setup.run_by_name("alg")
     setup.mpe("alg", sel_freq=sel_freq, order_in="find_min")
     r = alg.result
+    assert r is not None, "pyOMA2 returned no result"
     phi = np.asarray(r.Phi)
     return (np.asarray(r.Fn, float), np.asarray(r.Xi, float),
             [real for real in (np.real(phi[:, k] * np.exp(-0.5j * np.angle(np.sum(phi[:, k] ** 2))))
@@ -92,7 +94,7 @@ def _pyoma(window: Window, method: str, sel_freq: list[float]):
 
 
 def _accuracy(truth: so.Truth, f, z, phi) -> list[dict]:
-    rows = []
+    rows: list[dict[str, bool | float]] = []
     for k in range(4):
         if f.size == 0:
             rows.append({"found": False})
@@ -197,6 +199,8 @@ def main(argv: list[str] | None = None) -> int:
             "pyOMA2 1.4.3"]
         for tool in tools:
             ours = tool.startswith("shm_ros")
+            run: Callable[..., tuple]
+            extra: tuple
             if ours:
                 run, extra = _ours, (("upc",) if "UPC" in tool else ())
             else:
