@@ -230,13 +230,14 @@ def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, us
             report.removed["too few orders"] += int(members.size)
             continue
         fmed = np.median(poles.frequency_hz[members])
+        # the column's orders, and for each member the index of its order among them
+        col_orders, at_order = np.unique(poles.order[members], return_inverse=True)
         if use_filters:
             verdict = None
-            member_orders = poles.order[members]
             for check, ok in (("two-A", flags.two_a_ok), ("MPC", flags.mpc_ok)):
                 # share of the column's orders with a pole that passes (a second pole at one
                 # order, e.g. a split pair, must not outvote the column)
-                passed = [np.any(ok[members[member_orders == o]]) for o in np.unique(member_orders)]
+                passed = np.bincount(at_order, weights=ok[members], minlength=col_orders.size) > 0
                 share = float(np.mean(passed))
                 report.columns.append({"frequency_hz": float(fmed), "poles": int(members.size),
                                        "check": check, "pass_fraction": round(share, 3)})
@@ -250,12 +251,10 @@ def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, us
                 continue
             for check, ok in (("two-A", flags.two_a_ok), ("MPC", flags.mpc_ok)):
                 report.kept_failing[check] += int(np.count_nonzero(~ok[members]))
-        # one pole per order: the one nearest the cluster's median frequency
-        keep_list = []
-        for o in np.unique(poles.order[members]):
-            at = members[poles.order[members] == o]
-            keep_list.append(at[np.argmin(np.abs(poles.frequency_hz[at] - fmed))])
-        keep = np.array(keep_list)
+        # one pole per order: the one nearest the cluster's median frequency (the first of equals)
+        by = np.lexsort((members, np.abs(poles.frequency_hz[members] - fmed), at_order))
+        first = np.r_[True, np.diff(at_order[by]) != 0]
+        keep = members[by[first]]
         report.removed_by[np.setdiff1d(members, keep)] = "same order"
         report.removed["same order"] += int(members.size - keep.size)
         f = poles.frequency_hz[keep]
