@@ -90,7 +90,7 @@ class IdentifyConfig:
     # Input-output SSI's state is a finite-horizon estimate from the past inputs and outputs: a
     # weakly excited mode in a short record needs a longer past than the correlations of
     # output-only SSI. On the CSMIP bridge record (docs/benchmarks.md) 2 periods of the first mode
-    # found the second mode at 2 of 7 decimation rates, 4 periods at all 7.
+    # found the second mode at 3 of 7 decimation factors (4-10), 4 periods at all 7.
     block_periods: float | None = option(None, "automatic block rows span at least this many periods "
                                          "of the lowest mode of interest (unset: 4 for ssi-io, 2 for "
                                          "the output-only methods)")
