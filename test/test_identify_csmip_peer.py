@@ -16,7 +16,7 @@ MAC >= 0.9 between the complex shapes) have the same frequency within 3 %. Found
 benchmarks.md): the first transverse deck mode, shm_ros 2.500 Hz against SRIM 2.452 Hz (+2.0 %,
 MAC 0.99), and the second mode, 3.417 against 3.348 Hz (+2.1 %, MAC 0.91). With the former
 2-period block rows the defaults picked only the first one (the second's forward and backward
-estimates of A disagreed at every order). The record is fixed and both methods are
+estimates of A disagreed at most orders). The record is fixed and both methods are
 deterministic, so no statistical threshold is involved.
 """
 
