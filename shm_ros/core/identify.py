@@ -13,6 +13,7 @@ otherwise; the estimate's ``method`` says which one ran, never ``auto``.
 from __future__ import annotations
 
 import enum
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -38,7 +39,7 @@ from shm_ros.core.stabilization import (
 from shm_ros.core.types import ModalEstimate, Mode, Window
 
 __all__ = ["Method", "Weighting", "LQ", "IdentifyConfig", "IdentificationResult", "identify_window",
-           "identify_window_detailed", "identify_array", "METHODS"]
+           "identify_window_detailed", "identify_prepared", "identify_array", "METHODS"]
 
 
 class Method(enum.StrEnum):
@@ -65,6 +66,9 @@ class LQ(enum.StrEnum):  # LQ factorisation of SSI-data / SSI-io
 
 
 METHODS = tuple(m.value for m in Method)
+# automatic block rows: periods of the lowest mode of interest (IdentifyConfig.block_periods)
+BLOCK_PERIODS = 2.0
+IO_BLOCK_PERIODS = 4.0
 
 
 @dataclass
@@ -83,8 +87,13 @@ class IdentifyConfig:
                        choices=BandSource)
     band_modes: int = option(6, "modes of interest: the nominal model's lowest N frequencies set the band")
     band_margin: float = option(1.3, "top of the band = highest mode of interest x this")
-    block_periods: float = option(2.0, "automatic block rows span at least this many periods of the "
-                                  "lowest mode of interest")
+    # Input-output SSI's state is a finite-horizon estimate from the past inputs and outputs: a
+    # weakly excited mode in a short record needs a longer past than the correlations of
+    # output-only SSI. On the CSMIP bridge record (docs/benchmarks.md) 2 periods of the first mode
+    # found the second mode at 3 of 7 decimation factors (4-10), 4 periods at all 7.
+    block_periods: float | None = option(None, "automatic block rows span at least this many periods "
+                                         "of the lowest mode of interest (unset: 4 for ssi-io, 2 for "
+                                         "the output-only methods)")
     max_block_rows: int = option(100, "largest automatic number of block rows (cost)")
     max_order: int = option(60, "largest model order")
     min_order: int = option(2, "smallest model order")
@@ -193,12 +202,7 @@ def identify_window_detailed(window: Window, config: IdentifyConfig | None = Non
             raise ValueError(f"ssi-io input channel {name!r} is not among the usable channels "
                              f"{prep.channel_names}")
         inp = name
-    prep, band = _resolution(prep, cfg, inp)
-    notes = list(prep.notes) + notes + [band.describe()]
-    result = identify_array(prep, replace(cfg, method=method.value, block_rows=band.block_rows),
-                            input_channel=inp)
-    result.band = band
-    result.notes = notes + result.notes
+    result = identify_prepared(prep, replace(cfg, method=method.value), [inp] if inp else None, notes)
     est = result.estimate
     est.window_id = window.window_id
     est.start_ns = window.start_ns
@@ -208,11 +212,29 @@ def identify_window_detailed(window: Window, config: IdentifyConfig | None = Non
     return result
 
 
-def _resolution(prep: Prepared, cfg: IdentifyConfig, input_channel: str | None
+def identify_prepared(prep: Prepared, cfg: IdentifyConfig, input_channels: Sequence[str] | None = None,
+                      notes: list[str] | None = None) -> IdentificationResult:
+    """Band of interest, decimation and block rows chosen automatically (unless configured), then
+    :func:`identify_array`: what :func:`identify_window_detailed` does after pre-processing.
+    ``input_channels``: the measured inputs of ``ssi-io`` (one or several; ``auto`` runs ``ssi-io``
+    when given). ``notes`` go after the pre-processing's in the result's notes."""
+    inputs = list(input_channels or [])
+    method = Method(cfg.method)
+    if method == Method.AUTO:
+        method = Method.SSI_IO if inputs else Method.SSI_COV
+    prep, band = _resolution(prep, cfg, inputs if method == Method.SSI_IO else [], method)
+    result = identify_array(prep, replace(cfg, method=method.value, block_rows=band.block_rows),
+                            input_channel=inputs or None)
+    result.band = band
+    result.notes = list(prep.notes) + list(notes or []) + [band.describe()] + result.notes
+    return result
+
+
+def _resolution(prep: Prepared, cfg: IdentifyConfig, inputs: list[str], method: Method
                 ) -> tuple[Prepared, BandChoice]:
     """Band of interest -> decimation and block rows (core/band.py); explicit options win."""
-    outputs = [k for k, c in enumerate(prep.channel_names) if c != input_channel]
-    n_refs = len(cfg.reference_channels) if cfg.reference_channels and input_channel is None \
+    outputs = [k for k, c in enumerate(prep.channel_names) if c not in inputs]
+    n_refs = len(cfg.reference_channels) if cfg.reference_channels and not inputs \
         else max(1, len(outputs))
     default_rows = max(20, int(np.ceil(cfg.max_order / n_refs)) + 2)
     source = BandSource(cfg.band)
@@ -225,18 +247,21 @@ def _resolution(prep: Prepared, cfg: IdentifyConfig, input_channel: str | None
     if source in (BandSource.AUTO, BandSource.SPECTRUM) and band is None:
         source = BandSource.SPECTRUM
         band = band_from_spectrum(prep.data[:, outputs], prep.sample_rate_hz, cfg.band_margin)
+    periods = cfg.block_periods if cfg.block_periods is not None else \
+        IO_BLOCK_PERIODS if method == Method.SSI_IO else BLOCK_PERIODS
     choice = choose_resolution(prep.sample_rate_hz, band, source.value, default_rows=default_rows,
                                rows=cfg.block_rows, decimate=cfg.preprocess.target_rate_hz is None,
-                               periods=cfg.block_periods, max_block_rows=cfg.max_block_rows)
+                               periods=periods, max_block_rows=cfg.max_block_rows)
     if cfg.band == BandSource.MODEL and not cfg.nominal_frequencies_hz:
         choice.reasons.insert(0, "band: model asked for, but no nominal model given: spectrum")
     return decimate(prep, choice.decimation, "band of interest"), choice
 
 
-def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | None = None
+def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Sequence[str] | None = None
                    ) -> IdentificationResult:
-    """Identification of already pre-processed data (also used by the benchmarks). Under ``auto``
-    it is input-output SSI when ``input_channel`` is given, else covariance-driven."""
+    """Identification of already pre-processed data at the configured block rows (also used by
+    the benchmarks). Under ``auto`` it is input-output SSI when ``input_channel`` (one name or
+    several) is given, else covariance-driven."""
     names = list(prep.channel_names)
     data = prep.data
     fs = prep.sample_rate_hz
@@ -245,15 +270,19 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Non
     if method == Method.AUTO:
         method = Method.SSI_IO if input_channel is not None else Method.SSI_COV
     if method == Method.SSI_IO:
-        if input_channel is None:
+        if not input_channel:
             raise ValueError("ssi-io needs input_channel")
-        k = names.index(input_channel)
-        u = data[:, k]
-        out_idx = [j for j in range(len(names)) if j != k]
+        ins = [input_channel] if isinstance(input_channel, str) else list(input_channel)
+        missing = [c for c in ins if c not in names]
+        if missing:
+            raise ValueError(f"ssi-io input channel(s) {missing} not among {names}")
+        ks = [names.index(c) for c in ins]
+        u = data[:, ks]
+        out_idx = [j for j in range(len(names)) if j not in ks]
         y = data[:, out_idx]
         out_names = [names[j] for j in out_idx]
         if not out_names:
-            raise ValueError(f"ssi-io: no output channel besides the input {input_channel!r}")
+            raise ValueError(f"ssi-io: no output channel besides the input(s) {ins}")
         i = cfg.block_rows or max(20, int(np.ceil(cfg.max_order / len(out_names))) + 2)
         model = ssi.ssi_io(y, u, fs, i, cfg.max_order, lq="qr" if cfg.lq == "auto" else cfg.lq)
         refs = None
