@@ -89,6 +89,7 @@ class Case:
     f_true: np.ndarray  # (W, K) noise-free truth frequencies of the table's columns
     start_epoch_s: float  # POSIX time of the first window's middle (obs.times are POSIX seconds)
     factors: list[dict[str, float]]  # per window, the truth's group factors
+    z_true: np.ndarray | None = None  # (W, K) noise-free truth damping ratios of the table's columns
 
 
 def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_windows: int = 864,
@@ -102,8 +103,9 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
     effect = effect or str(rng.choice(EFFECTS))
     if effect not in EFFECTS:
         raise ValueError(f"unknown effect {effect!r} (known: {', '.join(EFFECTS)})")
-    if kind is None:
-        kind = "building" if effect == "damper_stiffness" else str(rng.choice(["girder", "building"]))
+    if kind is None:  # a building's foundation sway is not a candidate yet (docs/explain.md): girder soil only
+        kind = ("building" if effect == "damper_stiffness" else "girder" if effect == "support_flexibility"
+                else str(rng.choice(["girder", "building"])))
     if effect == "damper_stiffness" and kind != "building":
         raise ValueError("damper_stiffness needs the building")
     sc = named_scenario(kind, n_windows=n_windows, seed=seed, temperature_period_s=600.0)
@@ -368,7 +370,7 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
                             shapes=phi[:, :, rows], sensor_ids=sensors, damping=z_obs, covariates=covs,
                             time_kind="iso")
     return Case(kind=kind, seed=seed, obs=obs, structure=structure, truth=truth, f_true=f_true,
-                start_epoch_s=float(sc.start_epoch_s + t_s[0]), factors=factors)
+                start_epoch_s=float(sc.start_epoch_s + t_s[0]), factors=factors, z_true=z_true)
 
 
 def _ids(families: list[str]) -> list[tuple[str, int]]:

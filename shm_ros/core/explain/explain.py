@@ -150,6 +150,41 @@ def scores(r: np.ndarray, delta: np.ndarray | None, train: np.ndarray) -> tuple[
     return FitScores(_rmse_pct(e[train])), FitScores(_rmse_pct(e[~train]))
 
 
+def scatter(x: np.ndarray | None, scale: float = 100.0) -> float | None:
+    """The identification scatter of ``x`` (W, K) in time order, times ``scale``: per mode the robust
+    spread of differences between consecutive windows over sqrt(2) (slow effects and single steps hardly
+    enter), pooled as a root mean square over the modes. No model can fit below it: the misfit beyond
+    it (``sqrt(RMSE^2 - scatter^2)``) is what a candidate can explain."""
+    if x is None:
+        return None
+    out = []
+    for k in range(x.shape[1]):
+        v = x[np.isfinite(x[:, k]), k]
+        if v.size > 3:
+            d = np.diff(v)
+            out.append((1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2)) ** 2)
+    return float(scale * math.sqrt(np.mean(out))) if out else None
+
+
+def damping_scores(z: np.ndarray | None, ln_factor: np.ndarray | None, train: np.ndarray
+                   ) -> tuple[float | None, float | None]:
+    """Damping-ratio RMSE in percentage points on the training and held-out windows: the observed
+    ratios ``z`` (W, K) against each mode's typical ratio (geometric mean over the training windows)
+    times the candidate's factor ``exp(ln_factor)`` (W, 1 or K; None: no change)."""
+    if z is None:
+        return None, None
+    lz = np.log(np.where(z > 0, z, np.nan))
+    lf = 0.0 if ln_factor is None else ln_factor
+    off = np.nanmean((lz - lf)[train], axis=0)
+    e = z - np.exp(off + lf)
+
+    def rms(a: np.ndarray) -> float | None:
+        v = a[np.isfinite(a)]
+        return float(100 * np.sqrt(np.mean(v ** 2))) if v.size else None
+
+    return rms(e[train]), rms(e[~train])
+
+
 # -- proposals ---------------------------------------------------------------------------------------
 
 def default_proposals(groups: GroupModel) -> list[Proposal]:
@@ -176,7 +211,9 @@ def _locate(obs, baseline, context, config, groups) -> tuple[Mismatch, list[Prop
     from .locate import LocateConfig
 
     mismatch, props = locate(obs, baseline, context, LocateConfig(min_unpaired_fraction=config.min_unpaired_fraction))
-    return mismatch, [p for p in props if p.group in groups.groups and p.candidate in CANDIDATES], []
+    # damping candidates act on the modal damping, not on a group of the model
+    return mismatch, [p for p in props if (p.group in groups.groups or p.group == "damping")
+                      and p.candidate in CANDIDATES], []
 
 
 # -- catch-all ---------------------------------------------------------------------------------------
@@ -284,11 +321,17 @@ class _OnTop(Candidate):
         return self.new.key_parameter()
 
 
-def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch: float) -> CandidateResult:
+def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch: float,
+            z_all: np.ndarray | None = None) -> CandidateResult:
     c = job.cand
     d_all, _ = job.deltas(fr.theta_map)
     delta = None if d_all is None else d_all[0]
     fit_after, held_after = scores(r_all, delta, train)
+    res_acts = "frequency" if delta is not None else "damping"
+    if z_all is not None:
+        _, dd = job.deltas(fr.theta_map)
+        fit_after.damping_rmse_pct, held_after.damping_rmse_pct = damping_scores(
+            z_all, None if dd is None else dd[0], train)
     key = c.key_parameter()
     res = CandidateResult(
         name=c.vocabulary, label=c.label, form=c.form(fr.theta_map), where=c.group,
@@ -297,7 +340,7 @@ def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoc
         log_evidence_gain_err=float(fr.evidence.err), prior_sensitivity=dict(fr.prior_sensitivity),
         time=_iso(epoch, c.time(fr.theta_map)), explanation=c.explanation, fit_after=fit_after,
         held_out_after=held_after)
-    res.extra.update({"key_parameter": key, "gain_at_map": fr.gain_map, "evaluations": fr.n_eval,
+    res.extra.update({"key_parameter": key, "gain_at_map": fr.gain_map, "acts_on": res_acts, "evaluations": fr.n_eval,
                       "check_method": fr.check_method, "check_err": fr.check_err})
     t0 = c.time(fr.theta_map)
     if t0 is not None:
@@ -311,7 +354,7 @@ MAX_EFFECTS = 3
 
 
 def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config,
-                  say) -> tuple[list[CandidateResult], FitScores, FitScores]:
+                  say, z_all=None) -> tuple[list[CandidateResult], FitScores, FitScores, tuple | None]:
     """Greedy forward selection: every other candidate that cleared the threshold alone is refitted on
     top of the effects accepted so far (held at their MAP); the best one is accepted when its gain
     over them clears the same threshold, it improves the held-out windows further and its key
@@ -324,6 +367,7 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
     fit_after = best.fit_after or FitScores(float("nan"))
     held_after = best.held_out_after or FitScores(float("nan"))
     out: list[CandidateResult] = []
+    last = None
     pool = [c for c in tried if c.label not in done and c.log_evidence_gain > threshold]
     by_label = {p.candidate + "/" + p.group: p for p in proposals}
     for _ in range(MAX_EFFECTS - 1):
@@ -335,7 +379,7 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
             job = _Job(cand, sur, lik, train)
             fr = fit(job.gain, job.specs, seed=config.seed + 100 + i, n_is=config.n_importance,
                      sensitivity=False)
-            res = _result(job, fr, r_all, train, epoch)
+            res = _result(job, fr, r_all, train, epoch, z_all)
             res.log_evidence_gain = float(fr.evidence.log_z - base_gain)
             res.extra.update({"on_top_of": [f[0].label for f in fixed], "gain_over_nominal": float(fr.evidence.log_z)})
             results.append((res, job, fr))
@@ -345,16 +389,19 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
         res, job, fr = results[0]
         key = job.cand.key_parameter()
         null = next(sp.null for sp in job.specs if sp.name == key)
-        from .select import null_excluded
+        from .select import held_out_metric, null_excluded
 
-        held = res.held_out_after.frequency_rmse_pct if res.held_out_after else math.inf
-        ok = (res.log_evidence_gain > threshold and held < held_after.frequency_rmse_pct
-              and null_excluded(res, key, null))
+        metric = held_out_metric(res)
+        held = getattr(res.held_out_after, metric) if res.held_out_after else None
+        held = math.inf if held is None else held
+        ref = getattr(held_after, metric)
+        ref = math.inf if ref is None else ref
+        ok = res.log_evidence_gain > threshold and held < ref and null_excluded(res, key, null)
         res.reasons = [f"{'passed' if res.log_evidence_gain > threshold else 'failed'}: evidence gain "
                        f"{res.log_evidence_gain:.1f} nats on top of {', '.join(res.extra['on_top_of'])} vs "
                        f"threshold {threshold:.1f}",
-                       f"{'passed' if held < held_after.frequency_rmse_pct else 'failed'}: held-out frequency "
-                       f"RMSE {held:.3f} % vs {held_after.frequency_rmse_pct:.3f} % without it"]
+                       f"{'passed' if held < ref else 'failed'}: held-out {metric} {held:.3f} vs {ref:.3f} "
+                       "without it"]
         if not ok:
             break
         res.accepted = True
@@ -369,11 +416,12 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
         out.append(res)
         tried.append(res)
         fixed.append((job.cand.new, fr.theta_map))  # type: ignore[attr-defined]
+        last = (job, fr.theta_map)
         base_gain = float(fr.gain_map)
         fit_after, held_after = res.fit_after or fit_after, res.held_out_after or held_after
         same = {(c.name, c.where) for c in [best, *out]}
         pool = [c for c in pool if c.label != res.label and (c.name, c.where) not in same]
-    return out, fit_after, held_after
+    return out, fit_after, held_after, last
 
 
 # -- entry point -------------------------------------------------------------------------------------
@@ -408,6 +456,9 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
                               tau=config.effect_form_error, noise_guess=config.noise_guess,
                               damping_noise_guess=config.damping_noise_guess)
     fit_before, held_before = scores(r_all, None, train)
+    z_all = None if obs.damping is None else obs.damping[:, kept]
+    fit_before.damping_rmse_pct, held_before.damping_rmse_pct = damping_scores(z_all, None, train)
+    noise = {"frequency_pct": scatter(r_all), "damping_points": scatter(z_all)}
     mismatch, proposals, more = _locate(obs, base, context, config, groups)
     notes += more
     threshold_info = shipped_threshold()
@@ -425,7 +476,7 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
         job = _Job(cand, sur, lik, train)
         fr = fit(job.gain, job.specs, seed=config.seed + i, n_is=config.n_importance,
                  sensitivity=config.prior_sensitivity)
-        res = _result(job, fr, r_all, train, epoch)
+        res = _result(job, fr, r_all, train, epoch, z_all)
         res.extra["proposal_reason"] = p.reason
         spec_key = next(s for s in job.specs if s.name == cand.key_parameter())
         keys[res.label] = (spec_key.name, spec_key.null)
@@ -438,7 +489,7 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
                                  f"exceeds {config.surrogate_tolerance:.0e}")
         tried.append(res)
         jobs[res.label] = (job, fr)
-    accepted = decide(tried, keys, threshold, held_before.frequency_rmse_pct, None, config.tie_nats)
+    accepted = decide(tried, keys, threshold, held_before, None, config.tie_nats)
     if config.nested_check:  # the second, independent estimator for every accepted candidate
         for i, c in enumerate(accepted):
             say(f"evidence check of {c.label}", 0.95)
@@ -454,10 +505,12 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     if accepted:
         fit_after = accepted[0].fit_after or fit_before
         held_after = accepted[0].held_out_after or held_before
+    last = (jobs[accepted[0].label][0], jobs[accepted[0].label][1].theta_map) if accepted else None
     if accepted and config.second_round:
-        more_accepted, fit_after, held_after = _more_effects(
-            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config, say)
+        more_accepted, fit_after, held_after, more_last = _more_effects(
+            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config, say, z_all)
         accepted += more_accepted
+        last = more_last or last
     catch = None
     unexplained = None
     if config.catch_all:
@@ -485,6 +538,7 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
             c.reasons.append(f"failed: a smooth function of the covariates and time per mode (the catch-all, "
                              f"{catch:.1f} nats) fits better than the named effects together")
         accepted = []
+        last = None
         fit_after, held_after = fit_before, held_before
     # observed modes no model mode pairs with, seen in enough windows
     for u in base.unpaired:
@@ -502,8 +556,55 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     say("done", 1.0)
     return Verdict(mismatch=mismatch, missing_physics=accepted, tried=tried, fit_before=fit_before,
                    fit_after=fit_after, held_out_before=held_before, held_out_after=held_after,
-                   unexplained=unexplained,
+                   unexplained=unexplained, scatter=noise,
                    threshold={**threshold_info, "catch_all_gain": catch}, notes=notes,
-                   figures={"baseline_theta": base.theta, "train_windows": int(train.sum()),
-                            "held_out_windows": int((~train).sum()),
-                            "modes": list(base.mode_numbers), "model_modes": [i + 1 for i in base.model_index]})
+                   figures=_series(obs, base, context, train, r_all, z_all, last, epoch))
+
+
+def _series(obs, base, context, train, r_all, z_all, last, epoch) -> dict:
+    """The numbers behind the report's figures (explain_series.json): per window the times, the
+    covariates and the misfit before and after the accepted effects (each mode's offset taken out on
+    the training windows), the training mask, and the fitted form of the most supported effect."""
+    d = dd = None
+    if last is not None:
+        job, theta = last
+        dd_, ddd = job.deltas(theta)
+        d = None if dd_ is None else dd_[0]
+        dd = None if ddd is None else ddd[0]
+    before = r_all - np.nanmean(r_all[train], axis=0)
+    after = r_all if d is None else r_all - d
+    after = after - np.nanmean(after[train], axis=0)
+    out = {"times_s": np.asarray(obs.times, float), "start_epoch_s": epoch, "mode_numbers": list(base.mode_numbers),
+           "model_modes": [i + 1 for i in base.model_index], "covariates": dict(context.covariates),
+           "train": train, "log_residual_before": before, "log_residual_after": after,
+           "baseline_theta": base.theta}
+    if z_all is not None:
+        lz = np.log(np.where(z_all > 0, z_all, np.nan))
+        out["log_damping_before"] = lz - np.nanmean(lz[train], axis=0)
+        la = lz if dd is None else lz - dd
+        out["log_damping_after"] = la - np.nanmean(la[train], axis=0)
+    if last is not None:
+        out["form"] = _form_curve(last[0].cand, last[1], context)
+    return out
+
+
+def _form_curve(cand, theta, context) -> dict:
+    """The fitted effect against what it depends on: each group's factor (or the damping factor)
+    per window, against temperature, amplitude or time, whichever the effect follows."""
+    mod = cand.modify(np.atleast_2d(theta))
+    base = getattr(cand, "new", cand)
+    key = next((k for k in ("temperature_c", "rms_accel_m_s2", "pga_m_s2")
+                if k in context.covariates and k.split("_")[0] in type(base).__name__.lower() + base.name), None)
+    if key is None and "temperature" in base.name:
+        key = "temperature_c"
+    if key is None and "amplitude" in base.name:
+        key = "rms_accel_m_s2" if "rms_accel_m_s2" in context.covariates else None
+    x = np.asarray(context.covariates[key], float) if key else np.asarray(context.times_s, float) / 86400.0
+    if mod.groups:
+        g, f = next(iter(mod.groups.items()))
+        y, ylab = np.asarray(f[0], float), f"factor on {g}"
+    else:
+        y, ylab = np.asarray(mod.damping[0], float), "damping factor"
+    order = np.argsort(x)
+    return {"x": x[order], "y": y[order], "x_label": key or "days from the first window", "y_label": ylab,
+            "title": f"{base.label}: {base.form(theta) if hasattr(base, 'form') else ''}"}

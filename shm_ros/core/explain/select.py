@@ -25,7 +25,7 @@ import math
 from importlib import resources
 from typing import Any
 
-from .types import CandidateResult
+from .types import CandidateResult, FitScores
 
 THRESHOLD_FILE = "threshold.json"
 
@@ -43,21 +43,31 @@ def null_excluded(c: CandidateResult, key: str, null: float | None) -> bool:
     return not lo <= null <= hi
 
 
+def held_out_metric(c: CandidateResult) -> str:
+    """What the held-out windows are scored on: damping RMSE for a candidate that changes the modal
+    damping only, frequency RMSE otherwise."""
+    return "damping_rmse_pct" if c.extra.get("acts_on") == "damping" else "frequency_rmse_pct"
+
+
 def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | None]], threshold: float,
-           held_out_before: float, catch_all: float | None, tie_nats: float) -> list[CandidateResult]:
+           held_out_before: FitScores, catch_all: float | None, tie_nats: float) -> list[CandidateResult]:
     """Mark ``accepted`` and ``reasons`` on every result; the accepted ones, most supported first.
 
-    ``keys[label] = (key parameter, null value)``; ``held_out_before``: frequency RMSE (%) of the
-    nominal model on the held-out windows; ``catch_all``: the catch-all's gain (None: not fitted).
+    ``keys[label] = (key parameter, null value)``; ``held_out_before``: the nominal model's scores on
+    the held-out windows; ``catch_all``: the catch-all's gain (None: not fitted).
     """
     for c in results:
         key, null = keys[c.label]
-        held = c.held_out_after.frequency_rmse_pct if c.held_out_after is not None else math.inf
+        metric = held_out_metric(c)
+        held = getattr(c.held_out_after, metric) if c.held_out_after is not None else None
+        held = math.inf if held is None else held
+        before = getattr(held_out_before, metric)
+        before = math.inf if before is None else before
         checks = [
             (c.log_evidence_gain > threshold,
              f"evidence gain {c.log_evidence_gain:.1f} nats vs threshold {threshold:.1f}"),
-            (held < held_out_before,
-             f"held-out frequency RMSE {held:.3f} % vs {held_out_before:.3f} % without it"),
+            (held < before,
+             f"held-out {metric.replace('_rmse_pct', ' RMSE')} {held:.3f} % vs {before:.3f} % without it"),
             (null_excluded(c, key, null),
              f"95 % interval of {key} {_iv(c.intervals.get(key))} "
              + ("excludes" if null_excluded(c, key, null) else "includes") + f" the null value {null}"),

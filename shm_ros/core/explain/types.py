@@ -80,6 +80,9 @@ class Verdict:
     held_out_before: FitScores
     held_out_after: FitScores
     unexplained: dict[str, Any] | None = None  # the catch-all beat every named candidate: where / when
+    # identification scatter (window to window), the floor below which no model fits: frequency in %,
+    # damping ratio in percentage points
+    scatter: dict[str, float | None] = field(default_factory=dict)
     threshold: dict[str, Any] = field(default_factory=dict)  # the acceptance threshold and its calibration
     notes: list[str] = field(default_factory=list)
     figures: dict[str, Any] = field(default_factory=dict)  # numbers behind the report's figures
@@ -92,7 +95,8 @@ class Verdict:
             "missing_physics": [c.entry() for c in self.missing_physics],
             "fit": {"before": self.fit_before.to_dict(), "after": self.fit_after.to_dict(),
                     "held_out": {"before": self.held_out_before.to_dict(),
-                                 "after": self.held_out_after.to_dict()}},
+                                 "after": self.held_out_after.to_dict()},
+                    "scatter": {k: v for k, v in self.scatter.items() if v is not None}},
             "candidates": [{**c.entry(), "accepted": c.accepted, "reasons": list(c.reasons),
                             "log_evidence_gain_check": c.log_evidence_gain_check,
                             "log_evidence_gain_err": c.log_evidence_gain_err,
