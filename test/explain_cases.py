@@ -333,7 +333,7 @@ def draw_case(seed: int, effect: str | None = None, kind: str | None = None, n_w
     truth.size = float(size)
     if effect not in ("amplitude_dependent_damping", "clean", "unmodelled_modes"):
         truth.where = spec["group"]
-        truth.parameters = {k: v for k, v in spec.items() if k != "group"}
+        truth.parameters = {**truth.parameters, **{k: v for k, v in spec.items() if k != "group"}}
         truth.parameters["scale"] = float(scale)
     if effect == "amplitude_dependent_stiffness":
         truth.parameters["accel_ref_m_s2"] = float(1.0 / scale)

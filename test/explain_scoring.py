@@ -64,11 +64,11 @@ def parameter_checks(name: str, top: dict[str, Any], truth: Any, times: np.ndarr
             out["spring"] = _rel(float(np.expm1(p["ln_step"])), -t["scale"])
         elif "frost_per_c" in p and t.get("mode") == "frozen":
             out["spring"] = _rel(p["frost_per_c"], t["scale"])
-    elif name == "damper_stiffness":
-        if "after_factor" in p and t.get("mode") == "failure":
-            out["damper"] = _rel(1.0 - p["after_factor"], t["scale"])
-        elif "per_c" in p and t.get("mode") == "temperature":
-            out["damper"] = _rel(p["per_c"], -t["scale"])
+    elif name == "damper_stiffness":  # the change of the braces' stiffness, in story stiffness
+        if "brace_lost" in p and t.get("mode") == "failure":
+            out["damper"] = _rel(p["brace_lost"], t["scale"] * t["k_rel"])
+        elif "brace_change_per_c" in p and t.get("mode") == "temperature":
+            out["damper"] = _rel(p["brace_change_per_c"], -t["scale"] * t["k_rel"])
     return out
 
 

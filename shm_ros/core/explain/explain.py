@@ -33,7 +33,7 @@ from shm_ros.core.structure import StructureSpec
 
 from .candidates.base import CANDIDATES, Candidate, Context, ParamSpec
 from .config import ExplainConfig
-from .fit import Box, FitResult, fit, nested_check
+from .fit import Box, FitResult, evidence_check, fit
 from .groups import GroupModel, build_groups
 from .likelihood import S_RANGE, CandidateLikelihood, catch_all_gain
 from .select import decide, shipped_threshold
@@ -406,10 +406,10 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
             break
         res.accepted = True
         if config.nested_check:  # the second estimator, of the gain over nominal, less the same base
-            chk, err = nested_check(job.gain, Box(job.specs), config.n_live, config.seed + 200)
+            chk, err, method = evidence_check(job.gain, Box(job.specs), config.n_live, config.seed + 200)
             res.log_evidence_gain_check = float(chk - (res.extra["gain_over_nominal"] - res.log_evidence_gain))
             tol = max(0.5, 3.0 * math.hypot(res.log_evidence_gain_err, err))
-            res.extra.update({"check_method": "nested sampling (dynesty)", "check_err": err,
+            res.extra.update({"check_method": method, "check_err": err,
                               "check_agrees": bool(abs(res.log_evidence_gain_check - res.log_evidence_gain) <= tol)})
         res.extra["proposal_reason"] = getattr(by_label.get(res.label.split("/", 1)[1] if "/" in res.label else ""),
                                                "reason", "")
@@ -494,8 +494,9 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
         for i, c in enumerate(accepted):
             say(f"evidence check of {c.label}", 0.95)
             job = jobs[c.label][0]
-            c.log_evidence_gain_check, err = nested_check(job.gain, Box(job.specs), config.n_live, config.seed + i)
-            c.extra.update({"check_method": "nested sampling (dynesty)", "check_err": err})
+            c.log_evidence_gain_check, err, method = evidence_check(job.gain, Box(job.specs), config.n_live,
+                                                                    config.seed + i)
+            c.extra.update({"check_method": method, "check_err": err})
             tol = max(0.5, 3.0 * math.hypot(c.log_evidence_gain_err, err))
             c.extra["check_agrees"] = bool(abs(c.log_evidence_gain_check - c.log_evidence_gain) <= tol)
             if not c.extra["check_agrees"]:

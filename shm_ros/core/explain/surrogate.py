@@ -219,6 +219,13 @@ class Surrogate:
             t = self._table(g, float(x.min()), float(x.max()))
             return t(np.log(x))
         flat = {g: x.reshape(-1) for g, x in varying.items()}
+        # several groups: one small eigenproblem per distinct combination of factors (steps and
+        # intermittent effects take few distinct values over the windows)
+        stacked = np.column_stack([flat[g] for g in sorted(flat)])
+        uniq, inverse = np.unique(stacked, axis=0, return_inverse=True)
+        if len(uniq) < len(stacked):
+            lf = self._ritz_logf({g: uniq[:, i] for i, g in enumerate(sorted(flat))})
+            return lf[np.ravel(inverse)].reshape(*shape, -1)
         return self._ritz_logf(flat).reshape(*shape, -1)
 
     def delta(self, mod: Modification) -> np.ndarray:

@@ -100,6 +100,8 @@ class Verdict:
             "candidates": [{**c.entry(), "accepted": c.accepted, "reasons": list(c.reasons),
                             "log_evidence_gain_check": c.log_evidence_gain_check,
                             "log_evidence_gain_err": c.log_evidence_gain_err,
+                            "log_evidence_gain_check_err": c.extra.get("check_err"),
+                            "check_agrees": c.extra.get("check_agrees"),
                             "prior_sensitivity": dict(c.prior_sensitivity)} for c in self.tried],
             "threshold": dict(self.threshold),
             "notes": list(self.notes),

@@ -1,15 +1,20 @@
 """Damper stiffness: the damper braces of the file (group ``damper``) add stiffness the file leaves
 out, and it changes with the temperature (viscoelastic dampers soften as they warm) or drops at a
-time (a damper fails). The group's factor is additive (x - 1 = brace stiffness / reference).
+time (a damper fails).
 
-Parameters: the braces' stiffness relative to the reference, and, by locate's hints, its change per
-degC (``covariate = temperature_c``) or its factor after a window (``change_index``).
+What modal data can identify is the *change* of the braces' stiffness: its constant part is absorbed
+by the calibration of the story stiffnesses (the nominal parameters), so the parameters are changes,
+in units of the braced story's stiffness: per degC about the campaign's mean temperature, or lost at
+a window (locate's ``change_index``); without a hint, a constant brace stiffness. The group's factor
+is additive: ``x - 1 = brace stiffness / reference``, the reference being
+:data:`shm_ros.core.explain.groups.DAMPER_REFERENCE` of the story's stiffness.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..groups import DAMPER_REFERENCE
 from ._common import covariate
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
@@ -19,45 +24,43 @@ class DamperStiffness(Candidate):
     vocabulary = "damper_stiffness"
     explanation = ("The dampers also stiffen the building; their stiffness falls as they warm or when one "
                    "fails, which moves the frequencies of the modes that strain the braced stories.")
+    default_groups = ("damper",)
 
     def _change(self) -> str:
         h = self.context.hints
         return "step" if "change_index" in h else "temperature" if h.get("covariate") == "temperature_c" else "none"
 
     def params(self) -> list[ParamSpec]:
-        out = [ParamSpec("brace_stiffness", 0.0, 3.0, null=None, unit="x reference")]
         change = self._change()
         if change == "temperature":
-            out.insert(0, ParamSpec("per_c", -0.1, 0.1, null=0.0, unit="1/degC"))
-        elif change == "step":
-            out.insert(0, ParamSpec("after_factor", 0.0, 2.0, null=1.0))
-        return out
+            return [ParamSpec("brace_change_per_c", -0.05, 0.05, null=0.0, unit="story stiffness / degC")]
+        if change == "step":
+            return [ParamSpec("brace_lost", -0.5, 1.0, null=0.0, unit="story stiffness")]
+        return [ParamSpec("brace_stiffness", 0.0, 1.0, null=0.0, unit="story stiffness")]
 
     def modify(self, theta: np.ndarray) -> Modification:
-        th = np.atleast_2d(np.asarray(theta, float))
+        v = np.atleast_2d(np.asarray(theta, float))[:, :1]
         W = len(self.context.times_s)
-        k = th[:, -1][:, None] * np.ones((1, W))
         change = self._change()
         if change == "temperature":
             t = covariate(self.context, "temperature_c")
-            k = k * np.exp(th[:, 0][:, None] * (t - float(np.mean(t)))[None, :])
+            dk = v * (t - float(np.mean(t)))[None, :]
         elif change == "step":
             on = (np.arange(W) >= int(self.context.hints["change_index"])).astype(float)
-            k = k * (1.0 + (th[:, 0][:, None] - 1.0) * on[None, :])
-        return Modification(groups={self.group: 1.0 + k})
+            dk = -v * on[None, :]
+        else:
+            dk = v * np.ones((1, W))
+        return Modification(groups={self.group: 1.0 + dk / DAMPER_REFERENCE})
 
     def form(self, theta: np.ndarray) -> str:
-        th = np.ravel(theta)
-        s = f"damper braces {th[-1]:.2f} x reference stiffness"
+        v = float(np.ravel(theta)[0])
         change = self._change()
         if change == "temperature":
-            s += f", {100 * th[0]:+.1f} %/degC"
-        elif change == "step":
-            s += f", x{th[0]:.2f} from window {self.context.hints['change_index']}"
-        return s
-
-    def key_parameter(self) -> str:
-        return self.params()[0].name
+            return f"damper braces' stiffness {100 * v:+.2f} % of the story stiffness per degC"
+        if change == "step":
+            return (f"damper braces lose {100 * v:.1f} % of the story stiffness from window "
+                    f"{self.context.hints['change_index']}")
+        return f"damper braces {100 * v:.1f} % of the story stiffness"
 
     def time(self, theta: np.ndarray) -> float | None:
         if self._change() == "step":

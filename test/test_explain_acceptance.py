@@ -1,0 +1,122 @@
+"""explain on cases it was not built for: the effect, where it acts and its size drawn at random
+(test/explain_cases.py) on the simulator's default model-form error (the truth is outside the
+analysis model's class: per-mode offsets no parameter explains, out-of-plane modes among the tracked
+ones), scored by test/explain_scoring.py against the truth.
+
+Full size (``SHM_FULL=1``): 5 cases per vocabulary name (40), 864 windows each; 50 clean seeds;
+5 cases of two effects. Criteria (docs/explain.md): the right top name in >= 90 % overall and >= 60 %
+per name, and among those every parameter / fit check in >= 90 %; no false alarm in >= 95 % of the
+clean seeds; both effects with their checks in >= 4 of 5 two-effect cases.
+
+Reduced size (CI): one case per name (8) at 192 windows, 6 clean seeds, one two-effect case, with
+thresholds that a method meeting the full-size rates passes with >= 99 % probability:
+* named cases: a case counts when its top name and all its checks hold; with a per-case rate of 0.95
+  (the full-size requirement 0.9 x 0.9 is below what the method reaches, 0.96 in the recorded run),
+  P(at least 6 of 8) = 0.994;
+* clean: the threshold is the 99th percentile of the largest gain on clean replicates, so the per-seed
+  false-alarm rate is about 1 %: P(at most 1 of 6) = 0.9985;
+* the two-effect case and the unmodelled-modes case are exact checks (both effects found; the listed
+  modes equal the out-of-plane modes), whose failure rates at full size are below 1 %.
+Every accepted candidate's evidence is checked against the second estimator (nested sampling) within
+max(0.5, 3 combined standard errors).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import pytest
+from explain_cases import draw_case
+from explain_scoring import parameter_checks, score, top_entry
+
+from shm_ros.core.explain.explain import explain
+from shm_ros.core.structure import structure_from_dict
+
+FULL = os.environ.get("SHM_FULL", "") not in ("", "0")
+NAMES = ("temperature_dependent_stiffness", "amplitude_dependent_stiffness", "amplitude_dependent_damping",
+         "added_mass", "support_flexibility", "stiffness_change_at_time", "damper_stiffness", "unmodelled_modes")
+PER_NAME = 5 if FULL else 1
+WINDOWS = 864 if FULL else 192
+CLEAN_SEEDS = 50 if FULL else 6
+TWO = 5 if FULL else 1
+
+
+def _run(case):
+    v = explain(case.obs, structure_from_dict(case.structure))
+    return v, v.to_dict()
+
+
+def _check_evidence(d):
+    for c in d["candidates"]:
+        if not c["accepted"] or c.get("log_evidence_gain_check") is None:
+            continue
+        se = math.hypot(c["log_evidence_gain_err"] or 0.0, c.get("log_evidence_gain_check_err") or 0.0)
+        gap = abs(c["log_evidence_gain_check"] - c["log_evidence_gain"])
+        assert gap <= max(0.5, 3 * se), (c["label"], c["log_evidence_gain"], c["log_evidence_gain_check"], se)
+
+
+def test_named_effects_found_and_fitted():
+    results = []
+    for i, name in enumerate(NAMES):
+        for j in range(PER_NAME):
+            case = draw_case(7000 + 100 * i + j, name, n_windows=WINDOWS)
+            v, d = _run(case)
+            _check_evidence(d)
+            results.append(score(d, case, v.figures))
+    lines = [f"{s.name}: top {s.top} {s.checks} {s.details.get('listed', '')}" for s in results]
+    report = "\n".join(lines)
+    if FULL:
+        assert sum(s.top_ok for s in results) >= 0.9 * len(results), report
+        for name in NAMES:
+            mine = [s for s in results if s.name == name]
+            assert sum(s.top_ok for s in mine) >= 0.6 * len(mine), report
+        right = [s for s in results if s.top_ok]
+        checks = {k for s in right for k in s.checks}
+        for k in checks:
+            have = [s.checks[k] for s in right if k in s.checks]
+            assert sum(have) >= 0.9 * len(have), (k, report)
+    else:
+        assert sum(s.ok for s in results) >= 6, report
+
+
+def test_clean_recordings_raise_no_false_alarm():
+    alarms, listed_wrong = [], []
+    for seed in range(CLEAN_SEEDS):
+        case = draw_case(8000 + seed, "clean", n_windows=WINDOWS)
+        _, d = _run(case)
+        named = [m["name"] for m in d["missing_physics"] if m["name"] != "unmodelled_modes"]
+        if named:
+            alarms.append((seed, named))
+        # a clean table holds the in-plane modes only: nothing to list as unmodelled
+        if any(m["name"] == "unmodelled_modes" for m in d["missing_physics"]):
+            listed_wrong.append(seed)
+    assert len(alarms) <= (0.05 * CLEAN_SEEDS if FULL else 1), alarms
+    assert len(listed_wrong) <= (0.05 * CLEAN_SEEDS if FULL else 1), listed_wrong
+
+
+def test_unmodelled_modes_listed_exactly():
+    for seed in range(3 if FULL else 1):
+        case = draw_case(8500 + seed, "unmodelled_modes", n_windows=WINDOWS)
+        _, d = _run(case)
+        listed = {int(m["where"].split()[2]) for m in d["missing_physics"] if m["name"] == "unmodelled_modes"}
+        assert listed == set(case.truth.out_of_plane_modes), (listed, case.truth.out_of_plane_modes)
+        assert top_entry(d) is None, d["missing_physics"]
+
+
+@pytest.mark.parametrize("seed", range(TWO))
+def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss(seed):
+    case = draw_case(9000 + seed, "temperature_dependent_stiffness", kind="girder", n_windows=WINDOWS,
+                     form="bilinear", second_step=True)
+    v, d = _run(case)
+    _check_evidence(d)
+    found = [m for m in d["missing_physics"] if m["name"] != "unmodelled_modes"]
+    names = [m["name"] for m in found]
+    assert "temperature_dependent_stiffness" in names and "stiffness_change_at_time" in names, found
+    knee = next(m for m in found if m["name"] == "temperature_dependent_stiffness")
+    step = next(m for m in found if m["name"] == "stiffness_change_at_time")
+    checks = parameter_checks("temperature_dependent_stiffness", knee, case.truth, case.obs.times)
+    assert checks.get("knee") and checks.get("slope"), (checks, knee["parameters"], case.truth)
+    assert abs(int(step["change_window"]) - int(case.truth.second.change_index)) <= 6, (step, case.truth.second)
+    s = score(d, case, v.figures)
+    assert s.checks.get("halved") and s.checks.get("held_out"), s
