@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 KNEE_C, WINDOWS, REL = 1.5, 6, 0.25
+BEARING_K = 5.0e9  # the girder's nominal vertical bearing stiffness (shm_ros.core.simulate.scenario)
 
 
 @dataclass
@@ -60,10 +61,17 @@ def parameter_checks(name: str, top: dict[str, Any], truth: Any, times: np.ndarr
     elif name == "added_mass" and "mass_fraction" in p:
         out["mass"] = _rel(p["mass_fraction"], t["fraction"])
     elif name == "support_flexibility":
+        # the case scales the truth's bearing springs, in series with the soil; the model's support
+        # spring stands for both
+        kb, ks = BEARING_K, float(t.get("k_soil_n_m", np.inf))
+
+        def eff(factor: float) -> float:
+            return 1.0 / (1.0 / (kb * factor) + 1.0 / ks)
+
         if "ln_step" in p and t.get("mode") == "scour":
-            out["spring"] = _rel(float(np.expm1(p["ln_step"])), -t["scale"])
+            out["spring"] = _rel(float(np.expm1(p["ln_step"])), eff(1 - t["scale"]) / eff(1.0) - 1)
         elif "frost_per_c" in p and t.get("mode") == "frozen":
-            out["spring"] = _rel(p["frost_per_c"], t["scale"])
+            out["spring"] = _rel(p["frost_per_c"], eff(1 + t["scale"]) / eff(1.0) - 1)
     elif name == "damper_stiffness":  # the change of the braces' stiffness, in story stiffness
         if "brace_lost" in p and t.get("mode") == "failure":
             out["damper"] = _rel(p["brace_lost"], t["scale"] * t["k_rel"])

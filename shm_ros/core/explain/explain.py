@@ -368,7 +368,9 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
     held_after = best.held_out_after or FitScores(float("nan"))
     out: list[CandidateResult] = []
     last = None
-    pool = [c for c in tried if c.label not in done and c.log_evidence_gain > threshold]
+    # every candidate tried alone, whatever its gain then: an effect may only show once a larger one
+    # is accounted for
+    pool = [c for c in tried if c.label not in done]
     by_label = {p.candidate + "/" + p.group: p for p in proposals}
     for _ in range(MAX_EFFECTS - 1):
         results = []

@@ -93,7 +93,7 @@ def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | No
     for c, zi in zip(tied, z, strict=True):
         c.tied_with = [o.label for o in tied if o is not c]
         c.extra["relative_support"] = zi / sum(z)
-    for c in passing[len(tied):]:
+    for c in [c for c in passing if c not in tied]:
         c.accepted = False
         c.reasons.append(f"failed: {best.label} explains the same misfit better "
                          f"({best.log_evidence_gain - c.log_evidence_gain:.1f} nats)")

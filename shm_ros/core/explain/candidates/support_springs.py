@@ -1,9 +1,11 @@
 """Support flexibility: the bearings' springs (girder, group ``bearings``) or the foundation's soil
 (building, group ``foundation``) are softer than the file says, and their stiffness may change.
 
-Parameters: the log of a constant stiffness factor, and, when locate hints at it, a change: a
-stiffening below a knee temperature (frozen ground, ``covariate = temperature_c`` with ``knee_c``)
-or a step from a window on (scour, settlement: ``change_index``).
+Parameters: when locate hints at a change, the change alone: a stiffening below a knee temperature
+(frozen ground, ``covariate = temperature_c`` with ``knee_c``) or a step from a window on (scour,
+settlement: ``change_index``), relative to the calibrated supports (a free constant level beside it
+trades off against the change: frequencies hardly depend on stiff supports, so a stiffer level would
+need a larger step). Without a hint, the log of a constant stiffness factor.
 """
 
 from __future__ import annotations
@@ -29,19 +31,19 @@ class SupportSprings(Candidate):
         return "none"
 
     def params(self) -> list[ParamSpec]:
-        out = [ParamSpec("ln_stiffness_factor", float(np.log(0.2)), float(np.log(5.0)), null=0.0)]
         change = self._change()
         if change == "step":
-            out.insert(0, ParamSpec("ln_step", float(np.log(0.1)), float(np.log(3.0)), null=0.0))
-        elif change == "frost":
-            out.insert(0, ParamSpec("frost_per_c", 0.0, 1.0, null=0.0, unit="1/degC"))
-        return out
+            return [ParamSpec("ln_step", float(np.log(0.1)), float(np.log(3.0)), null=0.0)]
+        if change == "frost":
+            return [ParamSpec("frost_per_c", 0.0, 1.0, null=0.0, unit="1/degC")]
+        return [ParamSpec("ln_stiffness_factor", float(np.log(0.2)), float(np.log(5.0)), null=0.0)]
 
     def modify(self, theta: np.ndarray) -> Modification:
         th = np.atleast_2d(np.asarray(theta, float))
         h, W = self.context.hints, len(self.context.times_s)
         change = self._change()
-        base = np.exp(th[:, -1])[:, None] * np.ones((1, W))
+        base = (np.ones((th.shape[0], W)) if change != "none"
+                else np.exp(th[:, -1])[:, None] * np.ones((1, W)))
         if change == "step":
             on = (np.arange(W) >= int(h["change_index"])).astype(float)
             base = base * np.exp(th[:, 0][:, None] * on[None, :])
@@ -52,13 +54,13 @@ class SupportSprings(Candidate):
 
     def form(self, theta: np.ndarray) -> str:
         th = np.ravel(theta)
-        s = f"{self.group} stiffness x{np.exp(th[-1]):.2f}"
         change = self._change()
         if change == "step":
-            s += f", x{np.exp(th[0]):.2f} from window {self.context.hints['change_index']}"
-        elif change == "frost":
-            s += f", +{100 * th[0]:.1f} %/degC below {self.context.hints['knee_c']:.1f} degC"
-        return s
+            return f"{self.group} stiffness x{np.exp(th[0]):.2f} from window {self.context.hints['change_index']}"
+        if change == "frost":
+            return (f"{self.group} stiffness +{100 * th[0]:.1f} %/degC below "
+                    f"{self.context.hints['knee_c']:.1f} degC (frozen ground)")
+        return f"{self.group} stiffness x{np.exp(th[-1]):.2f}"
 
     def time(self, theta: np.ndarray) -> float | None:
         if self._change() == "step":
