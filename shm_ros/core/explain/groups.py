@@ -34,7 +34,9 @@ from shm_ros.core.structure import StructureSpec, structure_from_dict
 # rotational stiffness a span offers with its far end fixed), so x - 1 = 1 is a stiff restraint
 ROTATION_REFERENCE = 4.0
 # reference damper-brace stiffness when a damper gives no k_maxwell: this share of the story's stiffness
-DAMPER_REFERENCE = 0.1
+# (1: the factor x - 1 is the brace stiffness in units of the story stiffness, and a lost brace
+# stiffness of the calibrated model is a factor in (0, 1), which the surrogate tabulates in ln x)
+DAMPER_REFERENCE = 1.0
 _DUMMY_PRIOR = {"dist": "normal", "mean": 1.0, "std": 0.1}
 
 
