@@ -62,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
             obs = tracked_observations_from_bag(
                 args.bag, spec, observed, args.window,
                 lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))
-        verdict = explain(obs, spec, config, progress=Progress("explain", every_s=2.0))
+        bar = Progress("explain", every_s=2.0)  # explain reports (stage, fraction done)
+        verdict = explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
     except Exception as exc:  # file, table, structure and model errors name their source
         print(f"shm-ros explain: error: {exc}", file=sys.stderr)
         return 2
