@@ -1,150 +1,175 @@
-"""`shm-ros example --out DIR`: the bundled example, end to end through the real node graph.
+"""`shm-ros example --out DIR`: the bundled example, from recordings to verdict, in one report.
 
-Simulates a short campaign of a three-span girder (truth model finer than the nominal one, daily
-temperature cycle, traffic-like excitation) and replays the bag through ingest -> identify -> track
--> update (separate processes over DDS, with a recorder node; the stages overlap as data flows).
-Writes ``modes.json``, ``tracked_modes.csv`` + ``tracking.json``, ``update/posterior.json`` +
-``samples.npz``, the recorder's bag, and ``report.html`` / ``report.md`` with a section per stage
-(every figure's numbers next to it in ``figures/``).
+Reads ``examples/main_job.yaml`` (or ``--config``): two simulated campaigns with a known truth.
+
+* girder: one winter day of a three-span girder whose deck stiffens below 0 degC (a concealed
+  effect the structure file does not mention), replayed through ingest -> identify -> track ->
+  update -> explain (+ recorder);
+* building: an eight-story building with a measured ground input, ambient windows then earthquakes,
+  replayed through ingest -> identify -> track -> update -> predict (+ recorder); the predict node
+  waits for the update node's posterior and predicts the floors' responses to the measured input.
+
+Each graph is separate processes over DDS; the stages overlap as data flows. While the building's
+graph runs, the bridge paper's Table 1 sweep (``shm-ros update --study``) runs on the girder's
+tracked modes. Writes, under DIR: ``girder/`` and ``building/`` (recording, ``modes.json``,
+``tracked_modes.csv``, ``update/posterior.json``, ``explain/verdict.json`` or
+``prediction/prediction.json``, ``pipeline_bag`` = the run's output bag), ``girder/study/``, and
+``report.html`` / ``report.md`` (a plain-words summary on top, a section per stage, the papers'
+tables; every figure's numbers in ``figures/`` next to it) plus ``example.json`` (the run's facts).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import copy
+import multiprocessing
 import shutil
 import sys
 import time
+from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+CONFIG = Path(__file__).resolve().parents[2] / "examples" / "main_job.yaml"
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("example", help="run the bundled example end to end", description=__doc__)
+    p = sub.add_parser("example", help="run the bundled example end to end", description=__doc__,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="out/example", help="output folder (default out/example)")
-    p.add_argument("--windows", type=int, default=12, help="number of windows (default 12)")
-    p.add_argument("--window-s", type=float, default=300.0, help="window length in s (default 300)")
-    p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--config", default=str(CONFIG), help="example file (default examples/main_job.yaml)")
+    p.add_argument("--windows", type=int, help="girder windows (default: the file's; the day is kept)")
+    p.add_argument("--window-s", type=float, help="girder and building window length in s (default: the file's)")
+    p.add_argument("--seed", type=int, help="simulation seed of both parts (default: the file's)")
     p.set_defaults(func=run)
 
 
-def stage_settings(n_windows: int, out: Path) -> dict[str, dict[str, Any]]:
-    """Node parameters of the example: track's reference and training periods and update's
-    schedule scaled to a short campaign (one posterior, from every window)."""
+# -- configuration ------------------------------------------------------------------------------
+
+def load_example(args: argparse.Namespace) -> dict[str, Any]:
+    """The example file with the command line's overrides applied (the girder keeps its day)."""
+    import yaml
+
+    doc = yaml.safe_load(Path(args.config).read_text())
+    for part in ("girder", "building"):
+        if not isinstance(doc.get(part), dict) or not isinstance(doc[part].get("scenario"), dict):
+            raise ValueError(f"{args.config}: '{part}: scenario:' is required")
+    g = doc["girder"]["scenario"]
+    day = float(g.get("n_windows", 3)) * (float(g.get("window_s", 600.0)) + float(g.get("pause_s", 2.0)))
+    if args.window_s:
+        for part in ("girder", "building"):
+            sc = doc[part]["scenario"]
+            interval = float(sc.get("window_s", 600.0)) + float(sc.get("pause_s", 2.0))
+            sc["window_s"], sc["pause_s"] = args.window_s, max(2.0, interval - args.window_s)
+            for q in sc.get("earthquakes") or []:
+                q["onset_s"] = min(float(q.get("onset_s", 0.0)), 0.25 * args.window_s)
+    if args.windows:
+        g["n_windows"] = args.windows
+        g["pause_s"] = max(2.0, day / args.windows - float(g["window_s"]))
+    if args.seed is not None:
+        for part in ("girder", "building"):
+            doc[part]["scenario"]["seed"] = args.seed
+    return doc
+
+
+def node_settings(part: dict[str, Any], n_windows: int, out: Path) -> dict[str, dict[str, Any]]:
+    """The part's node parameters with what depends on the campaign's size and the output folder:
+    track's reference and training periods (half the windows), update and explain on every window
+    (one run each, when the last window has arrived), files under ``out``."""
+    nodes = copy.deepcopy(part.get("nodes") or {})
     half = max(3, n_windows // 2)
-    return {"identify": {},
-            "track": {"reference_windows": half, "training_windows": half, "store": str(out / "track.sqlite")},
-            "update": {"min_windows": n_windows, "min_new_windows": n_windows,
-                       "output_dir": str(out / "update")}}
+    s: dict[str, dict[str, Any]] = {"identify": dict(nodes.get("identify") or {})}
+    s["track"] = {"reference_windows": half, "training_windows": half, **(nodes.get("track") or {}),
+                  "store": str(out / "track.sqlite")}
+    s["update"] = {"min_windows": n_windows, "min_new_windows": n_windows, **(nodes.get("update") or {}),
+                   "output_dir": str(out / "update")}
+    if "explain" in nodes:
+        s["explain"] = {"min_windows": n_windows, "min_new_windows": n_windows, **(nodes["explain"] or {}),
+                        "output_dir": str(out / "explain")}
+    if "predict" in nodes:
+        s["predict"] = {"wait_for_posterior_s": 900.0, **(nodes["predict"] or {}),
+                        "posterior": str(out / "update"), "output_dir": str(out / "prediction")}
+    return s
+
+
+# -- the run ------------------------------------------------------------------------------------
+
+def _log(text: str) -> None:
+    print(f"[example] {text}", flush=True)
+
+
+def simulate_part(name: str, part: dict[str, Any], out: Path) -> Any:
+    from shm_ros.core.simulate import simulate_campaign
+    from shm_ros.core.simulate.scenario import scenario_from_dict
+    from shm_ros.io.campaign import print_progress, write_campaign
+
+    sc = scenario_from_dict(copy.deepcopy(part["scenario"]), source=f"example {name}")
+    _log(f"{name}: simulating {sc.n_windows} windows of {sc.window_s:.0f} s every {sc.interval_s / 60:.0f} min "
+         f"({sc.name}, seed {sc.seed}{', hidden: ' + ', '.join(e.key for e in sc.effects) if sc.effects else ''}"
+         f"{f', {len(sc.earthquakes)} earthquake(s)' if sc.earthquakes else ''})")
+    return write_campaign(simulate_campaign(sc), out / "recording", progress=print_progress(every=8)), sc
+
+
+def run_part(name: str, files: Any, sc: Any, settings: dict[str, dict[str, Any]], out: Path) -> Any:
+    from shm_ros.ros.graph_run import replay_through_graph
+
+    stages = ["ingest", "identify", "track", "update", *[k for k in ("predict", "explain") if k in settings]]
+    _log(f"{name}: replaying {files.bag} through {' -> '.join(stages)} (+ recorder; separate processes, DDS)")
+    events = len(sc.earthquakes) + (sc.n_windows if sc.earthquake_every_window else 0)
+    return replay_through_graph(files.bag, files.structure, out, window_s=sc.window_s,
+                                expected_windows=sc.n_windows, identify=settings["identify"],
+                                track=settings["track"], update=settings["update"],
+                                predict=settings.get("predict"), explain=settings.get("explain"),
+                                expected_predictions=events if "predict" in settings else None,
+                                timeout_s=1800.0, log=lambda s: _log(f"{name}: {s}"))
 
 
 def run(args: argparse.Namespace) -> int:
-    from shm_ros.core.simulate import named_scenario, simulate_campaign
-    from shm_ros.io.campaign import print_progress, write_campaign
-    from shm_ros.ros.graph_run import replay_through_graph
+    from shm_ros.commands.example_outputs import study_job, write_report, write_stage_files
 
-    if args.windows < 3:
-        print("shm-ros example: --windows must be at least 3 (tracking needs a reference period)",
-              file=sys.stderr)
+    try:
+        doc = load_example(args)
+    except (OSError, ValueError) as exc:
+        print(f"shm-ros example: {exc}", file=sys.stderr)
+        return 2
+    if int(doc["girder"]["scenario"].get("n_windows", 3)) < 6:
+        print("shm-ros example: the girder needs at least 6 windows (tracking's reference period)", file=sys.stderr)
         return 2
     out = Path(args.out)
-    recording = out / "recording"
-    for old in (recording, out / "update", out / "figures"):
-        if old.exists():
-            shutil.rmtree(old)
+    for old in ("girder", "building", "figures"):
+        if (out / old).exists():
+            shutil.rmtree(out / old)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
-    print(f"[example] simulating {args.windows} windows of {args.window_s:.0f} s (girder, seed {args.seed})")
-    scenario = named_scenario("girder")
-    scenario.n_windows, scenario.window_s, scenario.seed = args.windows, args.window_s, args.seed
-    files = write_campaign(simulate_campaign(scenario), recording, progress=print_progress(every=4))
-    settings = stage_settings(args.windows, out)
-    print(f"[example] replaying {files.bag} through ingest -> identify -> track -> update "
-          "(separate processes, DDS)")
-    graph = replay_through_graph(files.bag, files.structure, out, window_s=args.window_s,
-                                 expected_windows=args.windows, identify=settings["identify"],
-                                 track=settings["track"], update=settings["update"],
-                                 log=lambda s: print(f"[example] {s}", flush=True))
-    report, facts = write_outputs(out, graph, Path(files.structure), Path(files.truth), settings, args)
-    facts["wall time"] = f"{time.monotonic() - t0:.0f} s"
+    parts: dict[str, dict[str, Any]] = {}
+    for name in ("girder", "building"):
+        files, sc = simulate_part(name, doc[name], out / name)
+        parts[name] = {"files": files, "scenario": sc,
+                       "settings": node_settings(doc[name], sc.n_windows, out / name)}
+    g = parts["girder"]
+    g["graph"] = run_part("girder", g["files"], g["scenario"], g["settings"], out / "girder")
+    g["stage"] = write_stage_files(out / "girder", g["graph"], g["settings"], doc)
+    # the Table 1 sweep on the girder's tracked modes runs beside the building's graph
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+    study: Future | None = None
+    if g["stage"].tracking is not None:
+        _log("girder: the bridge paper's Table 1 sweep (shm-ros update --study) starts on the tracked modes")
+        study = pool.submit(study_job, g["stage"].tracking.observations, str(g["files"].structure),
+                            dict(doc["girder"].get("study") or {}), str(out / "girder" / "study"))
+    b = parts["building"]
+    b["graph"] = run_part("building", b["files"], b["scenario"], b["settings"], out / "building")
+    b["stage"] = write_stage_files(out / "building", b["graph"], b["settings"], doc)
+    study_rows = None
+    if study is not None:
+        try:
+            study_rows = study.result()
+        except Exception as exc:  # the report says what is missing instead of stopping
+            print(f"[example] Table 1 sweep failed: {exc}", file=sys.stderr)
+    pool.shutdown()
+    report, facts, ok = write_report(out, parts, study_rows, t0)
     for k, v in facts.items():
         print(f"[example] {k}: {v}")
     print(f"[example] wrote {report}")
-    ok = (graph.replay.lost == 0 and len(graph.estimates) == args.windows and graph.node_exit_code == 0
-          and (out / "update" / "posterior.json").is_file())
     if not ok:
-        print("[example] the graph did not deliver every stage's results; see the report's diagnostics",
-              file=sys.stderr)
+        print("[example] the graph did not deliver every stage's results; see the report's notes", file=sys.stderr)
     return 0 if ok else 1
-
-
-def write_outputs(out: Path, graph: Any, structure: Path, truth_path: Path, settings: dict[str, dict[str, Any]],
-                  args: argparse.Namespace) -> tuple[Path, dict[str, Any]]:
-    """The stage files and the report from what the graph published."""
-    from shm_ros.core.identify import IdentifyConfig, identify_window_detailed
-    from shm_ros.core.tracking import TrackingConfig, track
-    from shm_ros.io.modes_json import write_modes_json
-    from shm_ros.io.tables import write_tracked_modes
-    from shm_ros.report.build import build_report
-    from shm_ros.report.identify_summary import match_to_truth
-    from shm_ros.report.inputs import DiagnosticRow, IdentifyInputs, IngestInputs, ReportInputs
-    from shm_ros.report.load import ReportInputError, load_posterior
-
-    seed = args.seed
-    config = {"example": {"windows": args.windows, "window_s": args.window_s, "seed": seed}, "nodes": settings}
-    write_modes_json(out / "modes.json", graph.estimates, config=config, seed=seed)
-    # The track node published one row per window; the table and the report's tracking section
-    # come from the same core over the same estimates (the online tracker equals the batch result).
-    n_train = settings["track"]["training_windows"]
-    tracking = None
-    try:
-        tracking = track(graph.estimates, TrackingConfig(
-            reference_windows=settings["track"]["reference_windows"],
-            training_fraction=min(1.0, n_train / max(len(graph.estimates), 1))))
-        write_tracked_modes(out / "tracked_modes.csv", tracking.observations)
-    except ValueError as exc:
-        print(f"[example] tracking: {exc}", file=sys.stderr)
-    posterior = None
-    try:
-        posterior = load_posterior(out / "update")
-    except ReportInputError as exc:
-        print(f"[example] no posterior: {exc}", file=sys.stderr)
-    # stabilization diagrams of the first, middle and last window (the node's settings)
-    windows = sorted(graph.windows, key=lambda w: w.start_ns)
-    diagrams = {}
-    for w in {id(w): w for w in (windows[:1] + windows[len(windows) // 2:][:1] + windows[-1:])}.values():
-        try:
-            diagrams[w.window_id] = identify_window_detailed(w, IdentifyConfig(spectrum=True)).diagram
-        except (ValueError, ArithmeticError):
-            pass
-    truth = json.loads(truth_path.read_text())
-    matches = match_to_truth(graph.estimates, truth)
-    errors = sorted(abs(e) for m in matches for e in m.error_pct if e is not None)
-    found = sum(f is not None for m in matches for f in m.found_hz)
-    facts: dict[str, Any] = {
-        "structure": structure.name,
-        "recording": f"{args.windows} windows of {args.window_s:.0f} s, simulated (seed {seed})",
-        "messages replayed": graph.replay.published,
-        "messages lost": graph.replay.lost,
-        "windows from ingest": len(graph.windows),
-        "modal estimates from identify": len(graph.estimates),
-        "tracked-mode rows from track": len(graph.tracked),
-        "posteriors from update": len(graph.posteriors),
-        "true modes found (first 4 per window)": f"{found}/{sum(len(m.true_hz) for m in matches)}",
-        "median |frequency error|": f"{errors[len(errors) // 2]:.3f} %" if errors else "-",
-        "graph wall time": f"{graph.wall_s:.0f} s",
-    }
-    inputs = ReportInputs(
-        title=f"shm_ros example: {_structure_name(structure)}", facts=facts,
-        ingest=IngestInputs.from_windows(windows, [DiagnosticRow.from_any(d) for d in graph.diagnostic_rows
-                                                   if d["level"] != 0]),
-        identify=IdentifyInputs(graph.estimates, diagrams, "ssi-cov"), truth=truth,
-        tracking=tracking, posterior=posterior)
-    files = build_report(inputs, out)
-    return files.html, facts
-
-
-def _structure_name(path: Path) -> str:
-    from shm_ros.io.structure import load_structure
-
-    return str(load_structure(path).name)

@@ -170,3 +170,6 @@ class ReportInputs:
     posterior: Posterior | None = None
     prediction: PredictionInputs | None = None
     explain: ExplainInputs | None = None
+    # the papers' tables that apply: {"table1": study.json's content (``shm-ros update --study``)};
+    # Table 3 comes with ``prediction``
+    papers: dict[str, Any] | None = None

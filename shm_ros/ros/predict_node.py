@@ -5,18 +5,24 @@ and any window named on ``/shm/predict_request`` (std_msgs/String: a window id a
 ``keep_windows`` received; no service type is used because std_srvs is not a dependency), is
 predicted with the posterior file ``posterior`` (re-read when it changes; a ``/shm/posterior``
 message marks that it did) or the nominal model without one, scored and published as
-``ResponsePrediction`` on ``/shm/prediction``. Predictions run one at a time in a worker process
+``ResponsePrediction`` on ``/shm/prediction``. With ``wait_for_posterior_s`` > 0 the queued windows
+wait until the update node has written the posterior (a graph that replays a recording delivers the
+event windows long before the first posterior exists). With ``output_dir`` the node also writes
+``prediction.json`` (Table 3 rows, scores, summary) and ``prediction_series.json`` after every
+prediction, as ``shm-ros predict`` does. Predictions run one at a time in a worker process
 (:mod:`shm_ros.ros.predict_worker`); a timer in the executor thread collects them.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import time
 from collections import OrderedDict, deque
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 from rclpy.node import Node
@@ -33,6 +39,7 @@ from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
 
 REQUEST = "/shm/predict_request"  # std_msgs/msg/String: the id of a window to predict
+MAX_FILED = 100  # predictions kept for output_dir's files (the newest)
 
 
 @dataclass
@@ -40,6 +47,12 @@ class PredictNodeConfig:
     structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
     posterior: str | None = option(None, "posterior.json or its folder (unset: the nominal model)")
     keep_windows: int = option(20, "windows kept for requests by id")
+    wait_for_posterior_s: float = option(0.0, "windows to predict wait (queued, the executor runs on) until the "
+                                         "posterior file and its samples exist, at most this long (wall clock, "
+                                         "from the first queued window); then the nominal model is used "
+                                         "(0: no wait)")
+    output_dir: str | None = option(None, "directory of prediction.json and prediction_series.json (as `shm-ros "
+                                    "predict` writes them), rewritten after every prediction (unset: not written)")
 
 
 def prediction_to_msg(pred: Any) -> Any:
@@ -87,6 +100,7 @@ class PredictNode(Node):
         self.windows: OrderedDict[str, Any] = OrderedDict()
         self.queue: deque = deque()
         self.future: Future | None = None
+        self.future_model = "nominal"
         self.done = 0
         self.diag = Diagnostics(self, "predict", summary=lambda: (
             "ok", f"{self.done} predictions, {len(self.queue)} waiting" if self.enabled
@@ -99,6 +113,8 @@ class PredictNode(Node):
                                  lambda _msg: None, latched_qos())  # the file is re-read when it changed
         self.create_subscription(topics.message_class("std_msgs/msg/String"), REQUEST, self._on_request,
                                  stream_qos())
+        self.results: deque = deque(maxlen=MAX_FILED)  # (prediction, Table-3 row, model label) for output_dir
+        self.waiting_since: float | None = None  # monotonic time of the first window held for the posterior
         self._workers: set = set()
         self.pool: ProcessPoolExecutor | None = self._new_pool() if self.enabled else None
         steady_timer(self, 0.1, self._poll)
@@ -151,12 +167,69 @@ class PredictNode(Node):
             else:
                 self.pub.publish(prediction_to_msg(pred))
                 self.done += 1
+                if self.settings.output_dir:
+                    self.results.append((pred, row, self.future_model))
+                    self._write_files()
                 self.diag.report("ok", f"{pred.window_id}: NRMS floor 4 {row.get('accel_floor4')}, "
                                  f"floor 8 {row.get('accel_floor8')}", "prediction")
             self.diag.publish()
         if self.future is None and self.queue and self.pool is not None:
+            posterior = self._posterior_or_wait()
+            if posterior is False:
+                return
             w = self.queue.popleft()
-            self.future = self.pool.submit(predict_worker.run, w, self.config, self.settings.posterior)
+            self.future = self.pool.submit(predict_worker.run, w, self.config, posterior)
+            self.future_model = "updated" if posterior and _posterior_file(posterior).is_file() else "nominal"
+
+    def _write_files(self) -> None:
+        """prediction.json + prediction_series.json of the predictions so far (``shm-ros predict``'s layout)."""
+        from dataclasses import asdict
+
+        from shm_ros.core.predict import event_json, summary_json
+        from shm_ros.core.provenance import stamp_output
+        from shm_ros.io import jsonio
+        from shm_ros.io.prediction_files import write_prediction_series
+
+        preds = [p for p, _, _ in self.results]
+        models = sorted({m for _, _, m in self.results})
+        payload = {"model": models[0] if len(models) == 1 else "mixed",
+                   "events": [event_json(p) for p in preds], "table3": [r for _, r, _ in self.results],
+                   "summary": summary_json(preds), "errors": []}
+        cfg = asdict(self.config) | {"structure": self.structure, "posterior": self.settings.posterior}
+        try:
+            jsonio.dump(stamp_output(payload, cfg, self.config.seed), Path(self.settings.output_dir or ".")
+                        / "prediction.json", indent=2)
+            write_prediction_series(self.settings.output_dir or ".", preds)
+        except OSError as exc:  # a full disk must not take the node down
+            self.diag.report("error", f"cannot write {self.settings.output_dir}: {exc}", "output")
+
+    def _posterior_or_wait(self) -> str | None | Literal[False]:
+        """The posterior to predict with, or False while the queued windows still wait for it."""
+        path = self.settings.posterior
+        wait = float(self.settings.wait_for_posterior_s)
+        if not path or wait <= 0 or self.waiting_since == -1.0:
+            return path
+        p = _posterior_file(path)
+        # the update node writes posterior.json, then samples.npz by rename: both present = complete
+        if p.is_file() and p.with_name("samples.npz").is_file():
+            self.waiting_since = -1.0  # from now on the file is only re-read when it changes
+            return path
+        now = time.monotonic()
+        if self.waiting_since is None:
+            self.waiting_since = now
+            self.diag.report("ok", f"{len(self.queue)} window(s) wait for the posterior {p}", "prediction")
+        if now - self.waiting_since < wait:
+            return False
+        self.waiting_since = -1.0
+        self.diag.report("warn", f"no posterior {p} after {wait:.0f} s: predicting with the nominal model",
+                         "prediction")
+        return None
+
+
+def _posterior_file(path: str) -> Path:
+    """posterior.json of ``path`` (the file, or its folder, which may not exist yet)."""
+    p = Path(path)
+    return p / "posterior.json" if p.is_dir() or not p.suffix else p
 
 
 def make_node(name: str, parameters: dict[str, Any]) -> PredictNode:
