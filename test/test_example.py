@@ -1,6 +1,19 @@
-"""The main job (README's first command) runs end to end through the real node graph: simulate ->
-replay over DDS -> ingest -> identify -> track -> update, ending in one report with a section per
-stage (each with a figure of this run and its data file) that opens cleanly in a real browser."""
+"""The main job (README's first command) end to end through the real node graphs, at reduced size:
+a girder day with a concealed freezing knee through ingest -> identify -> track -> update -> explain,
+and a building with a measured ground input and two earthquakes through ingest -> identify -> track
+-> update -> predict (the predict node waits for the update node's posterior), ending in one report
+whose every section has a figure of this run with its numbers next to it, that opens cleanly in a
+real browser.
+
+Acceptance checked: every stage's files; identified frequencies against the simulator's truth (whose
+model class is richer than the analysis model's: docs/simulator.md) within 1 % — per in-plane mode
+the median over windows, and at least 90 % of all (window, mode) pairs of the first three in-plane
+modes (single-window scatter of a 60-s window reaches 1 % now and then; the full-size command uses
+longer windows); explain's top entry other than ``unmodelled_modes`` is the concealed effect
+(``temperature_dependent_stiffness``). The example is one fixed seed (the README's), so these are
+checks of that run, not statistics over seeds; explain's detection rate is tested over seeds in
+test_explain_cases.py.
+"""
 
 from __future__ import annotations
 
@@ -10,62 +23,78 @@ import re
 import shutil
 import subprocess
 import sys
-from datetime import datetime
 
+import numpy as np
 from browser import Images, artefact_dir, page_errors, run_chromium
 
 from shm_ros.report.document import section_anchor
 
-N_WINDOWS, WINDOW_S = 6, 120.0  # reduced size: the README's command runs 12 x 300 s
+N_WINDOWS, WINDOW_S = 24, 60.0  # reduced size: the README's command runs examples/main_job.yaml (48 x 120 s)
 SECTIONS = {"Data health (ingest)": "ingest", "Identification": "identify", "Tracking": "tracking",
-            "Posterior (model updating)": "posterior"}
+            "Posterior (model updating)": "posterior", "Prediction": "prediction",
+            "Explanation (missing physics)": "explain", "The papers' tables": "papers"}
 
 
-def _t(text: str) -> datetime:
-    return datetime.fromisoformat(text.replace("Z", "+00:00"))
+def _frequency_errors(part_dir) -> dict[int, list[float]]:
+    """|f_identified / f_true - 1| in % per window for each of the first three in-plane true modes."""
+    doc = json.loads((part_dir / "modes.json").read_text())
+    truth = json.loads((part_dir / "recording" / "truth.json").read_text())
+    family = truth["model_form"]["in_plane_family"]
+    assert len(doc["windows"]) == len(truth["windows"])
+    out: dict[int, list[float]] = {0: [], 1: [], 2: []}
+    for w, tw in zip(doc["windows"], truth["windows"], strict=True):
+        found = np.array([m["frequency_hz"] for m in w["modes"]])
+        true = [f for f, g in zip(tw["frequencies_hz"], tw["mode_families"], strict=True) if g == family]
+        for k, f in enumerate(true[:3]):
+            out[k].append(float(np.min(np.abs(found / f - 1))) * 100)
+    return out
 
 
-def test_example_runs_every_stage_through_the_node_graph_and_reports(tmp_path):
+def test_example_runs_every_node_and_reports(tmp_path):
     out = tmp_path / "example"
     run = subprocess.run([sys.executable, "-m", "shm_ros.cli", "example", "--out", str(out),
                           "--windows", str(N_WINDOWS), "--window-s", str(WINDOW_S)],
-                         capture_output=True, text=True, timeout=900)
+                         capture_output=True, text=True, timeout=1200)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
-    assert "messages lost: 0" in run.stdout
+    assert "messages replayed / lost" in run.stdout and not re.search(r"replayed / lost: \d+ / [1-9]", run.stdout)
     assert re.search(r"graph \[#+\] \d+/\d+ .*(ETA|done)", run.stdout + run.stderr), "no progress shown"
 
     # every stage's files, from this run
-    doc = json.loads((out / "modes.json").read_text())
-    assert doc["schema_version"] and doc["provenance"]["version"] and doc["provenance"]["random_seed"] == 7
-    assert len(doc["windows"]) == N_WINDOWS
-    rows = (out / "tracked_modes.csv").read_text().splitlines()
-    assert len(rows) == 1 + N_WINDOWS
-    post = json.loads((out / "update" / "posterior.json").read_text())
-    assert post["parameters"] and (out / "update" / "samples.npz").stat().st_size > 1000
-    truth = json.loads((out / "recording" / "truth.json").read_text())
-    for w, tw in zip(doc["windows"], truth["windows"], strict=True):
-        assert _t(w["start"]) == _t(tw["start"])
-        found = [m["frequency_hz"] for m in w["modes"]]
-        assert found == sorted(found)
-        # the first three true in-plane (vertical) modes within 2 % (identification accuracy has its
-        # own acceptance tests; lateral modes reach the vertical sensors only by cross-axis sensitivity)
-        vertical = [f for f, g in zip(tw["frequencies_hz"], tw["mode_families"], strict=True) if g == "vertical"]
-        for f_true in vertical[:3]:
-            assert min(abs(f - f_true) / f_true for f in found) < 0.02, (found, f_true)
-        shape = w["modes"][0]["mode_shape"]
-        assert max(shape.values(), key=abs) == 1.0 and set(shape) == set(truth["sensor_ids"])
+    g, b = out / "girder", out / "building"
+    for part, n in ((g, N_WINDOWS), (b, 8)):
+        doc = json.loads((part / "modes.json").read_text())
+        assert doc["schema_version"] and doc["provenance"]["version"] and len(doc["windows"]) == n
+        assert len((part / "tracked_modes.csv").read_text().splitlines()) == 1 + n
+        post = json.loads((part / "update" / "posterior.json").read_text())
+        assert post["parameters"] and (part / "update" / "samples.npz").stat().st_size > 1000
+        assert (part / "pipeline_bag").is_dir()
+        for k, errs in _frequency_errors(part).items():
+            assert np.median(errs) < 1.0, (part.name, k, errs)
+        pooled = np.concatenate(list(_frequency_errors(part).values()))
+        assert np.mean(pooled < 1.0) >= 0.9, (part.name, np.sort(pooled)[-10:])
+    pred = json.loads((b / "prediction" / "prediction.json").read_text())
+    assert len(pred["events"]) == 2 and pred["model"] == "updated" and len(pred["table3"]) == 2
+    verdict = json.loads((g / "explain" / "verdict.json").read_text())
+    named = [m["name"] for m in verdict["missing_physics"] if m["name"] != "unmodelled_modes"]
+    assert named and named[0] == "temperature_dependent_stiffness", verdict["missing_physics"]
+    study = json.loads((g / "study" / "study.json").read_text())
+    assert len(study["rows"]) == 7 and all(len(r["rmse"]) == len(study["rows"][0]["rmse"]) for r in study["rows"])
 
-    # one report: a section per stage, each with a figure of this run and its numbers next to it
+    # one report: a summary in plain words, a section per stage, each with a figure of this run and its data
     md = (out / "report.md").read_text()
+    summary = md.split("## ", 2)[1]
+    assert summary.startswith("Summary") and "What the model is missing: temperature dependent stiffness" in summary
+    assert "Prediction:" in summary and "Hz" in summary and "°C" in summary
     parts = re.split(r"^## ", md, flags=re.M)[1:]
     by_title = {p.splitlines()[0].strip(): p for p in parts}
     assert set(SECTIONS) <= set(by_title), sorted(by_title)
+    stamp = (g / "recording" / "truth.json").stat().st_mtime
     for title in SECTIONS:
         pngs = re.findall(r"\]\((figures/[^)]+\.png)\)", by_title[title])
         assert pngs, f"section {title!r} has no figure"
         for png in pngs:
             f = out / png
-            assert f.is_file() and f.stat().st_mtime >= (out / "recording" / "truth.json").stat().st_mtime
+            assert f.is_file() and f.stat().st_mtime >= stamp
             assert any(f.with_suffix(s).is_file() for s in (".csv", ".json")), f"{png}: no data file"
 
     # ... that opens in a real browser without a console error, self-contained

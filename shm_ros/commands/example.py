@@ -39,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="out/example", help="output folder (default out/example)")
     p.add_argument("--config", default=str(CONFIG), help="example file (default examples/main_job.yaml)")
     p.add_argument("--windows", type=int, help="girder windows (default: the file's; the day is kept)")
-    p.add_argument("--window-s", type=float, help="girder and building window length in s (default: the file's)")
+    p.add_argument("--window-s", type=float, help="girder window length in s (default: the file's)")
     p.add_argument("--seed", type=int, help="simulation seed of both parts (default: the file's)")
     p.set_defaults(func=run)
 
@@ -57,12 +57,8 @@ def load_example(args: argparse.Namespace) -> dict[str, Any]:
     g = doc["girder"]["scenario"]
     day = float(g.get("n_windows", 3)) * (float(g.get("window_s", 600.0)) + float(g.get("pause_s", 2.0)))
     if args.window_s:
-        for part in ("girder", "building"):
-            sc = doc[part]["scenario"]
-            interval = float(sc.get("window_s", 600.0)) + float(sc.get("pause_s", 2.0))
-            sc["window_s"], sc["pause_s"] = args.window_s, max(2.0, interval - args.window_s)
-            for q in sc.get("earthquakes") or []:
-                q["onset_s"] = min(float(q.get("onset_s", 0.0)), 0.25 * args.window_s)
+        interval = float(g.get("window_s", 600.0)) + float(g.get("pause_s", 2.0))
+        g["window_s"], g["pause_s"] = args.window_s, max(2.0, interval - args.window_s)
     if args.windows:
         g["n_windows"] = args.windows
         g["pause_s"] = max(2.0, day / args.windows - float(g["window_s"]))

@@ -7,6 +7,7 @@ did not run say nothing). The owner of a structure reads this and nothing else.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
@@ -17,7 +18,9 @@ def summary_sentences(inputs: ReportInputs) -> list[str]:
     out: list[str] = []
     for part in (_measured, _modes, _changes, _model, _robust, _predicted, _missing):
         try:
-            text = part(inputs)
+            with warnings.catch_warnings():  # modes never found are NaN columns: no number, no warning
+                warnings.simplefilter("ignore", RuntimeWarning)
+                text = part(inputs)
         except (KeyError, ValueError, TypeError, IndexError):  # a summary must never stop a report
             text = None
         if text:

@@ -34,7 +34,39 @@ class ExplainSection:
         if tried:
             s.tables.append(_candidates_table(tried))
         s.figures += _figures(v, series, fig_dir)
+        if not s.figures and inputs.tracking is not None:  # a series without residuals: what the data follow
+            fig = _tracked_covariate_figure(inputs.tracking.observations, v, series, fig_dir)
+            if fig is not None:
+                s.figures.append(fig)
         return s
+
+
+def _tracked_covariate_figure(obs: Any, v: dict[str, Any], series: dict[str, Any], fig_dir: Path) -> Figure | None:
+    """The explained modes' frequencies (change from their mean, %) against each covariate the
+    mismatch correlates with: what the missing physics was found to follow."""
+    corr = (v.get("mismatch") or {}).get("covariates") or {}
+    covs = {k: np.asarray(obs.covariates[k], dtype=float) for k in corr if k in getattr(obs, "covariates", {})}
+    modes = [m for m in (series.get("modes") or obs.mode_numbers) if m in obs.mode_numbers]
+    if not covs or not modes:
+        return None
+    plt = pyplot()
+    fig, axes = plt.subplots(1, len(covs), figsize=(3.4 * len(covs) + 1, 3.2), squeeze=False, sharey=True)
+    data: dict[str, Any] = {"mode_numbers": modes, "covariates": covs, "change_pct": {}}
+    for m in modes:
+        f = np.asarray(obs.frequencies_hz[:, obs.mode_numbers.index(m)], dtype=float)
+        change = 100 * (f / np.nanmean(f) - 1)
+        data["change_pct"][m] = change
+        for ax, c in zip(axes[0], covs.values(), strict=True):
+            ax.plot(c, change, ".", ms=3, label=f"mode {m}")
+    for ax, name in zip(axes[0], covs, strict=True):
+        ax.set_xlabel(name)
+        ax.set_title(f"correlation with the misfit {float(corr[name]):+.2f}", fontsize=8)
+    axes[0, 0].set_ylabel("frequency change from the mean, %")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("what the mismatch follows: the explained modes' frequencies against each covariate", fontsize=9)
+    fig.tight_layout()
+    return figure_json(fig, fig_dir, "explain_tracked_covariates", "The explained modes' frequencies against each "
+                       "covariate, with the covariate's correlation with the model's misfit", plain(data))
 
 
 def _paragraphs(v: dict[str, Any]) -> list[str]:
