@@ -305,6 +305,59 @@ class _Job:
         return self.lik.gain(d, dd)
 
 
+class _OnTopJob(_Job):
+    """An effect on top of accepted ones, evaluated cheaply: the accepted effects' change of the
+    log-frequencies (exact, computed once) plus the new effect's own change (the surrogate of its
+    groups alone) plus a cross term, the exact joint change less those two, computed at one point
+    (``anchor``: the new effect's MAP of a first pass) and held fixed. Where several groups change
+    with continuous covariates the joint surrogate needs a small eigenproblem per window and draw;
+    this costs one. The joint model at the MAP is exact by construction; away from it the error is
+    second order in the parameters' deviation (the candidates' surrogate check reports it)."""
+
+    def __init__(self, cand: _OnTop, sur: Surrogate, lik: CandidateLikelihood, train: np.ndarray):
+        super().__init__(cand, sur, lik, train)
+        from .candidates.base import Modification
+
+        fixed = Modification({}, None)
+        for c, th in cand.fixed:
+            f = c.modify(th[None])
+            for g, x in f.groups.items():
+                fixed.groups[g] = fixed.groups[g] * x if g in fixed.groups else np.array(x, dtype=float)
+            if f.damping is not None:
+                fixed.damping = f.damping if fixed.damping is None else fixed.damping * f.damping
+        self.fixed_mod = fixed
+        self.d_fixed = sur.delta(fixed)[0] if fixed.groups else None  # (W, K)
+        self.cross: np.ndarray | None = None
+
+    def anchor(self, theta: np.ndarray) -> None:
+        """Exact joint change at ``theta`` less the two parts: the cross term."""
+        self.cross = None
+        joint, _ = _Job.deltas(self, theta)
+        parts, _ = self.deltas(theta)
+        self.cross = None if joint is None or parts is None else (joint - parts)[0]
+
+    def deltas(self, theta: np.ndarray, windows: np.ndarray | None = None):
+        from .candidates.base import Modification
+
+        sel = slice(None) if windows is None else windows
+        new = self.cand.new.modify(np.atleast_2d(theta))  # type: ignore[attr-defined]
+        d = None
+        if new.groups:
+            d = self.sur.delta(Modification({g: x[:, sel] for g, x in new.groups.items()}))
+        if self.d_fixed is not None:
+            base = self.d_fixed[sel][None]
+            d = base if d is None else d + base
+        if d is not None and self.cross is not None:
+            d = d + self.cross[sel][None]
+        damping = new.damping
+        if self.fixed_mod.damping is not None:
+            damping = self.fixed_mod.damping if damping is None else damping * self.fixed_mod.damping
+        dd = None if damping is None else np.log(np.maximum(damping[:, sel], 1e-9))[..., None]
+        if d is not None and d.shape[0] == 1 and np.atleast_2d(theta).shape[0] > 1:
+            d = np.repeat(d, np.atleast_2d(theta).shape[0], axis=0)
+        return d, dd
+
+
 class _OnTop(Candidate):
     """A candidate fitted on top of effects already accepted, those held at their MAP (the second
     round): its evidence gain over them is ln Z(new | accepted) - ln L(accepted at their MAP).
@@ -379,7 +432,8 @@ def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoc
 
 # -- second round: more effects on top of the accepted ones --------------------------------------------
 
-MAX_EFFECTS = 3
+MAX_EFFECTS = 2  # effects reported together (each more costs a round of fits on top of the others)
+POOL = 4  # candidates refitted on top per round: the most supported ones alone
 
 
 def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config,
@@ -387,7 +441,8 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
     """Greedy forward selection: every other candidate that cleared the threshold alone is refitted on
     top of the effects accepted so far (held at their MAP); the best one is accepted when its gain
     over them clears the same threshold, it improves the held-out windows further and its key
-    parameter excludes the null; repeated up to ``MAX_EFFECTS`` effects. Candidates tied with an
+    parameter excludes the null; repeated up to ``MAX_EFFECTS`` effects, with the ``POOL`` candidates
+    most supported alone. Candidates tied with an
     accepted one, or of the same name and group, are not tried again."""
     best = accepted[0]
     fixed = [(jobs[best.label][0].cand, jobs[best.label][1].theta_map)]
@@ -399,7 +454,7 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
     last = None
     # every candidate tried alone, whatever its gain then: an effect may only show once a larger one
     # is accounted for
-    pool = [c for c in tried if c.label not in done]
+    pool = sorted((c for c in tried if c.label not in done), key=lambda c: -c.log_evidence_gain)[:POOL]
     by_label = {p.candidate + "/" + p.group: p for p in proposals}
     for _ in range(MAX_EFFECTS - 1):
         results = []
@@ -407,7 +462,10 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
             job0 = jobs[c.label][0]
             say(f"fit {c.label} on top of {len(fixed)} effect(s)", 0.9)
             cand = _OnTop(job0.cand, fixed)
-            job = _Job(cand, sur, lik, train)
+            job = _OnTopJob(cand, sur, lik, train)
+            fr = fit(job.gain, job.specs, seed=config.seed + 100 + i, n_is=config.n_importance,
+                     sensitivity=False)
+            job.anchor(fr.theta_map)  # the cross term at the first pass's MAP, then the final fit
             fr = fit(job.gain, job.specs, seed=config.seed + 100 + i, n_is=config.n_importance,
                      sensitivity=False)
             res = _result(job, fr, r_all, train, epoch, z_all)

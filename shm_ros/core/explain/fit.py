@@ -274,7 +274,7 @@ def quadrature_check(fn: GainFn, box: Box) -> tuple[float, float]:
     difference to the last grid at half the resolution. Independent of the importance sampler: no
     proposal, no random numbers."""
     d = box.dim
-    n = {1: 2001, 2: 101, 3: 41}[d]
+    n = {1: 2001, 2: 101, 3: 31}[d]
     lo, hi = np.zeros(d), np.ones(d)
     for _ in range(3):
         z, vals = _grid_log_z(fn, box, lo, hi, n)
