@@ -66,6 +66,9 @@ def run_case(name: str, seed: int, n_windows: int) -> dict[str, Any]:
         now = time.perf_counter()
         key = _stage(last_label[0])
         stages[key] = stages.get(key, 0.0) + now - last_t[0]
+        if _stage(label) != key:  # a stage starts: say so (long runs)
+            print(f"{name}: {label} at {now - w0:.0f} s wall, {time.process_time() - c0:.0f} s CPU",
+                  file=sys.stderr, flush=True)
         last_t[0], last_label[0] = now, label
 
     w0, c0 = time.perf_counter(), time.process_time()

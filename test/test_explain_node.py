@@ -21,7 +21,8 @@ def test_explain_node_publishes_the_verdict(tmp_path):
     out = tmp_path / "explain"
     run = replay_through_graph(d / "bag", d / "structure.yaml", tmp_path / "graph", window_s=WINDOW_S,
                                expected_windows=N_WINDOWS, identify={"uncertainty": False},
-                               track={"reference_windows": 6, "training_windows": 6},
+                               track={"reference_windows": 6, "training_windows": 6,
+                                      "store": str(tmp_path / "track.sqlite")},
                                explain={"min_windows": N_WINDOWS, "min_new_windows": N_WINDOWS,
                                         "output_dir": str(out)},
                                timeout_s=300.0)

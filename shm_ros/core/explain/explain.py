@@ -539,7 +539,11 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     rd_all = None
     if obs.damping is not None:
         rd_all = np.log(np.where(obs.damping[:, kept] > 0, obs.damping[:, kept], np.nan))
-    context = Context(times_s=times_s, covariates={k: np.asarray(v, float) for k, v in obs.covariates.items()},
+    covariates = {k: np.asarray(v, float) for k, v in obs.covariates.items()}
+    for short, name in (("rms_accel", "rms_accel_m_s2"), ("pga", "pga_m_s2"), ("temperature", "temperature_c")):
+        if short in covariates and name not in covariates:  # tables that name covariates without units
+            covariates[name] = covariates.pop(short)
+    context = Context(times_s=times_s, covariates=covariates,
                       start_epoch_s=epoch)
     lik = CandidateLikelihood(r_all[train], J, None if rd_all is None else rd_all[train],
                               tau=config.effect_form_error, noise_guess=config.noise_guess,

@@ -19,6 +19,7 @@ class AddedMass(Candidate):
     vocabulary = "added_mass"
     explanation = ("Mass that the model does not include (traffic standing on the deck, snow, ice, new "
                    "equipment) lowers every frequency a little, most in the modes that move that part.")
+    default_groups = ("mass", "mass:*")
 
     def params(self) -> list[ParamSpec]:
         return [ParamSpec("mass_fraction", 0.0, 0.5, null=0.0, unit="fraction of the group's mass")]

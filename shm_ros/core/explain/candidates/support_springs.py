@@ -21,6 +21,7 @@ class SupportSprings(Candidate):
     vocabulary = "support_flexibility"
     explanation = ("The supports give way more than the model assumes (soil under the bearings or the "
                    "foundation); when the soil freezes, is scoured or settles, the stiffness changes too.")
+    default_groups = ("bearings",)
 
     def _change(self) -> str:
         h = self.context.hints
