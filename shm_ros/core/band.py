@@ -118,9 +118,10 @@ def first_singular_spectrum(y: np.ndarray, fs: float, segment: int | None = None
     y = np.asarray(y, dtype=float)
     n, c = y.shape
     seg, step, k = _welch_segments(n, fs, segment)
-    sd = y.std(axis=0)
-    scale = 1.0 / np.where(sd > 0, sd, 1.0)
-    z = ((y - y.mean(axis=0)) * scale).astype(np.float32)  # unit variance, record mean removed
+    d = y - np.ones(n) @ y / n  # the record mean removed (a constant: detrended per segment anyway)
+    sd = np.sqrt(np.einsum("ij,ij->j", d, d) / n)
+    z = np.empty(d.shape, np.float32)  # unit variance
+    np.multiply(d, 1.0 / np.where(sd > 0, sd, 1.0), out=z, casting="same_kind")
     win = sig.get_window("hann", seg)  # periodic, as welch/csd take it
     segs = np.lib.stride_tricks.sliding_window_view(z, seg, axis=0)[::step][:k]  # (k, c, seg) view
     x = sp_fft.rfft(segs * win.astype(np.float32), axis=2)  # (k, c, bins), complex64
