@@ -5,13 +5,16 @@ The fast spectrum transforms each channel once, removes the segment means after 
 runs in single precision; the reference below is the pair-by-pair construction it replaced
 (independent code: scipy's own segmentation, detrend, window and scaling). Deterministic, so no
 statistical threshold: on every simulated window the band (low, high), the decimation and the
-block rows must be equal, and the spectrum must agree to 1e-4 relative in every bin (single
-precision rounding gives at most 3e-6 on these records; 1e-4 is 0.00004 decades, far below the
-0.7-decade prominence the peaks are selected with). Windows: ambient vibration of 12-floor
-buildings (12 and 6 channels, 100 and 40 Hz, gravity offsets and drift), earthquake responses of
-an 8-storey building (40 s records, 256-sample segments), the low-frequency moment frame of
-``test/lowfreq_frame.py`` (7 minutes, a measured shaker input among the channels) and white noise
-(no band: both must say so). ``SHM_FULL=1`` runs more seeds.
+block rows must be equal, and the spectrum must agree to 1e-4 relative in every bin within 6
+decades of its maximum (single precision rounding gives at most 3e-6 there on these records and on
+the steel-frame and CSMIP records; 1e-4 is 0.00004 decades, far below the 0.7-decade prominence
+the peaks are selected with) and to 0.01 decades further down (the rounding is relative to a
+channel's level: 5e-4 in the anti-alias stop band 9.6 decades down in the steel-frame record; the
+band uses peaks within 4 decades of the highest, and a base that deep only adds prominence).
+Windows: ambient vibration of 12-floor buildings (12 and 6 channels, 100 and 40 Hz, gravity
+offsets and drift), earthquake responses of an 8-storey building (40 s records, 256-sample
+segments), the low-frequency moment frame of ``test/lowfreq_frame.py`` (7 minutes, a measured
+shaker input among the channels) and white noise (no band: both must say so). ``SHM_FULL=1`` runs more seeds.
 """
 
 from __future__ import annotations
@@ -28,7 +31,9 @@ from conftest import full_size
 from shm_ros.core.band import band_from_singular_spectrum, choose_resolution, first_singular_spectrum
 
 N_SEEDS = 8 if full_size() else 3
-RTOL = 1e-4
+RTOL = 1e-4  # relative, in bins within DECADES of the maximum
+DECADES = 6.0
+LOG_TOL = 0.01  # decades, every bin
 
 
 def reference_spectrum(y: np.ndarray, fs: float, segment: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -46,6 +51,13 @@ def reference_spectrum(y: np.ndarray, fs: float, segment: int | None = None) -> 
             g[:, a, b] = p
             g[:, b, a] = np.conj(p)
     return f, np.linalg.eigvalsh(g)[:, -1]
+
+
+def _assert_close(s1: np.ndarray, s0: np.ndarray, name: str) -> None:
+    assert np.all(s0 > 0) and np.all(s1 > 0), name
+    near = s0 >= s0.max() * 10.0 ** -DECADES
+    np.testing.assert_allclose(s1[near], s0[near], rtol=RTOL, atol=0, err_msg=name)
+    np.testing.assert_allclose(np.log10(s1), np.log10(s0), rtol=0, atol=LOG_TOL, err_msg=name)
 
 
 def _windows() -> list[tuple[str, np.ndarray, float]]:
@@ -76,7 +88,7 @@ def test_fast_spectrum_equals_the_pairwise_csd(windows):
         f0, s0 = reference_spectrum(y, fs)
         f1, s1 = first_singular_spectrum(y, fs)
         np.testing.assert_array_equal(f1, f0, err_msg=name)
-        np.testing.assert_allclose(s1, s0, rtol=RTOL, atol=0, err_msg=name)
+        _assert_close(s1, s0, name)
 
 
 @pytest.mark.parametrize("segment", [255, 300, 1001])
@@ -88,7 +100,7 @@ def test_fast_spectrum_odd_and_untiled_segments(segment):
     f0, s0 = reference_spectrum(y, fs, segment)
     f1, s1 = first_singular_spectrum(y, fs, segment)
     np.testing.assert_array_equal(f1, f0)
-    np.testing.assert_allclose(s1, s0, rtol=RTOL, atol=0)
+    _assert_close(s1, s0, f"segment {segment}")
 
 
 def test_band_decimation_and_block_rows_equal_the_full_spectrum(windows):
