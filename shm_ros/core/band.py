@@ -121,14 +121,15 @@ def first_singular_spectrum(y: np.ndarray, fs: float, segment: int | None = None
     d = y - np.ones(n) @ y / n  # the record mean removed (a constant: detrended per segment anyway)
     sd = np.sqrt(np.einsum("ij,ij->j", d, d) / n)
     z = np.empty(d.shape, np.float32)  # unit variance
-    np.multiply(d, 1.0 / np.where(sd > 0, sd, 1.0), out=z, casting="same_kind")
+    scale = 1.0 / np.where(sd > 0, sd, 1.0)
+    np.multiply(d, scale, out=z, casting="same_kind")
     win = sig.get_window("hann", seg)  # periodic, as welch/csd take it
     segs = np.lib.stride_tricks.sliding_window_view(z, seg, axis=0)[::step][:k]  # (k, c, seg) view
     x = sp_fft.rfft(segs * win.astype(np.float32), axis=2)  # (k, c, bins), complex64
     # each segment's own mean (the constant detrend), from half-segment sums when they tile it
     if seg == 2 * step:
-        h = z[:(k + 1) * step].reshape(k + 1, step, c).sum(axis=1, dtype=np.float64)
-        means = (h[:-1] + h[1:]) / seg
+        h = np.ones(step) @ d[:(k + 1) * step].reshape(k + 1, step, c)  # half-segment sums
+        means = (h[:-1] + h[1:]) / seg * scale
     else:
         means = segs.mean(axis=2, dtype=np.float64)
     w_hat = sp_fft.rfft(win)
