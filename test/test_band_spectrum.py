@@ -8,9 +8,11 @@ statistical threshold: on every simulated window the band (low, high), the decim
 block rows must be equal, and the spectrum must agree to 1e-4 relative in every bin within 6
 decades of its maximum (single precision rounding gives at most 3e-6 there on these records and on
 the steel-frame and CSMIP records; 1e-4 is 0.00004 decades, far below the 0.7-decade prominence
-the peaks are selected with) and to 0.01 decades further down (the rounding is relative to a
-channel's level: 5e-4 in the anti-alias stop band 9.6 decades down in the steel-frame record; the
-band uses peaks within 4 decades of the highest, and a base that deep only adds prominence).
+the peaks are selected with) and to 0.01 decades down to 10 decades (the rounding is relative to
+a channel's level: 5e-4 in the anti-alias stop band 9.6 decades down in the steel-frame record).
+Deeper bins are single-precision rounding (a factor up to 2 at 15-16 decades in the filtered
+CSMIP record) and are not compared: the band uses peaks within 4 decades of the highest, and a
+valley that deep is a base of more than 10 decades of prominence against the 0.7 wanted.
 Windows: ambient vibration of 12-floor buildings (12 and 6 channels, 100 and 40 Hz, gravity
 offsets and drift), earthquake responses of an 8-storey building (40 s records, 256-sample
 segments), the low-frequency moment frame of ``test/lowfreq_frame.py`` (7 minutes, a measured
@@ -29,11 +31,14 @@ import synthetic_oma as so
 from conftest import full_size
 
 from shm_ros.core.band import band_from_singular_spectrum, choose_resolution, first_singular_spectrum
+from shm_ros.core.preprocess import PreprocessConfig, preprocess
+from shm_ros.io.importers import read_v2
 
 N_SEEDS = 8 if full_size() else 3
 RTOL = 1e-4  # relative, in bins within DECADES of the maximum
 DECADES = 6.0
-LOG_TOL = 0.01  # decades, every bin
+LOG_TOL = 0.01  # decades, in bins within DEEP decades of the maximum
+DEEP = 10.0
 
 
 def reference_spectrum(y: np.ndarray, fs: float, segment: int | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -57,7 +62,8 @@ def _assert_close(s1: np.ndarray, s0: np.ndarray, name: str) -> None:
     assert np.all(s0 > 0) and np.all(s1 > 0), name
     near = s0 >= s0.max() * 10.0 ** -DECADES
     np.testing.assert_allclose(s1[near], s0[near], rtol=RTOL, atol=0, err_msg=name)
-    np.testing.assert_allclose(np.log10(s1), np.log10(s0), rtol=0, atol=LOG_TOL, err_msg=name)
+    mid = s0 >= s0.max() * 10.0 ** -DEEP
+    np.testing.assert_allclose(np.log10(s1[mid]), np.log10(s0[mid]), rtol=0, atol=LOG_TOL, err_msg=name)
 
 
 def _windows() -> list[tuple[str, np.ndarray, float]]:
@@ -116,3 +122,27 @@ def test_band_decimation_and_block_rows_equal_the_full_spectrum(windows):
         if name == "white noise":
             assert bands[0] is None  # no peaks: the comparison above covered "no band" too
     assert found == len(windows) - 1  # every structural window has a band: not a None == None check
+
+
+def test_real_records_same_band(test_data):
+    """The records the identify tests take a band from by spectrum: the steel frame (decimated to
+    64 Hz as ``test_identify_real.py`` does) and the CSMIP bridge's deck channels (pre-processed
+    as ``test_identify_csmip_peer.py`` does, inputs left out as ``identify`` leaves them out)."""
+    records = []
+    for setup in (2, 5):
+        raw = np.load(test_data / "pyoma_steel_frame" / f"measurement_{setup}.npy").astype(np.float64)
+        prep = preprocess(raw, 256.0, [f"c{i}" for i in range(raw.shape[1])],
+                          PreprocessConfig(target_rate_hz=64.0))
+        records.append((f"steel frame setup {setup}", prep.data, prep.sample_rate_hz))
+    rec = read_v2(test_data / "csmip_v2_sample" / "Inglewood_17May2009_CE13795P.zip")[0]
+    deck = [6, 7, 8, 10, 11, 12]  # the deck channels (bench/bench_peers_io.py BRIDGE_OUTPUTS)
+    prep = preprocess(rec.samples[:, [c - 1 for c in deck]], rec.sample_rate_hz,
+                      [rec.channel_names[c - 1] for c in deck])
+    records.append(("CSMIP bridge deck", prep.data, prep.sample_rate_hz))
+    for name, y, fs in records:
+        f0, s0 = reference_spectrum(y, fs)
+        f1, s1 = first_singular_spectrum(y, fs)
+        _assert_close(s1, s0, name)
+        band = band_from_singular_spectrum(f0, s0, fs, 1.3)
+        assert band is not None, name
+        assert band_from_singular_spectrum(f1, s1, fs, 1.3) == band, name

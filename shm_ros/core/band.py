@@ -109,7 +109,8 @@ def first_singular_spectrum(y: np.ndarray, fs: float, segment: int | None = None
     * windowing, transforms and products run in single precision (halves the memory traffic, the
       transforms run twice as fast): the channels are centred and scaled first, so the rounding is
       relative to each channel's own level (~1e-6 of a bin's value where that bin is within 6
-      decades of the channel's strongest; the band uses peaks within 4 decades of the highest);
+      decades of the strongest; the band uses peaks within 4 decades of the highest, and bins more
+      than ~12 decades down, rounding in either precision, only ever serve as deep valleys);
     * the largest eigenvalue of each Hermitian matrix (= first singular value) in double precision:
       the eigenvalues are what remains of the cost (~60 %). Power iteration is cheaper but does
       not converge where the leading eigenvalues are close (the noise floor between modes, the
