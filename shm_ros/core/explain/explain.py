@@ -318,6 +318,7 @@ class _OnTopJob(_Job):
         super().__init__(cand, sur, lik, train)
         from .candidates.base import Modification
 
+        self.new_cand: Candidate = cand.new
         fixed = Modification({}, None)
         for c, th in cand.fixed:
             f = c.modify(th[None])
@@ -340,7 +341,7 @@ class _OnTopJob(_Job):
         from .candidates.base import Modification
 
         sel = slice(None) if windows is None else windows
-        new = self.cand.new.modify(np.atleast_2d(theta))  # type: ignore[attr-defined]
+        new = self.new_cand.modify(np.atleast_2d(theta))
         d = None
         if new.groups:
             d = self.sur.delta(Modification({g: x[:, sel] for g, x in new.groups.items()}))
@@ -368,8 +369,8 @@ class _OnTop(Candidate):
         super().__init__(new.group, new.context)
         self.new, self.fixed = new, list(fixed)  # a copy: the caller appends to its list later
         self.vocabulary = new.vocabulary  # type: ignore[misc]  # the instance speaks for the new effect
-        self.name = new.name  # type: ignore[misc]
-        self.explanation = new.explanation  # type: ignore[misc]
+        self.name = new.name  # type: ignore[misc]  # a ClassVar elsewhere: this instance stands for `new`
+        self.explanation = new.explanation  # type: ignore[misc]  # likewise
 
     @property
     def label(self) -> str:
@@ -504,7 +505,7 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
                                                "reason", "")
         out.append(res)
         tried.append(res)
-        fixed.append((job.cand.new, fr.theta_map))  # type: ignore[attr-defined]
+        fixed.append((job.new_cand, fr.theta_map))
         last = (job, fr.theta_map)
         base_gain = float(fr.gain_map)
         fit_after, held_after = res.fit_after or fit_after, res.held_out_after or held_after
