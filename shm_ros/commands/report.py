@@ -70,22 +70,16 @@ def run(args: argparse.Namespace) -> int:
         if args.posterior:
             inputs.posterior = load_posterior(args.posterior, args.samples)
             inputs.facts["posterior"] = args.posterior
-        if args.prediction:
-            from shm_ros.report.inputs import PredictionInputs
+        from shm_ros.report.inputs import ExplainInputs, PredictionInputs
 
-            try:
-                inputs.prediction = PredictionInputs.from_files(args.prediction)
-            except (OSError, ValueError) as exc:
-                raise ReportInputError(f"{args.prediction}: {exc}") from None
-            inputs.facts["prediction"] = args.prediction
-        if args.verdict:
-            from shm_ros.report.inputs import ExplainInputs
-
-            try:
-                inputs.explain = ExplainInputs.from_files(args.verdict)
-            except (OSError, ValueError) as exc:
-                raise ReportInputError(f"{args.verdict}: {exc}") from None
-            inputs.facts["verdict"] = args.verdict
+        for path, cls, field, fact in ((args.prediction, PredictionInputs, "prediction", "prediction"),
+                                       (args.verdict, ExplainInputs, "explain", "verdict")):
+            if path:
+                try:
+                    setattr(inputs, field, cls.from_files(path))
+                except (OSError, ValueError) as exc:
+                    raise ReportInputError(f"{path}: {exc}") from None
+                inputs.facts[fact] = path
         if args.truth:
             inputs.truth = load_json(args.truth)
             inputs.facts["truth"] = args.truth

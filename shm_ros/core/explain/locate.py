@@ -139,14 +139,9 @@ def _ljung_box(r: np.ndarray, lags: int) -> float:
 
 def _fill(x: np.ndarray) -> np.ndarray:
     """Missing covariate values by linear interpolation (the nearest value at the ends)."""
-    x = np.asarray(x, float).copy()
-    bad = ~np.isfinite(x)
-    if bad.all():
-        return np.zeros_like(x)
-    if bad.any():
-        i = np.arange(x.size)
-        x[bad] = np.interp(i[bad], i[~bad], x[~bad])
-    return x
+    from .candidates._common import fill_missing
+
+    return fill_missing(x)
 
 
 def _gain(Z: np.ndarray, ok: np.ndarray, X: np.ndarray, cols: np.ndarray) -> float:

@@ -9,7 +9,12 @@ from .base import Context
 
 def covariate(context: Context, name: str) -> np.ndarray:
     """(W,) covariate with missing values filled by linear interpolation (zeros if it is absent)."""
-    x = np.asarray(context.covariates.get(name, np.zeros(len(context.times_s))), float).copy()
+    return fill_missing(context.covariates.get(name, np.zeros(len(context.times_s))))
+
+
+def fill_missing(x: np.ndarray) -> np.ndarray:
+    """Missing values (NaN) by linear interpolation (the nearest value at the ends; zeros if all miss)."""
+    x = np.asarray(x, float).copy()
     bad = ~np.isfinite(x)
     if bad.all():
         return np.zeros_like(x)
