@@ -14,8 +14,10 @@ Accepted candidates within ``tie_nats`` of the most supported one, or whose best
 volume only), are reported together
 (``tied_with``, with their relative support ``exp(gain)`` normalised over the tied set): the data
 cannot tell them apart. The **catch-all** (a smooth function of the covariates and of time per mode,
-:func:`.likelihood.catch_all_gain`) beating every named candidate means the misfit has structure none
-of them explains: nothing is accepted and ``unexplained`` says where (modes) and when.
+:func:`.likelihood.catch_all_gain`) is compared in :mod:`.explain` with the accepted effects together:
+when it beats them, ``unexplained`` says where (modes) and when structure remains that they do not
+explain. ``decide`` is called without it (``catch_all=None``); given one, it still vetoes every
+candidate it beats.
 """
 
 from __future__ import annotations
