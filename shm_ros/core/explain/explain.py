@@ -630,7 +630,7 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     if unexplained is not None and accepted:
         # the named effects stay (each beat the nominal model on its own terms); the catch-all's lead
         # says that structure remains which they do not explain: reported, with where and when
-        unexplained["summary"] += "; the accepted effects explain part of it"
+        unexplained["summary"] = f"{unexplained['summary']}; the accepted effects explain part of it"
         for c in accepted:
             c.reasons.append(f"note: a smooth function of the covariates and time per mode (the catch-all, "
                              f"{catch:.1f} nats) fits better than the named effects together")
