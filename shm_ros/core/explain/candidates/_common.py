@@ -34,3 +34,13 @@ def amplitude(context: Context) -> tuple[str, np.ndarray]:
 
 def hour_utc(context: Context) -> np.ndarray:
     return ((context.start_epoch_s + np.asarray(context.times_s, float)) % 86400.0) / 3600.0
+
+
+def after_change(context: Context) -> np.ndarray:
+    """(W,) 1.0 from locate's hinted change window (``change_index``) on, 0.0 before."""
+    return (np.arange(len(context.times_s)) >= int(context.hints["change_index"])).astype(float)
+
+
+def change_time(context: Context) -> float:
+    """Seconds since the first window of locate's hinted change window."""
+    return float(context.times_s[int(context.hints["change_index"])])

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import covariate, hour_utc
+from ._common import after_change, change_time, covariate, hour_utc
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -34,7 +34,7 @@ class AddedMass(Candidate):
         if when == "below" and "below_c" in h:
             return (covariate(self.context, "temperature_c") < float(h["below_c"])).astype(float)
         if when == "after" and "change_index" in h:
-            return (np.arange(W) >= int(h["change_index"])).astype(float)
+            return after_change(self.context)
         return np.ones(W)
 
     def modify(self, theta: np.ndarray) -> Modification:
@@ -51,5 +51,5 @@ class AddedMass(Candidate):
     def time(self, theta: np.ndarray) -> float | None:
         h = self.context.hints
         if h.get("when") == "after" and "change_index" in h:
-            return float(self.context.times_s[int(h["change_index"])])
+            return change_time(self.context)
         return None

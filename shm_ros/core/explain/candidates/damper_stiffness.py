@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..groups import DAMPER_REFERENCE
-from ._common import covariate
+from ._common import after_change, change_time, covariate
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -46,7 +46,7 @@ class DamperStiffness(Candidate):
             t = covariate(self.context, "temperature_c")
             dk = v * (t - float(np.mean(t)))[None, :]
         elif change == "step":
-            on = (np.arange(W) >= int(self.context.hints["change_index"])).astype(float)
+            on = after_change(self.context)
             dk = -v * on[None, :]
         else:
             dk = v * np.ones((1, W))
@@ -64,5 +64,5 @@ class DamperStiffness(Candidate):
 
     def time(self, theta: np.ndarray) -> float | None:
         if self._change() == "step":
-            return float(self.context.times_s[int(self.context.hints["change_index"])])
+            return change_time(self.context)
         return None

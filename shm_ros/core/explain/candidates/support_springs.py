@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import covariate
+from ._common import after_change, change_time, covariate
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -46,7 +46,7 @@ class SupportSprings(Candidate):
         base = (np.ones((th.shape[0], W)) if change != "none"
                 else np.exp(th[:, -1])[:, None] * np.ones((1, W)))
         if change == "step":
-            on = (np.arange(W) >= int(h["change_index"])).astype(float)
+            on = after_change(self.context)
             base = base * np.exp(th[:, 0][:, None] * on[None, :])
         elif change == "frost":
             below = np.maximum(float(h["knee_c"]) - covariate(self.context, "temperature_c"), 0.0)
@@ -65,5 +65,5 @@ class SupportSprings(Candidate):
 
     def time(self, theta: np.ndarray) -> float | None:
         if self._change() == "step":
-            return float(self.context.times_s[int(self.context.hints["change_index"])])
+            return change_time(self.context)
         return None
