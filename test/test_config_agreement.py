@@ -41,8 +41,8 @@ STAGES: dict[str, tuple[type, type, dict[str, Any], set[str], set[str], set[str]
     "identify": (IdentifyConfig, IdentifyNodeConfig, {},
                  {"frame_id"},
                  # the recording, the files, and the window length of ingest (IngestConfig's)
-                 {"bag", "structure", "out", "window", "plots", "config"},
-                 set()),
+                 {"bag", "out", "window", "plots", "config"},
+                 {"structure"}),
     "track": (TrackingConfig, TrackNodeConfig, {"store": "none"},
               # the node trains on a number of windows, the command on a fraction of the campaign;
               # the node writes its store, the command exports a time range of one

@@ -33,3 +33,44 @@ def test_identify_node_weighting_parameter():
     assert "CONFIG ssi-data cva 40" in _run("cva")
     bad = _run("pca")
     assert "EXIT" in bad and "'weighting'" in bad and "pca" in bad
+
+
+BAND_SCRIPT = r"""
+import sys, rclpy
+from shm_ros.ros.identify_node import IdentifyNode
+rclpy.init()
+try:
+    params = {"structure": sys.argv[1]} if sys.argv[1] != "-" else {}
+    node = IdentifyNode(parameters=params)
+    print("BAND", node.config.nominal_frequencies_hz)
+    node.destroy_node()
+except SystemExit as exc:
+    print("EXIT", exc)
+finally:
+    rclpy.shutdown()
+"""
+
+
+def test_identify_node_takes_the_band_from_the_structure_file(tmp_path):
+    """As `shm-ros identify` does: the structure's nominal model sets the band of interest (without
+    it each window's spectrum does, and a quasi-static peak can pick 100 block rows)."""
+    import ast
+    from pathlib import Path
+
+    from shm_ros.core.band import nominal_frequencies
+    from shm_ros.io.structure import load_structure
+
+    girder = str(Path(__file__).resolve().parents[1] / "examples" / "girder.yaml")
+
+    def band(arg: str) -> str:
+        out = subprocess.run([sys.executable, "-c", BAND_SCRIPT, arg], capture_output=True, text=True,
+                             timeout=120)
+        assert out.returncode == 0, out.stderr
+        return out.stdout
+
+    line = [s for s in band(girder).splitlines() if s.startswith("BAND")][0]
+    got = ast.literal_eval(line.split(" ", 1)[1])
+    assert got == nominal_frequencies(load_structure(girder), 6)
+    assert "BAND None" in band("-")
+    missing = band(str(tmp_path / "nope.yaml"))
+    assert "EXIT" in missing and "'structure'" in missing and "nope.yaml" in missing

@@ -108,14 +108,12 @@ def run(args: argparse.Namespace) -> int:
     for d in res.diagnostics:
         if d.level >= 2:
             print(str(d), file=sys.stderr)
-    if cfg.band in ("auto", "model") and not cfg.nominal_frequencies_hz:
-        from shm_ros.core.band import nominal_frequencies
+    if not cfg.nominal_frequencies_hz:  # the band of interest from the nominal model (docs/identify.md)
+        from shm_ros.core.band import band_frequencies
 
-        try:  # the band of interest from the structure's nominal model (docs/identify.md)
-            cfg.nominal_frequencies_hz = nominal_frequencies(spec, cfg.band_modes)
-        except Exception as exc:  # a kind without a buildable model: the spectrum decides
-            print(f"shm-ros identify: {args.structure}: no nominal frequencies ({exc}): band from the "
-                  "spectrum", file=sys.stderr)
+        cfg.nominal_frequencies_hz, why_not = band_frequencies(spec, cfg.band, cfg.band_modes)
+        if why_not:
+            print(f"shm-ros identify: {args.structure}: {why_not}", file=sys.stderr)
     plots = Path(args.plots) if args.plots else None
     cfg.spectrum = plots is not None
     records: list[dict[str, Any]] = []

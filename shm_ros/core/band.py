@@ -29,7 +29,7 @@ import scipy.fft as sp_fft
 import scipy.signal as sig
 
 __all__ = ["BandSource", "BandChoice", "band_from_model", "band_from_singular_spectrum", "band_from_spectrum",
-           "choose_resolution", "first_singular_spectrum", "nominal_frequencies"]
+           "band_frequencies", "choose_resolution", "first_singular_spectrum", "nominal_frequencies"]
 
 # decimate's IIR anti-alias filter (Chebyshev I, order 8) cuts at 0.8 x the new Nyquist rate,
 # i.e. 0.4 fs; the band's top is kept below 0.36 fs so it sits inside the flat part
@@ -70,6 +70,18 @@ def nominal_frequencies(spec: Any, n_modes: int) -> list[float]:
     """The lowest ``n_modes`` natural frequencies of a structure spec's nominal model (Hz)."""
     model = spec.model_kind.build(spec)
     return [float(f) for f in model.modes(n_modes=n_modes).frequencies_hz]
+
+
+def band_frequencies(spec: Any, band: str, n_modes: int) -> tuple[list[float] | None, str | None]:
+    """The nominal frequencies that set the band of interest (``band`` auto or model), or
+    ``(None, why not)``: a model kind that cannot be built leaves the band to the spectrum. Used
+    alike by the ``identify`` command and node, so a structure file gives the same band in both."""
+    if band not in (BandSource.AUTO, BandSource.MODEL):
+        return None, None
+    try:
+        return nominal_frequencies(spec, n_modes), None
+    except Exception as exc:  # any kind's build error: the spectrum decides instead
+        return None, f"no nominal frequencies ({exc}): band from the spectrum"
 
 
 def band_from_model(frequencies_hz: list[float] | np.ndarray, modes: int, margin: float

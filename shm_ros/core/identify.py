@@ -357,10 +357,13 @@ def _jackknife(replicates, n_blocks: int, n_out: int, fs: float, picked: list[Pi
     fr = np.full((n_blocks, len(picked)), np.nan)
     zr = np.full((n_blocks, len(picked)), np.nan)
     for b, o in enumerate(replicates):
-        for k, p in enumerate(picked):
-            nord = min(p.representative_order, o.shape[1])
-            up, dn = o[:-n_out, :nord], o[n_out:, :nord]
-            a = sla.lstsq(up, dn, check_finite=False)[0]
+        orders = sorted({min(p.representative_order, o.shape[1]) for p in picked})
+        # every order's least-squares A from one QR: with up = QR, the A of the leading n columns
+        # is R_n^-1 (Q^T dn)_n, the leading block (what a lstsq per order gives, to rounding)
+        q, r = sla.qr(o[:-n_out, :orders[-1]], mode="economic", check_finite=False)
+        qtd = q.T @ o[n_out:, :orders[-1]]
+        for nord in orders:
+            a = sla.solve_triangular(r[:nord, :nord], qtd[:nord, :nord], check_finite=False)
             mu, psi = sla.eig(a, check_finite=False)
             sel = mu.imag > 0
             if not np.any(sel):
@@ -370,11 +373,14 @@ def _jackknife(replicates, n_blocks: int, n_out: int, fs: float, picked: list[Pi
             z = -lam.real / np.abs(lam)
             phi = o[:n_out, :nord] @ psi[:, sel]
             phi /= np.linalg.norm(phi, axis=0)
-            mac = mac_matrix(p.mode_shape_complex[None], phi.T)[0]
-            score = np.abs(f - p.frequency_hz) / p.frequency_hz + (1 - mac)
-            j = int(np.argmin(score))
-            if score[j] < 0.1:
-                fr[b, k], zr[b, k] = f[j], z[j]
+            for k, p in enumerate(picked):
+                if min(p.representative_order, o.shape[1]) != nord:
+                    continue
+                mac = mac_matrix(p.mode_shape_complex[None], phi.T)[0]
+                score = np.abs(f - p.frequency_hz) / p.frequency_hz + (1 - mac)
+                j = int(np.argmin(score))
+                if score[j] < 0.1:
+                    fr[b, k], zr[b, k] = f[j], z[j]
     ok = np.sum(np.isfinite(fr), axis=0)
 
     def jk(v: np.ndarray) -> np.ndarray:

@@ -111,7 +111,7 @@ def analysis_nodes(structure: str | Path, window_s: float, *, identify: dict | N
                    predict: dict | None = None, explain: dict | None = None) -> list[NodeSpec]:
     """ingest + identify, and track / update / predict / explain when their parameters are given."""
     nodes = [NodeSpec("ingest", "ingest", {"structure": str(structure), "window_s": float(window_s)}),
-             NodeSpec("identify", "identify", dict(identify or {}))]
+             NodeSpec("identify", "identify", {"structure": str(structure), **(identify or {})})]
     if track is not None:
         nodes.append(NodeSpec("track", "track", dict(track)))
     if update is not None:

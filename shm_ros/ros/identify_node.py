@@ -24,6 +24,9 @@ class IdentifyNodeConfig:
     """Settings of the node itself (the identification's are :class:`IdentifyConfig`)."""
 
     frame_id: str = option("", "frame_id in the header of the published estimates")
+    structure: str | None = option(None, "path of the structure YAML: its nominal model sets the band "
+                                   "of interest (band auto/model), as in `shm-ros identify`; unset: "
+                                   "the band comes from each window's spectrum")
 
 
 class IdentifyNode(Node):
@@ -33,7 +36,10 @@ class IdentifyNode(Node):
     def __init__(self, name: str = "identify", parameters: dict[str, Any] | None = None) -> None:
         super().__init__(name, parameter_overrides=overrides(parameters))
         self.config = load_config(self, IdentifyConfig)
-        self.frame_id = load_config(self, IdentifyNodeConfig).frame_id
+        settings = load_config(self, IdentifyNodeConfig)
+        self.frame_id = settings.frame_id
+        if settings.structure and not self.config.nominal_frequencies_hz:
+            self._band_from(settings.structure)
         self.diag = Diagnostics(self, "identify", summary=lambda: (
             "ok", f"{self.count} windows identified", {"windows": self.count}))
         self.pub: Publisher[Any] = self.create_publisher(
@@ -44,6 +50,23 @@ class IdentifyNode(Node):
         self.count = 0
         self.get_logger().info(f"identify with {self.config.method}, orders up to {self.config.max_order}"
                                + ("" if self.config.uncertainty else ", no uncertainty"))
+
+    def _band_from(self, path: str) -> None:
+        """The structure's nominal frequencies for the band of interest (docs/identify.md)."""
+        from shm_ros.core.band import band_frequencies
+        from shm_ros.io.structure import load_structure
+
+        try:
+            spec = load_structure(path)
+        except Exception as exc:  # StructureError names the file and field
+            raise SystemExit(f"identify: parameter 'structure': {exc}") from exc
+        freqs, why_not = band_frequencies(spec, self.config.band, self.config.band_modes)
+        self.config.nominal_frequencies_hz = freqs
+        if why_not:
+            self.get_logger().warning(f"{path}: {why_not}")
+        elif freqs:
+            self.get_logger().info(f"band of interest from {path}: nominal modes at "
+                                   + ", ".join(f"{f:.3g}" for f in freqs) + " Hz")
 
     def _on_window(self, msg) -> None:
         t0 = time.perf_counter()
