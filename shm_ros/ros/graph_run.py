@@ -141,7 +141,10 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
 def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
               expected_windows: int | None = None, expected_predictions: int | None = None,
               timeout_s: float = 600.0, log: Callable[[str], None] = print) -> GraphRun:
+    import threading
+
     import rclpy
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
     from shm_ros.ros import topics
@@ -214,6 +217,13 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                 and ("update" not in kinds or watcher.count_publishers(topics.POSTERIOR) >= 1)
                 and ("predict" not in kinds or watcher.count_publishers(topics.PREDICTION) >= 1)):
             rclpy.spin_once(watcher, timeout_sec=0.2)
+        # From here the watcher spins in a thread of its own: a flat-out replay takes minutes, and a
+        # watcher not taking its messages meanwhile loses all but the last PIPELINE_DEPTH of them
+        # (keep-last history), so the graph never looked done on a long campaign.
+        executor = SingleThreadedExecutor()
+        executor.add_node(watcher)
+        spinner = threading.Thread(target=executor.spin, name="graph-watch", daemon=True)
+        spinner.start()
         result = replay_bag(bag, rate=0.0, wait_s=60.0, progress=True)
         log(f"replayed {result.published} messages, lost {result.lost}")
 
@@ -230,7 +240,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         end = time.monotonic() + timeout_s
         quiet_since, last = time.monotonic(), 0
         while time.monotonic() < end and not done():
-            rclpy.spin_once(watcher, timeout_sec=0.2)
+            time.sleep(0.2)
             if expected_windows:
                 bar(len(seen["estimates"]), expected_windows)
             dead = [name for name, p in sup.procs.items() if p.poll() is not None]
@@ -247,6 +257,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
             + (f", predicted {len(seen['predicted'])}" if "predict" in kinds else "")
             + (f", explained {explained_windows[0]}" if "explain" in kinds else ""))
         time.sleep(1.0)  # let the recorder write the last messages
+        executor.shutdown()
+        spinner.join(timeout=10.0)
         watcher.destroy_node()
     finally:
         rclpy.try_shutdown()

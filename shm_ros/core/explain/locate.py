@@ -352,6 +352,10 @@ def _proposals_for(e: _Effect, ranked: list[tuple[str, float]], cfg: LocateConfi
                 out.append(Proposal("added_mass", g, why, {**h, "when": e.kind}))
             elif support and e.kind == "below":
                 out.append(Proposal("support_springs", g, why, {"covariate": "temperature_c", "knee_c": h["below_c"]}))
+            if e.kind == "below" and not _is_mass(g) and g != "damper":
+                # stiffness that differs below a temperature (a freezing deck or bearing): a knee
+                # there, with the slopes on either side free, holds a plain offset below it too
+                out.append(Proposal("temperature_bilinear", g, why, {**h, "knee_c": h["below_c"]}))
     if e.kind in ("hours", "below", "step") and not any(p.candidate == "added_mass" for p in out):
         m = next((g for g, _ in ranked if _is_mass(g)), None)  # a mass change looks like a stiffness one
         if m is not None and e.kind != "step":
