@@ -109,7 +109,7 @@ class EventPosterior:
         ss = np.zeros((v.shape[0], len(self.lik.outputs)))
         for e in self.idx:
             part = self.lik.parts[e]
-            for a, Y in batch_responses(self.fm, self.rows(v, e), part.record.inputs, part.record.dt,
+            for a, Y in batch_responses(self.fm, self.rows(v, int(e)), part.record.inputs, part.record.dt,
                                         self.lik.outputs, chunk=self.chunk):
                 for b in range(Y.shape[0]):
                     ss[a + b] += part.innovation_ss(Y[b].T)
@@ -217,26 +217,43 @@ def laplace(post: EventPosterior, u: np.ndarray, f: float) -> Laplace:
     inner[post.nb:] = np.clip(u[post.nb:], 2e-4, 1 - 2e-4)
     diag = np.diag(hessian(post, inner, h0))
     h = np.clip(0.3 / np.sqrt(np.maximum(-diag, 1e-12)), 1e-7, 0.05)
+    h[post.nb:] = np.minimum(h[post.nb:], 0.2)
+    inner[post.nb:] = np.clip(u[post.nb:], 2.01 * h[post.nb:], 1 - 2.01 * h[post.nb:])  # every point in the box
     H = -hessian(post, inner, h)
+    if not np.all(np.isfinite(H)):  # a point fell outside the prior: keep the diagonal
+        H = np.diag(np.where(np.isfinite(np.diag(H)), np.diag(H), 1.0 / h ** 2))
     w, V = np.linalg.eigh(H)
     w = np.maximum(w, 1e-12 * max(float(np.max(np.abs(w))), 1e-300))
     cov = (V / w) @ V.T
-    # at a bound of the box the slope need not vanish: log p ~ f + g.(v - u) - (v - u).H.(v - u)/2,
-    # a Gaussian centred at u + H^-1 g (outside the box when the effect is pushed to its null)
-    g = np.zeros(d)
-    for j in range(post.nb, d):
-        if u[j] < 1e-3 or u[j] > 1 - 1e-3:
-            step = float(h[j]) * (1.0 if u[j] < 0.5 else -1.0)
-            e = np.zeros(d)
-            e[j] = step
-            g[j] = (float(post(u + e)[0]) - f) / step + 0.5 * H[j, j] * step
-    mu = u + cov @ g
-    log_z = f + 0.5 * float(g @ cov @ g) + 0.5 * d * math.log(2 * math.pi) - 0.5 * float(np.sum(np.log(w)))
-    for j in range(post.nb, d):  # mass of the Gaussian inside [0, 1] on the candidate's axes
-        sd = math.sqrt(max(cov[j, j], 1e-300))
-        mass = norm.cdf((1 - mu[j]) / sd) - norm.cdf(-mu[j] / sd)
+    # at a bound of the box the slope need not vanish: along such an axis (the effect pushed to its
+    # null) log p ~ f + g v - h v^2 / 2 with h the axis' marginal precision, integrated over the box
+    # numerically; the other axes by their Gaussian (the Hessian restricted to them)
+    at_bound = [j for j in range(post.nb, d) if u[j] < 1e-3 or u[j] > 1 - 1e-3]
+    inner_ax = [j for j in range(d) if j not in at_bound]
+    Hi = H[np.ix_(inner_ax, inner_ax)]
+    wi = np.maximum(np.linalg.eigvalsh(Hi), 1e-12 * max(float(np.max(np.abs(w))), 1e-300)) if inner_ax else np.zeros(0)
+    log_z = f + 0.5 * len(inner_ax) * math.log(2 * math.pi) - 0.5 * float(np.sum(np.log(wi)))
+    for j in at_bound:
+        sign = 1.0 if u[j] < 0.5 else -1.0
+        e = np.zeros(d)
+        e[j] = sign * float(h[j])
+        g = (float(post(u + e)[0]) - f) / float(h[j]) + 0.5 * H[j, j] * float(h[j])
+        log_z += _log_truncated(g, 1.0 / max(cov[j, j], 1e-300))
+    for j in [j for j in inner_ax if j >= post.nb]:
+        sd = math.sqrt(max(cov[j, j], 1e-300))  # mass of the Gaussian inside [0, 1]
+        mass = norm.cdf((1 - u[j]) / sd) - norm.cdf(-u[j] / sd)
         log_z += math.log(max(float(mass), 1e-300))
     return Laplace(u, f, log_z, cov)
+
+
+def _log_truncated(g: float, h: float) -> float:
+    """ln of the integral over [0, 1] of exp(g v - h v^2 / 2)."""
+    if h < 1e-9:
+        return math.log(math.expm1(g) / g) if abs(g) > 1e-12 else 0.0
+    m, r = g / h, math.sqrt(h)
+    a, b = -m * r, (1.0 - m) * r
+    la, lb = float(norm.logsf(a)), float(norm.logsf(b))  # mass between a and b, from the upper tail
+    return 0.5 * math.log(2 * math.pi / h) + 0.5 * g * m + la + math.log1p(-math.exp(min(lb - la, 0.0)) + 1e-300)
 
 
 def importance_log_z(post: EventPosterior, lap: Laplace, n: int, rng: np.random.Generator,
@@ -254,6 +271,8 @@ def importance_log_z(post: EventPosterior, lap: Laplace, n: int, rng: np.random.
     log_q = (gammaln((nu + d) / 2) - gammaln(nu / 2) - 0.5 * d * math.log(nu * math.pi)
              - float(np.sum(np.log(np.diag(L)))) - 0.5 * (nu + d) * np.log1p(m / nu))
     lw = post(x) - log_q
+    if not np.any(np.isfinite(lw)):
+        return -math.inf, math.inf
     lz = float(logsumexp(lw) - math.log(n))
     w = np.exp(lw - np.max(lw))
     se = float(np.std(w) / max(np.mean(w), 1e-300) / math.sqrt(n))
