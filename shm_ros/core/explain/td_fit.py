@@ -187,10 +187,14 @@ def find_map(post: EventPosterior, starts: list[np.ndarray]) -> tuple[np.ndarray
     return best_u, best_f
 
 
-def hessian(post: EventPosterior, u: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Central-difference Hessian of log p at ``u`` with steps ``h`` (one batch of evaluations)."""
-    d = u.size
-    E = np.diag(h)
+def hessian(post: EventPosterior, u: np.ndarray, h: np.ndarray, axes: list[int] | None = None) -> np.ndarray:
+    """Central-difference Hessian of log p at ``u`` with steps ``h`` (one batch of evaluations), over
+    the coordinates ``axes`` (default all)."""
+    ax = list(range(u.size)) if axes is None else list(axes)
+    d = len(ax)
+    E = np.zeros((d, u.size))
+    E[np.arange(d), ax] = h[ax]
+    h = h[ax]
     pts = [u]
     pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
     for i in range(d):
@@ -226,22 +230,33 @@ def laplace(post: EventPosterior, u: np.ndarray, f: float) -> Laplace:
     w = np.maximum(w, 1e-12 * max(float(np.max(np.abs(w))), 1e-300))
     cov = (V / w) @ V.T
     # at a bound of the box the slope need not vanish: along such an axis (the effect pushed to its
-    # null) log p ~ f + g v - h v^2 / 2 with h the axis' marginal precision, integrated over the box
-    # numerically; the other axes by their Gaussian (the Hessian restricted to them)
+    # null) log p ~ f + g v - c v^2 / 2 from one-sided differences at the MAP, integrated over the box
+    # exactly; the other axes by their Gaussian, with the Hessian taken at the MAP on them alone
     at_bound = [j for j in range(post.nb, d) if u[j] < 1e-3 or u[j] > 1 - 1e-3]
-    inner_ax = [j for j in range(d) if j not in at_bound]
-    Hi = H[np.ix_(inner_ax, inner_ax)]
-    wi = np.maximum(np.linalg.eigvalsh(Hi), 1e-12 * max(float(np.max(np.abs(w))), 1e-300)) if inner_ax else np.zeros(0)
-    log_z = f + 0.5 * len(inner_ax) * math.log(2 * math.pi) - 0.5 * float(np.sum(np.log(wi)))
-    for j in at_bound:
-        sign = 1.0 if u[j] < 0.5 else -1.0
-        e = np.zeros(d)
-        e[j] = sign * float(h[j])
-        g = (float(post(u + e)[0]) - f) / float(h[j]) + 0.5 * H[j, j] * float(h[j])
-        # the MAP sits at the bound, so log p cannot rise inwards: a positive slope or a negative
-        # curvature here is finite-difference noise, not a reason for evidence
-        log_z += _log_truncated(min(g, 0.0), max(1.0 / max(cov[j, j], 1e-300), 0.0))
-    for j in [j for j in inner_ax if j >= post.nb]:
+    if at_bound:
+        inner_ax = [j for j in range(d) if j not in at_bound]
+        Hi = -hessian(post, u, h, inner_ax)
+        wi = np.linalg.eigvalsh(Hi) if inner_ax else np.zeros(0)
+        wi = np.maximum(wi, 1e-12 * max(float(np.max(np.abs(wi), initial=0.0)), 1e-300))
+        log_z = f + 0.5 * len(inner_ax) * math.log(2 * math.pi) - 0.5 * float(np.sum(np.log(wi)))
+        cov = np.zeros((d, d))  # the importance proposal's: inner block, and each bound axis' own scale
+        if inner_ax:
+            cov[np.ix_(inner_ax, inner_ax)] = np.linalg.pinv(Hi)
+        for j in at_bound:
+            hj = min(float(h[j]), 0.25)
+            e = np.zeros(d)
+            e[j] = hj if u[j] < 0.5 else -hj
+            f1, f2 = post(np.array([u + e, u + 2 * e]))
+            g = (-3 * f + 4 * f1 - f2) / (2 * hj)
+            c = -(f - 2 * f1 + f2) / hj ** 2
+            # the MAP sits at the bound, so log p cannot rise inwards: a positive slope or a negative
+            # curvature here is finite-difference noise, not a reason for evidence
+            log_z += _log_truncated(min(float(g), 0.0), max(float(c), 0.0))
+            scale = min(1.0 / max(-float(g), 1e-12), 1.0 / math.sqrt(max(float(c), 1e-12)), 0.5)
+            cov[j, j] = scale ** 2
+        return Laplace(u, f, log_z, cov)
+    log_z = f + 0.5 * d * math.log(2 * math.pi) - 0.5 * float(np.sum(np.log(w)))
+    for j in range(post.nb, d):
         sd = math.sqrt(max(cov[j, j], 1e-300))  # mass of the Gaussian inside [0, 1]
         mass = norm.cdf((1 - u[j]) / sd) - norm.cdf(-u[j] / sd)
         log_z += math.log(max(float(mass), 1e-300))
