@@ -43,18 +43,8 @@ def simulate_quakes(seed: int, n_events: int = 6, *, duration_s: float = 60.0, f
     """``n_events`` windows with one earthquake each; ``truth_floors`` are simulated as hidden
     sensors ``h<k>``: their true absolute accelerations and (top story) drift are returned in
     ``truth`` but left out of the windows and the analysis structure."""
-    sc = named_scenario("building-earthquake", n_windows=n_events, window_s=duration_s, fs=fs, seed=seed,
-                        noise_rms_m_s2=noise_rms_m_s2)
-    sc.effects = [EffectRequest("damper", dict(DAMPER))]
-    st = sc.structure
-    st["sensors"] = ([{"id": "g0", "at": {"floor": 0}, "direction": "x"}]
-                     + [{"id": f"f{k}", "at": {"floor": k}, "direction": "x"} for k in sensor_floors]
-                     + [{"id": f"h{k}", "at": {"floor": k}, "direction": "x"} for k in truth_floors])
-    camp = simulate_campaign(sc)
-    rng = np.random.default_rng(np.random.SeedSequence([seed, 77]))
-    e = [float(rng.choice([-1.0, 1.0]) * rng.uniform(0.10, 0.20)) for _ in range(2)]
-    err = (e[0], e[1])
-    structure = analysis_structure(st, err)
+    camp, structure, err = quake_campaign(seed, n_events, duration_s=duration_s, fs=fs, sensor_floors=sensor_floors,
+                                          truth_floors=truth_floors, noise_rms_m_s2=noise_rms_m_s2)
     keep = [s["id"] for s in structure["sensors"]]
     windows, truth = [], {}
     names = [f"h{k}" for k in truth_floors]
@@ -67,6 +57,26 @@ def simulate_quakes(seed: int, n_events: int = 6, *, duration_s: float = 60.0, f
             truth[w.window_id] = np.column_stack([sw.accel[:, sw.sensor_ids.index(n)] for n in names]
                                                  + [_true_drift(camp, sw, truth_floors)])
     return Quakes(structure, windows, truth, names + ["drift_top"], err)
+
+
+def quake_campaign(seed: int, n_events: int = 6, *, duration_s: float = 60.0, fs: float = 50.0,
+                   sensor_floors: tuple[int, ...] = (1, 4, 6, 8), truth_floors: tuple[int, ...] = (),
+                   noise_rms_m_s2: float = 1e-3, effects: list[EffectRequest] | None = None,
+                   **options: Any) -> tuple[Any, dict[str, Any], tuple[float, float]]:
+    """The campaign of :func:`simulate_quakes` (``effects`` in addition to the damper braces,
+    ``options``: scenario fields such as ``earthquakes``), its analysis structure and stiffness error."""
+    sc = named_scenario("building-earthquake", n_windows=n_events, window_s=duration_s, fs=fs, seed=seed,
+                        noise_rms_m_s2=noise_rms_m_s2, **options)
+    sc.effects = [EffectRequest("damper", dict(DAMPER)), *(effects or [])]
+    st = sc.structure
+    st["sensors"] = ([{"id": "g0", "at": {"floor": 0}, "direction": "x"}]
+                     + [{"id": f"f{k}", "at": {"floor": k}, "direction": "x"} for k in sensor_floors]
+                     + [{"id": f"h{k}", "at": {"floor": k}, "direction": "x"} for k in truth_floors])
+    camp = simulate_campaign(sc)
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 77]))
+    e = [float(rng.choice([-1.0, 1.0]) * rng.uniform(0.10, 0.20)) for _ in range(2)]
+    err = (e[0], e[1])
+    return camp, analysis_structure(st, err), err
 
 
 def analysis_structure(simulated: dict[str, Any], err: tuple[float, float]) -> dict[str, Any]:

@@ -32,9 +32,10 @@ from .types import CandidateResult, FitScores
 THRESHOLD_FILE = "threshold.json"
 
 
-def shipped_threshold() -> dict[str, Any]:
-    """The calibrated acceptance threshold shipped with the package (``threshold.json``)."""
-    text = resources.files("shm_ros.core.explain").joinpath(THRESHOLD_FILE).read_text()
+def shipped_threshold(name: str = THRESHOLD_FILE) -> dict[str, Any]:
+    """The calibrated acceptance threshold shipped with the package (``threshold.json``; the
+    time-domain path's in ``threshold_timedomain.json``)."""
+    text = resources.files("shm_ros.core.explain").joinpath(name).read_text()
     return dict(json.loads(text))
 
 
@@ -47,7 +48,9 @@ def null_excluded(c: CandidateResult, key: str, null: float | None) -> bool:
 
 def held_out_metric(c: CandidateResult) -> str:
     """What the held-out windows are scored on: damping RMSE for a candidate that changes the modal
-    damping only, frequency RMSE otherwise."""
+    damping only, frequency RMSE otherwise; a candidate may name its own (time domain: ``nrms_pct``)."""
+    if c.extra.get("held_out_metric"):
+        return str(c.extra["held_out_metric"])
     return "damping_rmse_pct" if c.extra.get("acts_on") == "damping" else "frequency_rmse_pct"
 
 
@@ -69,7 +72,8 @@ def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | No
             (c.log_evidence_gain > threshold,
              f"evidence gain {c.log_evidence_gain:.1f} nats vs threshold {threshold:.1f}"),
             (held < before,
-             f"held-out {metric.replace('_rmse_pct', ' RMSE')} {held:.3f} % vs {before:.3f} % without it"),
+             f"held-out {metric.replace('_rmse_pct', ' RMSE').replace('_pct', '')} {held:.3f} % vs {before:.3f} % "
+             "without it"),
             (null_excluded(c, key, null),
              f"95 % interval of {key} {_iv(c.intervals.get(key))} "
              + ("excludes" if null_excluded(c, key, null) else "includes") + f" the null value {null}"),

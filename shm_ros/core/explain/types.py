@@ -21,7 +21,7 @@ class Mismatch:
 
 @dataclass
 class FitScores:
-    frequency_rmse_pct: float
+    frequency_rmse_pct: float | None = None  # None on the time-domain path (events, not modes)
     mac_mean: float | None = None
     damping_rmse_pct: float | None = None  # percentage points of damping ratio
     nrms_pct: float | None = None  # time-domain candidates

@@ -1,0 +1,103 @@
+"""Event records for the time-domain path of explain, and the model with per-event factors.
+
+A time-domain candidate changes the model per event (an earthquake record), not per sample: the
+existing amplitude candidates (:mod:`.candidates.amplitude_stiffness`, :mod:`.candidates.amplitude_damping`)
+already turn one covariate value per "window" into a factor, so an event plays the part of a window.
+:class:`FactorModel` is the structure's analysis model with two more parameters appended,
+
+    K = s K(theta),    C = d C_inherent(theta at s = 1) + C_dampers,
+
+``s`` a factor on every story's stiffness (the ``EI`` group of a shear building, which is all of
+its K) and ``d`` a factor on the inherent (Rayleigh / modal) damping. The inherent damping matrix is
+the one of the unsoftened model: a softening spring leaves its dashpot alone, as in the simulator's
+truth. The damper braces' dashpots are not scaled (their own law, not the structure's damping).
+Rows ``[theta, s, d]`` go through the shared response code (:func:`shm_ros.core.predict.batch.batch_responses`),
+so a batch of parameter sets is one batched discretisation per event.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from shm_ros.core.bayes.timedomain import AccelerationRecord
+from shm_ros.core.models.base import AffineModel
+from shm_ros.core.predict.config import Baseline
+from shm_ros.core.predict.record import EventRecord
+from shm_ros.core.predict.signals import baseline_correct, pre_event_end, strong_motion
+
+FACTOR_NAMES = ("_stiffness_factor", "_damping_factor")
+
+
+@dataclass
+class FactorModel(AffineModel):
+    """``model`` with :data:`FACTOR_NAMES` appended to its parameters (module doc)."""
+
+    n_base: int = 0
+
+    @classmethod
+    def of(cls, model: AffineModel) -> FactorModel:
+        kw = {f.name: getattr(model, f.name) for f in dataclasses.fields(AffineModel)}
+        kw["parameter_names"] = [*model.parameter_names, *FACTOR_NAMES]
+        kw["K_terms"] = [*model.K_terms, None, None]
+        kw["M_terms"] = [*model.M_terms, None, None]
+        kw["damping_factors"] = [*model.damping_factors, [], []]
+        kw["sensor_rows"] = dict(model.sensor_rows)
+        return cls(**kw, n_base=model.n_parameters)
+
+    def stiffness(self, theta: np.ndarray | None = None) -> np.ndarray:
+        th = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
+        return th[self.n_base] * AffineModel.stiffness(self, th)
+
+    def stiffness_batch(self, thetas: np.ndarray) -> np.ndarray:
+        th = self._thetas(thetas)
+        return th[:, self.n_base, None, None] * AffineModel.stiffness_batch(self, th)
+
+    def inherent_damping(self, theta: np.ndarray | None = None) -> np.ndarray:
+        th = (self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)).copy()
+        d = th[self.n_base + 1]
+        th[self.n_base] = 1.0  # the dashpots of the unsoftened structure
+        return d * AffineModel.inherent_damping(self, th)
+
+
+@dataclass
+class EventData:
+    """Baseline-corrected event records on one set of channels, with per-event amplitude covariates."""
+
+    window_ids: list[str]
+    records: list[AccelerationRecord]
+    covariates: dict[str, np.ndarray]  # pga_m_s2, rms_accel_m_s2: (E,)
+    start_ns: list[int] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def event_data(events: list[EventRecord], onset_arias: float = 0.001, min_pre_event_s: float = 1.0,
+               baseline: Baseline | str = Baseline.MEAN) -> EventData:
+    """Records for the joint likelihood (offsets removed as the prediction stage removes them,
+    :mod:`shm_ros.core.predict.signals`) and each event's amplitude: the input's peak (``pga_m_s2``)
+    and the RMS of the measured outputs over the input's strong motion (5-95 % of its Arias
+    intensity), averaged over channels in the mean-square sense (``rms_accel_m_s2``)."""
+    if not events:
+        raise ValueError("explain (time domain): no event records")
+    ids = events[0].channel_ids
+    recs, pga, rms, notes = [], [], [], []
+    for ev in events:
+        if ev.channel_ids != ids:
+            raise ValueError(f"event {ev.window_id}: channels {ev.channel_ids} differ from the first event's {ids}")
+        y = np.asarray(ev.outputs, dtype=float)
+        if not np.all(np.isfinite(y)):
+            keep = np.all(np.isfinite(y), axis=1)
+            notes.append(f"event {ev.window_id}: {int(np.sum(~keep))} samples with missing outputs set to 0")
+            y = np.where(np.isfinite(y), y, 0.0)
+        n_pre = pre_event_end(ev.inputs[0], ev.fs, onset_arias, min_pre_event_s)
+        u = baseline_correct(ev.inputs.T, n_pre, baseline).T
+        y = baseline_correct(y, n_pre, baseline)
+        recs.append(AccelerationRecord(1.0 / ev.fs, u, y, list(ids)))
+        s = strong_motion(u[0])
+        pga.append(float(np.max(np.abs(u[0]))))
+        rms.append(float(np.sqrt(np.mean(y[s] ** 2))))
+    return EventData([e.window_id for e in events], recs,
+                     {"pga_m_s2": np.array(pga), "rms_accel_m_s2": np.array(rms)},
+                     [int(e.start_ns) for e in events], notes)
