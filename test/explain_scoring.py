@@ -72,11 +72,15 @@ def parameter_checks(name: str, top: dict[str, Any], truth: Any, times: np.ndarr
             out["spring"] = _rel(float(np.expm1(p["ln_step"])), eff(1 - t["scale"]) / eff(1.0) - 1)
         elif "frost_per_c" in p and t.get("mode") == "frozen":
             out["spring"] = _rel(p["frost_per_c"], eff(1 + t["scale"]) / eff(1.0) - 1)
-    elif name == "damper_stiffness":  # the change of the braces' stiffness, in story stiffness
+    elif name == "damper_stiffness":
+        # the change of the braces' stiffness in units of the braced story's calibrated stiffness:
+        # the calibration absorbs the braces' constant part, so that unit is the story's own
+        # stiffness plus the brace's, (1 + k_rel) in the truth's story units
+        unit = 1.0 + float(t.get("k_rel", 0.0))
         if "brace_lost" in p and t.get("mode") == "failure":
-            out["damper"] = _rel(p["brace_lost"], t["scale"] * t["k_rel"])
+            out["damper"] = _rel(p["brace_lost"], t["scale"] * t["k_rel"] / unit)
         elif "brace_change_per_c" in p and t.get("mode") == "temperature":
-            out["damper"] = _rel(p["brace_change_per_c"], -t["scale"] * t["k_rel"])
+            out["damper"] = _rel(p["brace_change_per_c"], -t["scale"] * t["k_rel"] / unit)
     return out
 
 

@@ -14,6 +14,9 @@ class ExplainConfig:
     threshold: float | None = option(None, "log Bayes factor a candidate must clear (unset: the shipped "
                                      "calibration, threshold.json)")
     tie_nats: float = option(2.0, "accepted candidates within this many nats of the best are reported together")
+    tie_fraction: float = option(0.01, "accepted candidates whose fitted changes move with the best's in every "
+                                 "mode (correlation >= 0.95) and whose evidence is within this fraction of "
+                                 "the best's gain are reported together too")
     effect_form_error: float = option(0.1, "per-mode model-form error of an effect's size (relative)")
     noise_guess: float = option(0.003, "prior mode of the relative frequency scatter per window")
     damping_noise_guess: float = option(0.2, "prior mode of the relative damping scatter per window")

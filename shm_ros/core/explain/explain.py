@@ -423,6 +423,8 @@ def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoc
         log_evidence_gain_err=float(fr.evidence.err), prior_sensitivity=dict(fr.prior_sensitivity),
         time=_iso(epoch, c.time(fr.theta_map)), explanation=c.explanation, fit_after=fit_after,
         held_out_after=held_after)
+    if delta is not None:
+        res.extra["delta"] = delta  # (W, K) change of ln f at the MAP: ties (select.decide)
     res.extra.update({"key_parameter": key, "gain_at_map": fr.gain_map, "acts_on": res_acts, "evaluations": fr.n_eval,
                       "check_method": fr.check_method, "check_err": fr.check_err})
     t0 = c.time(fr.theta_map)
@@ -583,7 +585,7 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
                                  f"exceeds {config.surrogate_tolerance:.0e}")
         tried.append(res)
         jobs[res.label] = (job, fr)
-    accepted = decide(tried, keys, threshold, held_before, None, config.tie_nats)
+    accepted = decide(tried, keys, threshold, held_before, None, config.tie_nats, config.tie_fraction)
     if config.nested_check:  # the second, independent estimator for every accepted candidate
         for i, c in enumerate(accepted):
             say(f"evidence check of {c.label}", 0.95)

@@ -27,6 +27,8 @@ import math
 from importlib import resources
 from typing import Any
 
+import numpy as np
+
 from .types import CandidateResult, FitScores
 
 THRESHOLD_FILE = "threshold.json"
@@ -55,7 +57,8 @@ def held_out_metric(c: CandidateResult) -> str:
 
 
 def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | None]], threshold: float,
-           held_out_before: FitScores, catch_all: float | None, tie_nats: float) -> list[CandidateResult]:
+           held_out_before: FitScores, catch_all: float | None, tie_nats: float,
+           tie_fraction: float = 0.0, tie_corr: float = 0.95) -> list[CandidateResult]:
     """Mark ``accepted`` and ``reasons`` on every result; the accepted ones, most supported first.
 
     ``keys[label] = (key parameter, null value)``; ``held_out_before``: the nominal model's scores on
@@ -93,8 +96,11 @@ def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | No
     # the data cannot tell two candidates apart when their best fits are equally good (e.g. a uniform
     # added mass and a uniform stiffness loss move every frequency alike): their evidences then differ
     # only by their priors' volumes, which is no reason to name one of them
+    # nor when both say the same thing happened at the same times and differ only in how much each
+    # mode moved, by little evidence (_alike): e.g. a step in uniform mass or in the deck's
+    # stiffness, which model-form error in the bearings can make the data prefer either way
     tied = [c for c in passing if best.log_evidence_gain - c.log_evidence_gain <= tie_nats
-            or abs(_fit_gain(best) - _fit_gain(c)) <= tie_nats]
+            or abs(_fit_gain(best) - _fit_gain(c)) <= tie_nats or _alike(best, c, tie_corr, tie_fraction)]
     z = [math.exp(c.log_evidence_gain - best.log_evidence_gain) for c in tied]
     for c, zi in zip(tied, z, strict=True):
         c.tied_with = [o.label for o in tied if o is not c]
@@ -112,3 +118,24 @@ def _fit_gain(c: CandidateResult) -> float:
 
 def _iv(iv: tuple[float, float] | None) -> str:
     return "n/a" if iv is None else f"[{iv[0]:.4g}, {iv[1]:.4g}]"
+
+
+def _alike(a: CandidateResult, b: CandidateResult, min_corr: float, fraction: float) -> bool:
+    """The two fits say the same thing happened at the same times: in every mode that moves, their
+    changes of ln f over the windows (``extra["delta"]``) correlate at ``min_corr`` or more, so they
+    differ only in how much each mode moves (the pattern that the analysis model's model-form error
+    distorts: locate allows it 15 %); and their evidences differ by at most ``fraction`` of the best's
+    gain (on many windows a pattern distortion of that kind still adds up to nats)."""
+    da, db = a.extra.get("delta"), b.extra.get("delta")
+    if fraction <= 0 or da is None or db is None or np.shape(da) != np.shape(db):
+        return False
+    if a.log_evidence_gain - b.log_evidence_gain > fraction * abs(a.log_evidence_gain):
+        return False
+    da = np.asarray(da, float) - np.nanmean(da, axis=0)
+    db = np.asarray(db, float) - np.nanmean(db, axis=0)
+    na, nb = np.sqrt(np.nansum(da ** 2, axis=0)), np.sqrt(np.nansum(db ** 2, axis=0))
+    moving = (na > 1e-3 * na.max()) & (nb > 1e-3 * nb.max()) if na.max() > 0 and nb.max() > 0 else na > 0
+    if not np.any(moving):
+        return False
+    corr = np.nansum(da * db, axis=0)[moving] / (na[moving] * nb[moving])
+    return bool(np.all(corr >= min_corr))

@@ -4,7 +4,9 @@ time (a damper fails).
 
 What modal data can identify is the *change* of the braces' stiffness: its constant part is absorbed
 by the calibration of the story stiffnesses (the nominal parameters), so the parameters are changes,
-in units of the braced story's stiffness: per degC about the campaign's mean temperature, or lost at
+in units of the braced story's calibrated stiffness (which holds the braces' constant part: a brace
+of k_b on a story of k_s changing by dk_b reads dk_b / (k_s + k_b)): per degC about the campaign's
+mean temperature, or lost at
 a window (locate's ``change_index``); without a hint, a constant brace stiffness. The group's factor
 is additive: ``x - 1 = brace stiffness / reference``, the reference being
 :data:`shm_ros.core.explain.groups.DAMPER_REFERENCE` of the story's stiffness.

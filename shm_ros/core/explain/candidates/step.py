@@ -1,7 +1,10 @@
 """A step in stiffness at a moment (damage, repair): x_w = 1 before t0, 1 + size from t0 on.
 
 t0 is a grid parameter over the campaign (uniform between the 2nd and the second-to-last window:
-a step at either end cannot be told from an offset); ``time`` reports it. ``size`` (null 0) is
+a step at either end cannot be told from an offset), or, when locate hints a change window (its
+exact search keeps the other regressors, e.g. a temperature knee, that a step fitted alone would
+partly imitate), over the windows within ``HINT_WINDOWS`` of it (as added mass and damper
+candidates take the hinted window itself); ``time`` reports it. ``size`` (null 0) is
 the relative change of the group's stiffness, -60 % .. +40 %.
 """
 
@@ -10,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
+
+HINT_WINDOWS = 6  # the step time's prior around a hinted change window (locate's resolution)
 
 
 @CANDIDATES.register("step")
@@ -22,6 +27,10 @@ class Step(Candidate):
     def params(self) -> list[ParamSpec]:
         t = np.asarray(self.context.times_s, dtype=float)
         lo, hi = (float(t[1]), float(t[-2])) if t.size > 3 else (0.0, 1.0)
+        if "change_index" in self.context.hints and t.size > 3:
+            i = int(self.context.hints["change_index"])
+            lo = float(t[min(max(i - HINT_WINDOWS, 1), t.size - 2)])
+            hi = float(t[min(max(i + HINT_WINDOWS, 1), t.size - 2)])
         return [ParamSpec("size", -0.6, 0.4, null=0.0),
                 ParamSpec("t0_s", lo, max(hi, lo + 1.0), unit="s", grid=True)]
 
