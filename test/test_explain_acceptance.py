@@ -28,7 +28,7 @@ import os
 
 import pytest
 from explain_cases import draw_case
-from explain_scoring import parameter_checks, score, top_entry
+from explain_scoring import parameter_checks, score, top_entry, truth_misfit
 
 from shm_ros.core.explain.explain import explain
 from shm_ros.core.structure import structure_from_dict
@@ -66,6 +66,14 @@ def test_named_effects_found_and_fitted():
             results.append(score(d, case, v.figures))
     lines = [f"{s.name}: top {s.top} {s.checks} {s.details.get('listed', '')}" for s in results]
     report = "\n".join(lines)
+    right = [s for s in results if s.top_ok]
+    print(f"right top name {len(right)}/{len(results)}; per name "
+          + ", ".join(f"{n} {sum(s.top_ok for s in results if s.name == n)}/{sum(s.name == n for s in results)}"
+                      for n in NAMES)
+          + "; checks " + ", ".join(f"{k} {sum(s.checks[k] for s in right if k in s.checks)}/"
+                                   f"{sum(k in s.checks for s in right)}"
+                                   for k in sorted({k for s in right for k in s.checks})))
+    print(report)
     if FULL:
         assert sum(s.top_ok for s in results) >= 0.9 * len(results), report
         for name in NAMES:
@@ -91,6 +99,7 @@ def test_clean_recordings_raise_no_false_alarm():
         # a clean table holds the in-plane modes only: nothing to list as unmodelled
         if any(m["name"] == "unmodelled_modes" for m in d["missing_physics"]):
             listed_wrong.append(seed)
+    print(f"false alarms {len(alarms)}/{CLEAN_SEEDS}: {alarms}; unmodelled listed on a clean table {listed_wrong}")
     assert len(alarms) <= (0.05 * CLEAN_SEEDS if FULL else 1), alarms
     assert len(listed_wrong) <= (0.05 * CLEAN_SEEDS if FULL else 1), listed_wrong
 
@@ -118,5 +127,8 @@ def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss(seed):
     checks = parameter_checks("temperature_dependent_stiffness", knee, case.truth, case.obs.times)
     assert checks.get("knee") and checks.get("slope"), (checks, knee["parameters"], case.truth)
     assert abs(int(step["change_window"]) - int(case.truth.second.change_index)) <= 6, (step, case.truth.second)
-    s = score(d, case, v.figures)
-    assert s.checks.get("halved") and s.checks.get("held_out"), s
+    # the fit of both together (not the top entry's name, which may be the step's tied twin)
+    b, a = truth_misfit(case, v.figures)
+    assert b is not None and a is not None and a <= 0.5 * b, (b, a)
+    held = d["fit"]["held_out"]
+    assert held["after"]["frequency_rmse_pct"] < held["before"]["frequency_rmse_pct"], held

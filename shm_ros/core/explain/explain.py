@@ -456,8 +456,10 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
     out: list[CandidateResult] = []
     last = None
     # every candidate tried alone, whatever its gain then: an effect may only show once a larger one
-    # is accounted for
-    pool = sorted((c for c in tried if c.label not in done), key=lambda c: -c.log_evidence_gain)[:POOL]
+    # is accounted for; other physics first (variations of the accepted effect, e.g. the same knee on
+    # another group, mostly explain the misfit it already explains and would fill the pool)
+    pool = sorted((c for c in tried if c.label not in done),
+                  key=lambda c: (c.name == best.name, -c.log_evidence_gain))[:POOL]
     by_label = {p.candidate + "/" + p.group: p for p in proposals}
     for _ in range(MAX_EFFECTS - 1):
         results = []
@@ -513,7 +515,31 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
         fit_after, held_after = res.fit_after or fit_after, res.held_out_after or held_after
         same = {(c.name, c.where) for c in [best, *out]}
         pool = [c for c in pool if c.label != res.label and (c.name, c.where) not in same]
+    if out:
+        _backfit([best, *out], [(c, th) for c, th in fixed], sur, lik, train, epoch, config)
     return out, fit_after, held_after, last
+
+
+def _backfit(accepted: list[CandidateResult], fixed: list[tuple[Candidate, np.ndarray]], sur, lik, train,
+             epoch: float, config: ExplainConfig) -> None:
+    """One pass of backfitting over the accepted effects: each refitted (MAP and intervals) on top of
+    the others at their latest values, so that the first effect, fitted alone, gives back what it
+    took of the second's misfit (a step fitted before a knee takes some of the cold spell). Only the
+    reported parameters change; the evidences stay those of the forward selection."""
+    for k, res in enumerate(accepted):
+        cand = fixed[k][0]
+        others = [f for j, f in enumerate(fixed) if j != k]
+        job = _OnTopJob(_OnTop(cand, others), sur, lik, train)
+        fr = fit(job.gain, job.specs, seed=config.seed + 300 + k, n_is=config.n_importance, sensitivity=False)
+        job.anchor(fr.theta_map)
+        fr = fit(job.gain, job.specs, seed=config.seed + 300 + k, n_is=config.n_importance, sensitivity=False)
+        fixed[k] = (cand, fr.theta_map)
+        res.parameters, res.intervals, res.form = cand.describe(fr.theta_map), fr.intervals, cand.form(fr.theta_map)
+        t0 = cand.time(fr.theta_map)
+        res.time = _iso(epoch, t0)
+        if t0 is not None:
+            res.extra["change_window"] = int(np.searchsorted(cand.context.times_s, t0))
+        res.extra["backfitted"] = True
 
 
 # -- entry point -------------------------------------------------------------------------------------
