@@ -99,6 +99,18 @@ def row_record(r: TrackedRow) -> dict[str, Any]:
             "novelty_alarm": bool(r.novelty_alarm), "alarm_modes": list(r.alarm_modes), "unassigned": r.unassigned}
 
 
+def row_from_record(r: dict[str, Any]) -> TrackedRow:
+    """The inverse of :func:`row_record` (``None`` back to NaN)."""
+    def num(v: Any) -> float:
+        return math.nan if v is None else float(v)
+
+    return TrackedRow(r["window_id"], int(r["start_ns"]), [int(k) for k in r["modes"]], _nan(r["frequencies_hz"]),
+                      _nan(r["damping"]), _nan(r["macs"]), list(r["sensor_ids"]), _nan(r["shapes"]),
+                      {k: num(v) for k, v in r["covariates"].items()}, num(r["novelty_score"]),
+                      num(r["novelty_threshold"]), bool(r["novelty_alarm"]), _nan(r["normalised_hz"]),
+                      [int(k) for k in r["alarm_modes"]], int(r["unassigned"]))
+
+
 class TrackStore:
     """See the module docstring. ``writer=False`` opens read-only."""
 
@@ -153,6 +165,11 @@ class TrackStore:
 
     def has(self, window_id: str) -> bool:
         return self.db.execute("SELECT 1 FROM estimates WHERE window_id = ?", (window_id,)).fetchone() is not None
+
+    def row(self, window_id: str) -> TrackedRow | None:
+        """The tracked row of one stored window (None: not stored, or a window without a row)."""
+        got = self.db.execute("SELECT record FROM rows WHERE window_id = ?", (window_id,)).fetchone()
+        return None if got is None else row_from_record(json.loads(got[0]))
 
     def count(self, table: str = "rows") -> int:
         assert table in ("rows", "estimates", "alarms", "models")

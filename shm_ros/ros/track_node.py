@@ -106,7 +106,18 @@ class TrackNode(Node):
     def _on_estimate(self, msg) -> None:
         source = f"{topics.MODAL_ESTIMATES}[{msg.window_id}]"
         if self.store is not None and self.store.has(msg.window_id):
-            self.duplicates += 1  # redelivered after a restart (transient local): already tracked
+            # already tracked (redelivered after a restart, or the same recording replayed again):
+            # not tracked twice, but its stored row goes out again, so that a second replay of a bag
+            # feeds update and explain as the first did (they keep one row per window)
+            self.duplicates += 1
+            row = self.store.row(msg.window_id)
+            if row is not None:
+                self.pub.publish(tracked_row_to_msg(row, self.frame_id))
+            if self.duplicates == 1:
+                self.diag.report("ok", f"window {msg.window_id} already in the store {self.store.path}: its "
+                                 "stored row re-published, not tracked again (store: none to start afresh)",
+                                 source)
+                self.diag.publish()
             return
         try:
             est = estimate_from_msg(msg)
