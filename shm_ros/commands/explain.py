@@ -27,7 +27,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--modes", help="tracked-modes table (CSV, docs/interfaces.md §4)")
     src.add_argument("--bag", help="recording (rosbag2); identified and tracked first")
-    p.add_argument("--window", type=float, default=None, help="--bag: window length, s (default 600)")
+    src.add_argument("--events", help="recording (rosbag2) of earthquake events with the structure's measured "
+                     "input: explained in the time domain (docs/explain.md, Time domain)")
+    p.add_argument("--window", type=float, default=None, help="--bag/--events: window length, s (default 600)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     add_options(p.add_argument_group("explain (ExplainConfig; the explain node's parameters of the same names)"),
@@ -50,7 +52,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         config = config_from_args(ExplainConfig, args)
         spec = load_structure(args.structure)
-        if args.modes:
+        if args.events:
+            verdict = _events_verdict(args, spec, getattr(config, "seed", 0))
+        elif args.modes:
             from shm_ros.io.tables import read_tracked_modes
 
             obs = read_tracked_modes(args.modes)
@@ -62,14 +66,15 @@ def run(args: argparse.Namespace) -> int:
             obs = tracked_observations_from_bag(
                 args.bag, spec, observed, args.window,
                 lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))
-        bar = Progress("explain", every_s=2.0)  # explain reports (stage, fraction done)
-        verdict = explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
+        if not args.events:
+            bar = Progress("explain", every_s=2.0)  # explain reports (stage, fraction done)
+            verdict = explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
     except Exception as exc:  # file, table, structure and model errors name their source
         print(f"shm-ros explain: error: {exc}", file=sys.stderr)
         return 2
-    cfg = asdict(config) | {"structure": args.structure, "modes": args.modes, "bag": args.bag}
+    cfg = asdict(config) | {"structure": args.structure, "modes": args.modes, "bag": args.bag, "events": args.events}
     path = write_verdict(out, verdict, cfg, getattr(config, "seed", None))
-    if not args.no_report:
+    if not args.no_report and not args.events:  # the report's explain section draws modal tables
         from shm_ros.report.build import build_report
         from shm_ros.report.inputs import ExplainInputs, ReportInputs
 
@@ -82,6 +87,30 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+MIN_EVENTS = 3  # a calibration set and at least one held-out event
+
+
+def _events_verdict(args: argparse.Namespace, spec, seed: int):
+    """The time-domain path: the bag's event windows (docs/interfaces.md §1) as records of the
+    structure's measured input and outputs, explained by :func:`explain_events`."""
+    from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
+    from shm_ros.core.models import build_model
+    from shm_ros.core.predict import event_from_window
+    from shm_ros.io.recording import windows_from_bag
+
+    if not spec.input_sensor_ids():
+        raise ValueError(f"{args.structure}: --events needs a measured input (`input: {{sensor: ...}}`), and "
+                         "the structure declares none")
+    windows, _ = windows_from_bag(args.events, spec, args.window)
+    events = [w for w in windows if w.is_event]
+    if len(events) < MIN_EVENTS:
+        raise ValueError(f"{args.events}: {len(events)} event window(s) among {len(windows)}; the time-domain "
+                         f"path needs at least {MIN_EVENTS}")
+    model = build_model(spec)
+    return explain_events([event_from_window(w, model) for w in events], spec, TimeDomainConfig(seed=seed),
+                          progress=lambda text: print(f"shm-ros explain: {text}", file=sys.stderr))
+
+
 def format_verdict(v: dict) -> str:
     """A few lines for the terminal: mismatch summary, accepted physics, fit before / after."""
     lines = [f"mismatch: {v['mismatch']['summary']}"]
@@ -92,6 +121,11 @@ def format_verdict(v: dict) -> str:
         when = f" from {m['time']}" if m.get("time") else ""
         lines.append(f"{i}. {m['name']}{where}{when}: {m['form']} (log evidence gain {m['log_evidence_gain']:.1f})")
     f = v["fit"]
+    if "nrms_pct" in f["before"]:  # the time-domain path
+        lines.append(f"NRMS {f['before']['nrms_pct']:.1f} % -> {f['after'].get('nrms_pct', float('nan')):.1f} %; "
+                     f"held out {f['held_out']['before'].get('nrms_pct', float('nan')):.1f} % -> "
+                     f"{f['held_out']['after'].get('nrms_pct', float('nan')):.1f} %")
+        return "\n".join(lines)
     lines.append(f"frequency RMSE {f['before'].get('frequency_rmse_pct', float('nan')):.2f} % -> "
                  f"{f['after'].get('frequency_rmse_pct', float('nan')):.2f} %; held out "
                  f"{f['held_out']['before'].get('frequency_rmse_pct', float('nan')):.2f} % -> "
