@@ -36,6 +36,12 @@ def test_explain_events_writes_a_time_domain_verdict(tmp_path, capsys):
     assert {"amplitude_dependent_stiffness", "amplitude_dependent_damping"} <= tried
     assert f"calibrated on {n_events} events" in v["mismatch"]["summary"]
     assert "NRMS" in capsys.readouterr().out
+    # the report draws the time-domain figures: per-event NRMS, the strongest event's record
+    html = (out / "report.html").read_text()
+    assert "explain_events_nrms" in html and "explain_events_record" in html
+    series = json.loads((out / "explain_series.json").read_text())
+    ex = series["events"]["example"]
+    assert len(ex["measured"]) == len(ex["before"]) > 100
 
     # a structure without a measured input: exit 2, naming the file and the key
     plain = yaml.safe_load(s_path.read_text())

@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
         config = config_from_args(ExplainConfig, args)
         spec = load_structure(args.structure)
         if args.events:
-            verdict = _events_verdict(args, spec, getattr(config, "seed", 0))
+            verdict = _events_verdict(args, spec, config)
         elif args.modes:
             from shm_ros.io.tables import read_tracked_modes
 
@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     cfg = asdict(config) | {"structure": args.structure, "modes": args.modes, "bag": args.bag, "events": args.events}
     path = write_verdict(out, verdict, cfg, getattr(config, "seed", None))
-    if not args.no_report and not args.events:  # the report's explain section draws modal tables
+    if not args.no_report:
         from shm_ros.report.build import build_report
         from shm_ros.report.inputs import ExplainInputs, ReportInputs
 
@@ -90,9 +90,10 @@ def run(args: argparse.Namespace) -> int:
 MIN_EVENTS = 3  # a calibration set and at least one held-out event
 
 
-def _events_verdict(args: argparse.Namespace, spec, seed: int):
+def _events_verdict(args: argparse.Namespace, spec, config):
     """The time-domain path: the bag's event windows (docs/interfaces.md §1) as records of the
-    structure's measured input and outputs, explained by :func:`explain_events`."""
+    structure's measured input and outputs, explained by :func:`explain_events`. Of the options,
+    ``--threshold``, ``--tie-nats`` and ``--seed`` apply (the others are the modal path's)."""
     from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
     from shm_ros.core.models import build_model
     from shm_ros.core.predict import event_from_window
@@ -107,7 +108,8 @@ def _events_verdict(args: argparse.Namespace, spec, seed: int):
         raise ValueError(f"{args.events}: {len(events)} event window(s) among {len(windows)}; the time-domain "
                          f"path needs at least {MIN_EVENTS}")
     model = build_model(spec)
-    return explain_events([event_from_window(w, model) for w in events], spec, TimeDomainConfig(seed=seed),
+    cfg = TimeDomainConfig(threshold=config.threshold, tie_nats=config.tie_nats, seed=config.seed)
+    return explain_events([event_from_window(w, model) for w in events], spec, cfg,
                           progress=lambda text: print(f"shm-ros explain: {text}", file=sys.stderr))
 
 

@@ -466,13 +466,7 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
         for i, c in enumerate(pool):
             job0 = jobs[c.label][0]
             say(f"fit {c.label} on top of {len(fixed)} effect(s)", 0.9)
-            cand = _OnTop(job0.cand, fixed)
-            job = _OnTopJob(cand, sur, lik, train)
-            fr = fit(job.gain, job.specs, seed=config.seed + 100 + i, n_is=config.n_importance,
-                     sensitivity=False)
-            job.anchor(fr.theta_map)  # the cross term at the first pass's MAP, then the final fit
-            fr = fit(job.gain, job.specs, seed=config.seed + 100 + i, n_is=config.n_importance,
-                     sensitivity=False)
+            job, fr = _fit_on_top(job0.cand, fixed, sur, lik, train, config.seed + 100 + i, config)
             res = _result(job, fr, r_all, train, epoch, z_all)
             res.log_evidence_gain = float(fr.evidence.log_z - base_gain)
             res.extra.update({"on_top_of": [f[0].label for f in fixed], "gain_over_nominal": float(fr.evidence.log_z)})
@@ -520,6 +514,17 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
     return out, fit_after, held_after, last
 
 
+def _fit_on_top(cand: Candidate, fixed: list[tuple[Candidate, np.ndarray]], sur, lik, train, seed: int,
+                config: ExplainConfig):
+    """``cand`` fitted on top of the ``fixed`` effects (held at their values): a first fit, the cross
+    term anchored at its MAP, then the final fit. Returns the job and the final fit."""
+    job = _OnTopJob(_OnTop(cand, fixed), sur, lik, train)
+    fr = fit(job.gain, job.specs, seed=seed, n_is=config.n_importance, sensitivity=False)
+    job.anchor(fr.theta_map)
+    fr = fit(job.gain, job.specs, seed=seed, n_is=config.n_importance, sensitivity=False)
+    return job, fr
+
+
 def _backfit(accepted: list[CandidateResult], fixed: list[tuple[Candidate, np.ndarray]], sur, lik, train,
              epoch: float, config: ExplainConfig) -> None:
     """One pass of backfitting over the accepted effects: each refitted (MAP and intervals) on top of
@@ -529,10 +534,7 @@ def _backfit(accepted: list[CandidateResult], fixed: list[tuple[Candidate, np.nd
     for k, res in enumerate(accepted):
         cand = fixed[k][0]
         others = [f for j, f in enumerate(fixed) if j != k]
-        job = _OnTopJob(_OnTop(cand, others), sur, lik, train)
-        fr = fit(job.gain, job.specs, seed=config.seed + 300 + k, n_is=config.n_importance, sensitivity=False)
-        job.anchor(fr.theta_map)
-        fr = fit(job.gain, job.specs, seed=config.seed + 300 + k, n_is=config.n_importance, sensitivity=False)
+        _, fr = _fit_on_top(cand, others, sur, lik, train, config.seed + 300 + k, config)
         fixed[k] = (cand, fr.theta_map)
         res.parameters, res.intervals, res.form = cand.describe(fr.theta_map), fr.intervals, cand.form(fr.theta_map)
         t0 = cand.time(fr.theta_map)

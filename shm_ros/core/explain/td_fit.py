@@ -2,9 +2,11 @@
 
 The likelihood is :class:`shm_ros.core.bayes.records.JointTimeDomainLikelihood` (the records share each
 channel's prediction-error variance, integrated out with its inverse-gamma prior; an AR(p) residual model
-per record whose coefficients are fixed once, here at the nominal model's white-noise MAP on every
-event, and then shared by every model compared, so that all evidences are of one likelihood). Each
-event gets the candidate's factors through :class:`.td_model.FactorModel`. Parameters are searched in
+per record whose coefficients are fixed once per model compared, at that model's white-noise MAP: a
+model's residual model is estimated from its own residuals, as for the nominal model, so that the
+nominal's large residual, whitened, does not make the misfit an effect removes cheap). Each event
+gets the candidate's factors through :class:`.td_model.FactorModel`, or, within events, each segment
+of it (:class:`Segments`, :mod:`.td_varying`). Parameters are searched in
 unit coordinates ``u``: the nominal parameters as they are (factors near 1) and each candidate
 parameter as its place in its prior range, so a uniform prior has density 1 there.
 
@@ -31,13 +33,34 @@ from scipy.stats import norm
 from shm_ros.core.bayes.likelihoods import ig_marginal_loglik
 from shm_ros.core.bayes.priors import JointPrior
 from shm_ros.core.bayes.records import JointTimeDomainLikelihood
+from shm_ros.core.bayes.timedomain import ar_fit
 from shm_ros.core.predict.batch import batch_responses
 from shm_ros.core.predict.signals import nrms_pct
 
 from .candidates.base import Candidate
-from .td_model import FactorModel
+from .td_model import FactorModel, shape_logprior
+from .td_varying import node_steps, varying_responses
+
+
+@dataclass
+class Segments:
+    """Within-event resolution: every event's segments (:func:`.td_model.segment_amplitudes`)."""
+
+    lengths: list[int]  # samples per segment, per event
+    counts: list[int]  # segments per event
+    weights: np.ndarray  # (all segments,) the response's mean square: what the fit is dominated by
+
+    @property
+    def offsets(self) -> list[int]:
+        return [0, *np.cumsum(self.counts).tolist()]
+
+    def columns(self, events: np.ndarray) -> np.ndarray:
+        """The segment columns of ``events``."""
+        o = self.offsets
+        return np.concatenate([np.arange(o[e], o[e + 1]) for e in np.atleast_1d(events)]).astype(int)
 
 THETA_BOUNDS = (0.1, 10.0)  # nominal parameters are factors on the file's values
+FTOL, GTOL = 1e-12, 1e-7  # L-BFGS-B on the log posterior scaled by its value at the start (~2e5 nats)
 
 
 @dataclass
@@ -52,8 +75,10 @@ class EventPosterior:
     """log p(theta, phi | events) in unit coordinates for the events ``idx`` of ``lik``'s records."""
 
     def __init__(self, lik: JointTimeDomainLikelihood, prior: JointPrior, candidate: Candidate | None,
-                 idx: np.ndarray | None = None, chunk: int = 64):
+                 idx: np.ndarray | None = None, chunk: int = 64, segments: Segments | None = None):
         self.lik, self.prior, self.cand, self.chunk = lik, prior, candidate, chunk
+        # within-event resolution: the candidate's "windows" are every event's segments, in order
+        self.segments = segments if candidate is not None else None
         fm = lik.model
         assert isinstance(fm, FactorModel)
         self.fm = fm
@@ -75,9 +100,9 @@ class EventPosterior:
         return np.column_stack(cols) if cols else np.zeros((u.shape[0], 0))
 
     def factors(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Stiffness and damping factors (B, all events)."""
-        n_ev = len(self.lik.parts)
-        ones = np.ones((u.shape[0], n_ev))
+        """Stiffness and damping factors (B, all events), or (B, all segments) within events."""
+        n_w = len(self.lik.parts) if self.segments is None else self.segments.offsets[-1]
+        ones = np.ones((u.shape[0], n_w))
         if self.cand is None:
             return ones, ones
         mod = self.cand.modify(self.phi(u))
@@ -86,13 +111,58 @@ class EventPosterior:
         # relative to the geometric mean over the fitted events: the nominal parameters then stand for
         # the average event with or without the effect, so the nominal MAP is a good start for any effect
         # size (the response's phase makes the time-domain posterior multimodal in the stiffness)
-        s = s / np.exp(np.mean(np.log(s[:, self.idx]), axis=1, keepdims=True))
-        d = d / np.exp(np.mean(np.log(d[:, self.idx]), axis=1, keepdims=True))
+        # (within events: weighted by the response's mean square, so that the reference is the strong
+        # motion the nominal fit was dominated by, not the quiet start and end of each record)
+        if self.segments is None:
+            w = np.zeros(n_w)
+            w[self.idx] = 1.0
+        else:
+            w = np.zeros(n_w)
+            cols = self.segments.columns(self.idx)
+            w[cols] = self.segments.weights[cols]
+        w = w / w.sum()
+        s = s / np.exp(np.log(s) @ w)[:, None]
+        d = d / np.exp(np.log(d) @ w)[:, None]
         return s, d
 
     def rows(self, u: np.ndarray, e: int) -> np.ndarray:
+        """Parameter rows of event ``e`` (per-event resolution; within events: the factors at 1)."""
+        if self.segments is not None:
+            return np.column_stack([u[:, :self.nb], np.ones((u.shape[0], 2))])
         s, d = self.factors(u)
         return np.column_stack([u[:, :self.nb], s[:, e], d[:, e]])
+
+    def _responses(self, v: np.ndarray, events: np.ndarray):
+        """Yield (event, first row, Y (B, outputs, N)) for the rows ``v`` (in unit coordinates)."""
+        if self.segments is None:
+            for e in events:
+                part = self.lik.parts[e]
+                for a, Y in batch_responses(self.fm, self.rows(v, int(e)), part.record.inputs, part.record.dt,
+                                            self.lik.outputs, chunk=self.chunk):
+                    yield int(e), a, Y
+            return
+        seg = self.segments
+        col = self.nb if self.acts_on == "stiffness" else self.nb + 1
+        step = max(1, self.chunk // 2)
+        for a in range(0, v.shape[0], step):
+            w = v[a:a + step]
+            s, d = self.factors(w)
+            f = s if col == self.nb else d
+            base = self.rows(w, 0)
+            used = f[:, seg.columns(events)]
+            steps = {}
+            for e in events:
+                part = self.lik.parts[e]
+                dt = part.record.dt
+                if dt not in steps:
+                    steps[dt] = node_steps(self.fm, base, col, used.min(axis=1), used.max(axis=1), dt,
+                                           self.lik.outputs)
+                vals = f[:, seg.offsets[e]:seg.offsets[e + 1]]
+                yield int(e), a, varying_responses(steps[dt], vals, seg.lengths[e], part.record.inputs)
+
+    @property
+    def acts_on(self) -> str:
+        return "damping" if self.cand is not None and self.cand.vocabulary.endswith("damping") else "stiffness"
 
     def inside(self, u: np.ndarray) -> np.ndarray:
         th = u[:, :self.nb]
@@ -107,22 +177,21 @@ class EventPosterior:
             return out
         v = u[ok]
         ss = np.zeros((v.shape[0], len(self.lik.outputs)))
-        for e in self.idx:
+        for e, a, Y in self._responses(v, self.idx):
             part = self.lik.parts[e]
-            for a, Y in batch_responses(self.fm, self.rows(v, int(e)), part.record.inputs, part.record.dt,
-                                        self.lik.outputs, chunk=self.chunk):
-                for b in range(Y.shape[0]):
-                    ss[a + b] += part.innovation_ss(Y[b].T)
+            for b in range(Y.shape[0]):
+                ss[a + b] += part.innovation_ss(Y[b].T)
         ll = sum(ig_marginal_loglik(ss[:, j], self.n, p) for j, p in enumerate(self.lik.priors))
-        lp = self.prior.logpdf(v[:, :self.nb]) if self.nb else 0.0
+        # the file's parameters' prior, and the damping shape's (the last baseline column)
+        lp = self.prior.logpdf(v[:, :self.nb - 1]) if self.nb > 1 else 0.0
+        lp = lp + shape_logprior(v[:, self.nb - 1])
         # log-uniform candidate parameters: density 1 in u as well (u is the log position)
         out[ok] = ll + lp
         return out
 
     def predict(self, u: np.ndarray, e: int) -> np.ndarray:
         """Response (N, channels) of event ``e`` at ``u`` (dim,)."""
-        rec = self.lik.parts[e].record
-        _, Y = next(batch_responses(self.fm, self.rows(np.atleast_2d(u), e), rec.inputs, rec.dt, self.lik.outputs))
+        _, _, Y = next(self._responses(np.atleast_2d(u), np.array([e])))
         return Y[0].T
 
     def nrms(self, u: np.ndarray, events: np.ndarray) -> np.ndarray:
@@ -134,15 +203,31 @@ class EventPosterior:
         return np.array(out)
 
     def fix_ar(self, u: np.ndarray) -> None:
-        for e in self.idx:
-            self.lik.parts[e].fix_ar(self.rows(np.atleast_2d(u), int(e))[0])
+        """Every event's residual AR model, estimated once at ``u`` (this model's white-noise MAP)."""
+        for e in range(len(self.lik.parts)):
+            part = self.lik.parts[e]
+            if part.ar_order:
+                part.ar_coef = ar_fit(part.record.outputs - self.predict(u, e), part.ar_order)
+
+    def white(self) -> None:
+        """White residuals (AR coefficients zero) until :meth:`fix_ar`."""
+        for part in self.lik.parts:
+            part.ar_coef = None
+
+    def ar_state(self) -> list[np.ndarray | None]:
+        return [p.ar_coef for p in self.lik.parts]
+
+    def set_ar(self, state: list[np.ndarray | None]) -> None:
+        for p, c in zip(self.lik.parts, state, strict=True):
+            p.ar_coef = c
 
 
 def spectral_starts(post: EventPosterior, rng: np.random.Generator, n: int = 160, keep: int = 2) -> list[np.ndarray]:
     """Starting points of the nominal parameters: prior draws ranked by the misfit of the smoothed
     amplitude spectra of the records, which unlike the time-domain likelihood ignores phase and so
     has one broad basin (a stiffness 10-20 % off is many cycles out of phase over an event)."""
-    th = np.vstack([np.ones(post.nb), post.prior.sample(rng, n - 1)])
+    draws = post.prior.sample(rng, n - 1)  # the file's parameters; the damping shape starts at 1
+    th = np.vstack([np.ones(post.nb), np.column_stack([draws, np.ones(n - 1)])])
     th = np.clip(th, THETA_BOUNDS[0] * 1.05, THETA_BOUNDS[1] * 0.95)
     u = np.column_stack([th, np.zeros((n, post.dim - post.nb))])
     mis = np.zeros(n)
@@ -162,7 +247,8 @@ def spectral_starts(post: EventPosterior, rng: np.random.Generator, n: int = 160
 def _grad(post: EventPosterior, u: np.ndarray, h: float = 1e-6) -> tuple[float, np.ndarray]:
     pts = np.vstack([u, u + h * np.eye(u.size), u - h * np.eye(u.size)])
     f = post(pts)
-    g = (f[1:u.size + 1] - f[u.size + 1:]) / (2 * h)
+    with np.errstate(invalid="ignore"):  # a step outside the prior box: -inf on both sides, slope 0 below
+        g = (f[1:u.size + 1] - f[u.size + 1:]) / (2 * h)
     return float(f[0]), np.where(np.isfinite(g), g, 0.0)
 
 
@@ -180,7 +266,7 @@ def find_map(post: EventPosterior, starts: list[np.ndarray]) -> tuple[np.ndarray
             return (-f / scale, -g / scale) if math.isfinite(f) else (1e30, np.zeros_like(u))
 
         r = minimize(obj, np.clip(u0, lo, hi), jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
-                     options={"maxiter": 200, "ftol": 1e-15, "gtol": 1e-9})
+                     options={"maxiter": 200, "ftol": FTOL, "gtol": GTOL})
         f = float(post(r.x)[0])
         if f > best_f:
             best_u, best_f = np.asarray(r.x, float), f

@@ -1,6 +1,7 @@
 """Event records for the time-domain path of explain, and the model with per-event factors.
 
-A time-domain candidate changes the model per event (an earthquake record), not per sample: the
+At the per-event resolution a time-domain candidate changes the model per event (an earthquake
+record; within an event, per segment: :func:`segment_amplitudes`, :mod:`.td_varying`): the
 existing amplitude candidates (:mod:`.candidates.amplitude_stiffness`, :mod:`.candidates.amplitude_damping`)
 already turn one covariate value per "window" into a factor, so an event plays the part of a window.
 :class:`FactorModel` is the structure's analysis model with two more parameters appended,
@@ -18,9 +19,11 @@ so a batch of parameter sets is one batched discretisation per event.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 
 from shm_ros.core.bayes.timedomain import AccelerationRecord
 from shm_ros.core.models.base import AffineModel
@@ -29,23 +32,46 @@ from shm_ros.core.predict.record import EventRecord
 from shm_ros.core.predict.signals import baseline_correct, pre_event_end, strong_motion
 
 FACTOR_NAMES = ("_stiffness_factor", "_damping_factor")
+SHAPE_NAME = "_damping_shape"
+SHAPE_RANGE = (0.25, 4.0)  # log-uniform prior of the damping shape (a nuisance of every model compared)
+
+
+def shape_logprior(r: np.ndarray) -> np.ndarray:
+    """Log-uniform density of the damping shape on :data:`SHAPE_RANGE` (-inf outside)."""
+    r = np.asarray(r, float)
+    lo, hi = SHAPE_RANGE
+    ok = (r >= lo) & (r <= hi)
+    return np.where(ok, -np.log(np.where(ok, r, 1.0)) - math.log(math.log(hi / lo)), -np.inf)
 
 
 @dataclass
 class FactorModel(AffineModel):
-    """``model`` with :data:`FACTOR_NAMES` appended to its parameters (module doc)."""
+    """``model`` with :data:`SHAPE_NAME` and :data:`FACTOR_NAMES` appended to its parameters (module doc).
+
+    The damping shape ``r`` multiplies every damping ratio of the file after the first (Rayleigh: the
+    second anchor): a real structure's damping is not the file's in its spread over the modes either,
+    and without this freedom a candidate that changes the damping within events gains hundreds of
+    nats on a linear structure by trading damping between the first mode (ringing in the quiet tail)
+    and the higher ones (in the strong motion). ``n_base`` counts the model's parameters and ``r``:
+    the baseline every model compared shares."""
 
     n_base: int = 0
 
     @classmethod
     def of(cls, model: AffineModel) -> FactorModel:
         kw = {f.name: getattr(model, f.name) for f in dataclasses.fields(AffineModel)}
-        kw["parameter_names"] = [*model.parameter_names, *FACTOR_NAMES]
-        kw["K_terms"] = [*model.K_terms, None, None]
-        kw["M_terms"] = [*model.M_terms, None, None]
-        kw["damping_factors"] = [*model.damping_factors, [], []]
+        kw["parameter_names"] = [*model.parameter_names, SHAPE_NAME, *FACTOR_NAMES]
+        kw["K_terms"] = [*model.K_terms, None, None, None]
+        kw["M_terms"] = [*model.M_terms, None, None, None]
+        kw["damping_factors"] = [*model.damping_factors, [], [], []]
         kw["sensor_rows"] = dict(model.sensor_rows)
-        return cls(**kw, n_base=model.n_parameters)
+        return cls(**kw, n_base=model.n_parameters + 1)
+
+    def damping_ratios_at(self, theta: np.ndarray | None = None) -> np.ndarray:
+        th = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
+        z = AffineModel.damping_ratios_at(self, th)
+        r = th[self.n_base - 1]
+        return np.r_[z[:1], z[1:] * r] if z.size > 1 else np.r_[z, z * r]
 
     def stiffness(self, theta: np.ndarray | None = None) -> np.ndarray:
         th = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
@@ -71,6 +97,27 @@ class EventData:
     covariates: dict[str, np.ndarray]  # pga_m_s2, rms_accel_m_s2: (E,)
     start_ns: list[int] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+
+
+SEGMENT_S = 0.25  # within-event resolution: a fraction of a period of the modes that soften
+
+
+def segment_amplitudes(records: list[AccelerationRecord], period_s: float,
+                       segment_s: float = SEGMENT_S) -> tuple[list[np.ndarray], list[int]]:
+    """Within each event, the local vibration amplitude per segment of ``segment_s``: the RMS of the
+    measured outputs (mean square over channels) over a centred window of one ``period_s`` (a cycle of
+    the first mode: a secant stiffness is a property of a cycle), then over the segment. Returns the
+    (J_e,) amplitudes (m/s^2) and the samples per segment of every event."""
+    amps, lens = [], []
+    for r in records:
+        n = r.outputs.shape[0]
+        ms = uniform_filter1d(np.mean(r.outputs ** 2, axis=1), max(1, int(round(period_s / r.dt))), mode="nearest")
+        L = max(1, int(round(segment_s / r.dt)))
+        J = max(1, -(-n // L))
+        pad = np.r_[ms, np.full(J * L - n, np.nan)].reshape(J, L)
+        amps.append(np.sqrt(np.nanmean(pad, axis=1)))
+        lens.append(L)
+    return amps, lens
 
 
 def event_data(events: list[EventRecord], onset_arias: float = 0.001, min_pre_event_s: float = 1.0,

@@ -5,9 +5,13 @@ Input: the structure (a building with a declared base input, docs/interfaces.md 
 
 1. the nominal parameters (the file's ``parameters:``) calibrated jointly on every event (MAP of the
    joint time-domain likelihood with the AR(p) residual model, :mod:`.td_fit`); NRMS per event;
-2. each time-domain candidate (the amplitude candidates of the registry, an event playing the part of
-   a window: one stiffness or damping factor per event from its amplitude) fitted with the nominal
-   parameters re-fitted jointly; evidence gain by Laplace, checked by importance sampling;
+2. each time-domain candidate (the amplitude candidates of the registry) at two resolutions: an event
+   playing the part of a window (one stiffness or damping factor per event from its amplitude), and
+   within events, a segment of a fraction of a second playing that part (the factor from the local
+   amplitude, so a stiffness that softens in the strong motion and recovers after it is followed,
+   :mod:`.td_varying`); fitted with the nominal parameters re-fitted jointly and the candidate's own
+   residual model (AR coefficients at its white-noise MAP); evidence gain by Laplace, checked by
+   importance sampling;
 3. held out: a fixed split of events (in amplitude order every ``held_out_every``-th from the second,
    so the weakest and strongest events stay in the fit: the held-out ones are interpolated); nominal
    and candidate are re-fitted without them and predict them;
@@ -30,10 +34,11 @@ from shm_ros.core.models import build_model
 from shm_ros.core.predict.record import EventRecord
 from shm_ros.core.structure import StructureSpec
 
+from .candidates._common import amplitude
 from .candidates.base import CANDIDATES, Context
 from .select import decide, shipped_threshold
-from .td_fit import EventPosterior, find_map, importance_log_z, laplace, spectral_starts
-from .td_model import FactorModel, event_data
+from .td_fit import EventPosterior, Segments, find_map, importance_log_z, laplace, spectral_starts
+from .td_model import SEGMENT_S, FactorModel, event_data, segment_amplitudes
 from .types import CandidateResult, FitScores, Mismatch, Verdict
 
 THRESHOLD_FILE = "threshold_timedomain.json"
@@ -51,6 +56,10 @@ class TimeDomainConfig:
     tie_nats: float = 2.0
     seed: int = 0
     candidates: tuple[str, ...] = TD_CANDIDATES
+    # per_event: one factor per event from its amplitude; within_event: one per segment of an event
+    # from the local amplitude (td_varying.py), so softening during the strong motion is followed
+    resolutions: tuple[str, ...] = ("per_event", "within_event")
+    segment_s: float = SEGMENT_S
 
 
 def held_out_events(amplitude: np.ndarray, every: int) -> np.ndarray:
@@ -97,14 +106,31 @@ def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeD
                   covariates=dict(data.covariates), hints={"covariate": cfg.amplitude})
     results: list[CandidateResult] = []
     keys: dict[str, tuple[str, float | None]] = {}
+    strongest = int(np.argmax(amp))  # the event the report draws
+    period = 1.0 / float(model.modes(None, 1).frequencies_hz[0])
+    seg_amp, seg_len = segment_amplitudes(data.records, period, cfg.segment_s)
+    segments = Segments(seg_len, [a.size for a in seg_amp], np.concatenate(seg_amp) ** 2)
+    seg_t = np.concatenate([ctx.times_s[e] + np.arange(a.size) * seg_len[e] * data.records[e].dt
+                            for e, a in enumerate(seg_amp)])
+    ctx_in = Context(times_s=seg_t, covariates={"rms_accel_m_s2": np.concatenate(seg_amp)},
+                     hints={"covariate": "rms_accel_m_s2"})
     for label in cfg.candidates:
-        say(f"fitting {label}")
-        cand = CANDIDATES.get(label)("EI", ctx)
-        r = _fit_candidate(cand, lik, prior, u_n, lap_n.log_z, chk_n, train, test, rng, cfg)
-        r.extra["nrms_per_event"] = r.extra.pop("_nrms").tolist()
-        results.append(r)
-        spec0 = cand.params()[0]
-        keys[r.label] = (cand.key_parameter(), spec0.null)
+        for res in cfg.resolutions:
+            say(f"fitting {label} ({res.replace('_', ' ')})")
+            within = res == "within_event"
+            cand = CANDIDATES.get(label)("EI", ctx_in if within else ctx)
+            r = _fit_candidate(cand, lik, prior, u_n, lap_n.log_z, chk_n, train, test, rng, cfg,
+                               segments if within else None, strongest)
+            r.extra["nrms_per_event"] = r.extra.pop("_nrms").tolist()
+            r.extra["resolution"] = res
+            if within:
+                r.label = f"{r.label}/within_event"
+                r.extra.update(period_s=period, segment_s=cfg.segment_s)
+                r.form = (f"{r.form} within each event: a = RMS acceleration of the outputs over one period of "
+                          f"the first mode ({period:.2f} s), per {cfg.segment_s:g} s")
+            results.append(r)
+            spec0 = cand.params()[0]
+            keys[r.label] = (cand.key_parameter(), spec0.null)
     thr = _threshold(cfg)
     accepted = decide(results, keys, float(thr["log_bayes_factor"]), _scores(held_before), None, cfg.tie_nats)
     after = np.array(accepted[0].extra["nrms_per_event"]) if accepted else before
@@ -114,14 +140,38 @@ def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeD
                         summary=(f"nominal model calibrated on {n_ev} events: NRMS {np.mean(before):.1f} % "
                                  f"(per event {', '.join(f'{v:.1f}' for v in before)}); correlation of the "
                                  f"per-event NRMS with {cfg.amplitude}: {corr:+.2f}"))
-    theta = dict(zip(model.parameter_names, map(float, u_n), strict=True))
+    theta = dict(zip(lik.model.parameter_names[:len(u_n)], map(float, u_n), strict=True))
+    examples = {r.label: r.extra.pop("_example") for r in results}
+    figures: dict = {"events": {"window_ids": data.window_ids, cfg.amplitude: amp.tolist(),
+                                "nrms_before": before.tolist(), "nrms_after": after.tolist(),
+                                "held_out": [int(i) for i in test], "nominal_parameters": theta}}
+    rec = data.records[strongest]
+    figures["events"]["example"] = {
+        "window_id": data.window_ids[strongest], "channel": rec.channel_ids[-1], "dt": rec.dt,
+        "measured": rec.outputs[:, -1].tolist(), "before": nominal.predict(u_n, strongest)[:, -1].tolist(),
+        "after": examples[accepted[0].label] if accepted else None}
+    if accepted:
+        figures["form"] = _form_curve(accepted[0])
     return Verdict(mismatch=mismatch, missing_physics=accepted, tried=results, fit_before=_scores(before),
                    fit_after=_scores(after), held_out_before=_scores(held_before), held_out_after=held_after,
                    threshold=thr, notes=[*data.notes, f"time domain: {n_ev} events, held out {list(test)} "
                                          f"(amplitude order), nominal parameters at the MAP: {theta}"],
-                   figures={"events": {"window_ids": data.window_ids, cfg.amplitude: amp.tolist(),
-                                       "nrms_before": before.tolist(), "nrms_after": after.tolist(),
-                                       "held_out": [int(i) for i in test]}})
+                   figures=figures)
+
+
+def _form_curve(c: CandidateResult) -> dict:
+    """The accepted effect's factor against the amplitude, from small amplitude, with its 95 % band."""
+    (name, k), (lo, hi) = next(iter(c.parameters.items())), next(iter(c.intervals.values()))
+    a = np.linspace(0.0, float(c.extra["amplitude_max"]), 60)
+    stiff = c.extra["acts_on"] == "stiffness"
+    f = (lambda kk: 1.0 / (1.0 + kk * a)) if stiff else (lambda kk: 1.0 + kk * a)
+    within = c.extra.get("resolution") == "within_event"
+    return {"x": a.tolist(), "y": f(k).tolist(), "lower": np.minimum(f(lo), f(hi)).tolist(),
+            "upper": np.maximum(f(lo), f(hi)).tolist(),
+            "x_label": ("local RMS acceleration over one period, m/s^2" if within else
+                        "event RMS acceleration over the strong motion, m/s^2"),
+            "y_label": f"{c.extra['acts_on']} factor (1 at small amplitude)",
+            "title": f"{c.name}: {c.extra['acts_on']} against amplitude ({name} = {k:.3g})"}
 
 
 def _threshold(cfg: TimeDomainConfig) -> dict:
@@ -130,14 +180,23 @@ def _threshold(cfg: TimeDomainConfig) -> dict:
     return shipped_threshold(THRESHOLD_FILE)
 
 
-def _fit_candidate(cand, lik, prior, u_n, log_z_n, chk_n, train, test, rng, cfg) -> CandidateResult:
-    post = EventPosterior(lik, prior, cand)
+def _fit_candidate(cand, lik, prior, u_n, log_z_n, chk_n, train, test, rng, cfg, segments=None,
+                   example: int = 0) -> CandidateResult:
+    post = EventPosterior(lik, prior, cand, segments=segments)
     specs = post.specs
+    nominal_ar = post.ar_state()
+    # the candidate's own residual model, as the nominal's: AR coefficients at its white-noise MAP
+    # (the nominal's residual is the misfit the effect leaves; whitened by its AR model, that misfit
+    # would cost the candidate's fit little, and its MAP would stop short of the effect)
+    post.white()
     grid = np.r_[0.0, np.logspace(-4, 0, 13)]  # the effect's place in its prior range: a coarse scan first
     pts = np.column_stack([np.tile(u_n, (grid.size, 1)), grid])
     f = post(pts)
     starts = [pts[i] for i in np.argsort(-f)[:2]]
-    u_c, f_c = find_map(post, starts)
+    u_w, _ = find_map(post, starts)
+    post.fix_ar(u_w)
+    u_c, f_c = find_map(post, [u_w])
+    gain_at_map = f_c - nominal_at(post, u_c)
     lap = laplace(post, u_c, f_c)
     chk, chk_se = importance_log_z(post, lap, cfg.n_importance, rng)
     gain = lap.log_z - log_z_n
@@ -148,24 +207,41 @@ def _fit_candidate(cand, lik, prior, u_n, log_z_n, chk_n, train, test, rng, cfg)
     u_lo, u_hi = max(u_c[nb] - 1.96 * sd, 0.0), min(u_c[nb] + 1.96 * sd, 1.0)
     phi = post.phi(np.array([u_c, np.r_[u_c[:nb], u_lo], np.r_[u_c[:nb], u_hi]]))[:, 0]
     after = post.nrms(u_c, np.arange(len(lik.parts)))
-    post_tr = EventPosterior(lik, prior, cand, train)
+    post_tr = EventPosterior(lik, prior, cand, train, segments=segments)
     u_tr, _ = find_map(post_tr, [u_c])
     held = post_tr.nrms(u_tr, test)
+    post.set_ar(nominal_ar)
     s, d = post.factors(u_c[None, :])
     acts_on = "damping" if cand.vocabulary.endswith("damping") else "stiffness"
     # the model's first-mode inherent damping ratio at this fit: what a damping factor multiplies
-    zeta1 = float(lik.model.damping_ratios_at(np.r_[u_c[:nb], 1.0, 1.0])[0])
+    # (at small amplitude: the factors are relative to the fitted events' average, raw / G)
+    raw = cand.modify(post.phi(u_c[None, :]))
+    raw_d = raw.damping if raw.damping is not None else np.ones_like(d)
+    raw_s = np.asarray(raw.groups.get("EI", np.ones_like(s)), float)
+    # G: the fitted factors are raw / G (relative to the fitted events' average, EventPosterior.factors)
+    norm = float(raw_s[0, 0] / s[0, 0]) if acts_on == "stiffness" else float(raw_d[0, 0] / d[0, 0])
+    zeta1 = float(lik.model.damping_ratios_at(np.r_[u_c[:nb], 1.0, 1.0])[0]) * float(d[0, 0] / raw_d[0, 0])
     return CandidateResult(
         name=cand.vocabulary, label=cand.label, form=cand.form(phi[:1]), where=cand.group,
         parameters={specs[0].name: float(phi[0])}, intervals={specs[0].name: (float(phi[1]), float(phi[2]))},
         log_evidence_gain=float(gain), log_evidence_gain_check=float(check), log_evidence_gain_err=0.0,
         prior_sensitivity={}, explanation=cand.explanation, fit_after=_scores(after), held_out_after=_scores(held),
-        extra={"_nrms": after, "check_err": check_err,
+        extra={"_nrms": after, "_example": post.predict(u_c, example)[:, -1].tolist(),
+               "amplitude_max": float(np.max(amplitude(cand.context)[1])), "factor_norm": norm,
+               "check_err": check_err,
                "check_agrees": bool(abs(gain - check) <= max(0.5, 3 * check_err)),
-               "held_out_metric": "nrms_pct", "acts_on": acts_on, "gain_at_map": float(f_c - nominal_at(post, u_c)),
-               "factors": (s if acts_on == "stiffness" else d)[0].tolist(),
+               "held_out_metric": "nrms_pct", "acts_on": acts_on, "gain_at_map": float(gain_at_map),
+               "factors": _per_event((s if acts_on == "stiffness" else d)[0], segments),
                "nominal_parameters": dict(zip(lik.model.parameter_names[:nb], map(float, u_c[:nb]), strict=True)),
                "inherent_damping_ratio_1": zeta1})
+
+
+def _per_event(f: np.ndarray, segments: Segments | None) -> list[float]:
+    """A fit's factors per event (within events: their geometric mean over each event's segments)."""
+    if segments is None:
+        return f.tolist()
+    o = segments.offsets
+    return [float(np.exp(np.mean(np.log(f[o[e]:o[e + 1]])))) for e in range(len(segments.counts))]
 
 
 def nominal_at(post: EventPosterior, u: np.ndarray) -> float:

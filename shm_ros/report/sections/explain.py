@@ -34,6 +34,10 @@ class ExplainSection:
         if tried:
             s.tables.append(_candidates_table(tried))
         s.figures += _figures(v, series, fig_dir)
+        if series.get("events"):  # the time-domain path (earthquake series)
+            s.figures += _event_figures(series["events"], fig_dir)
+            if (series.get("form") or {}).get("x") is not None:
+                s.figures.append(_form_figure(series["form"], fig_dir))
         if not s.figures and inputs.tracking is not None:  # a series without residuals: what the data follow
             fig = _tracked_covariate_figure(inputs.tracking.observations, v, series, fig_dir)
             if fig is not None:
@@ -201,6 +205,48 @@ def _form_figure(form: dict[str, Any], fig_dir: Path) -> Figure:
     fig.tight_layout()
     return figure_json(fig, fig_dir, "explain_form", form.get("title", "Fitted form of the selected physics"),
                        plain(form))
+
+
+def _event_figures(ev: dict[str, Any], fig_dir: Path) -> list[Figure]:
+    """Time domain: every event's NRMS before / after against its amplitude (held-out events marked),
+    and the strongest event's record at the top sensor with both models' predictions."""
+    plt = pyplot()
+    figs: list[Figure] = []
+    key = next((k for k in ("rms_accel_m_s2", "pga_m_s2") if k in ev), None)
+    before, after = np.asarray(ev.get("nrms_before", []), float), np.asarray(ev.get("nrms_after", []), float)
+    if key is not None and before.size:
+        a = np.asarray(ev[key], float)
+        held = np.zeros(a.size, bool)
+        held[[int(i) for i in ev.get("held_out", [])]] = True
+        fig, ax = plt.subplots(figsize=(6, 3.4))
+        ax.plot(a, before, "o", color="0.6", label="nominal model")
+        ax.plot(a[~held], after[~held], "o", color="tab:blue", label="with the accepted physics (fitted)")
+        ax.plot(a[held], after[held], "s", color="tab:orange", label="with the accepted physics (held out)")
+        ax.set_xlabel(key)
+        ax.set_ylabel("NRMS of the predicted response, %")
+        ax.set_ylim(bottom=0)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        figs.append(figure_json(fig, fig_dir, "explain_events_nrms", "Every event's prediction error (NRMS over "
+                                "its channels) against its amplitude, before and after", plain(
+                                    {key: a, "nrms_before": before, "nrms_after": after, "held_out": held})))
+    x = ev.get("example") or {}
+    if x.get("measured"):
+        y = np.asarray(x["measured"], float)
+        t = np.arange(y.size) * float(x["dt"])
+        fig, ax = plt.subplots(figsize=(9, 3.2))
+        ax.plot(t, y, color="k", lw=0.7, label="measured")
+        ax.plot(t, np.asarray(x["before"], float), color="0.6", lw=0.7, label="nominal model")
+        if x.get("after"):
+            ax.plot(t, np.asarray(x["after"], float), color="tab:blue", lw=0.7, label="with the accepted physics")
+        ax.set_xlabel("s")
+        ax.set_ylabel(f"{x['channel']}, m/s^2")
+        ax.set_title(f"strongest event ({x['window_id']})", fontsize=9)
+        ax.legend(fontsize=7, ncol=3)
+        fig.tight_layout()
+        figs.append(figure_json(fig, fig_dir, "explain_events_record", "The strongest event at the top sensor: "
+                                "measured, predicted by the nominal model and with the accepted physics", plain(x)))
+    return figs
 
 
 BUILDER = ExplainSection()
