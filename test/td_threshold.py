@@ -3,7 +3,8 @@ simulator's default model-form error): the largest evidence gain over the time-d
 replicate, and its 99th percentile (with fewer than 100 replicates: the largest value, said so).
 
     cd <repo> && PYTHONPATH=$PWD:$PWD/test OPENBLAS_NUM_THREADS=1 \\
-        python test/td_threshold.py --replicates 24 --seed 2000 --jobs 2 --out shm_ros/core/explain/threshold_timedomain.json
+        python test/td_threshold.py --replicates 100 --seed 2000 --jobs 2 \\
+        --out shm_ros/core/explain/threshold_timedomain.json
 """
 
 from __future__ import annotations
@@ -36,31 +37,39 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     a = ap.parse_args(argv)
     t0 = time.time()
-    if a.jobs > 1:
-        with ProcessPoolExecutor(a.jobs) as pool:
-            runs = list(pool.map(replicate, [a.seed] * a.replicates, range(a.replicates)))
-    else:
-        runs = [replicate(a.seed, r) for r in range(a.replicates)]
+    runs: list[tuple[float, str]] = []
+    out: dict = {}
+    with ProcessPoolExecutor(max(a.jobs, 1)) as pool:
+        for run in pool.map(replicate, [a.seed] * a.replicates, range(a.replicates)):
+            runs.append(run)
+            out = summary(runs, a, time.time() - t0)
+            if a.out:  # after every replicate: a stopped run leaves what it has, marked provisional
+                write(out, a.out)
+    print(json.dumps(out, indent=2))
+    return out
+
+
+def summary(runs: list[tuple[float, str]], a: argparse.Namespace, wall_s: float) -> dict:
     gains = [g for g, _ in runs]
     argmax: dict[str, int] = {}
     for _, label in runs:
         argmax[label] = argmax.get(label, 0) + 1
     g = np.array(gains)
     q99 = float(np.quantile(g, 0.99)) if g.size >= 100 else float(g.max())
-    out = {"log_bayes_factor": round(max(q99, 0.0), 2), "provisional": g.size < 100,
-           "statistic": "99th percentile over clean event series of the largest evidence gain over the "
-                        "time-domain candidates (fewer than 100 replicates: their largest value)",
-           "command": f"PYTHONPATH=$PWD:$PWD/test OPENBLAS_NUM_THREADS=1 python test/td_threshold.py "
-                      f"--replicates {a.replicates} --seed {a.seed} --jobs {a.jobs}",
-           "replicates": int(g.size), "seed": a.seed, "events": 6, "gains": [round(x, 2) for x in gains],
-           "max_gain_quantiles": {"0.5": round(float(np.median(g)), 2), "max": round(float(g.max()), 2)},
-           "argmax_counts": argmax, "wall_s_per_replicate": round((time.time() - t0) * a.jobs / max(g.size, 1), 1)}
-    if a.out:
-        with open(a.out, "w") as f:
-            json.dump(out, f, indent=2)
-            f.write("\n")
-    print(json.dumps(out, indent=2))
-    return out
+    return {"log_bayes_factor": round(max(q99, 0.0), 2), "provisional": g.size < 100,
+            "statistic": "99th percentile over clean event series of the largest evidence gain over the "
+                         "time-domain candidates (fewer than 100 replicates: their largest value)",
+            "command": f"PYTHONPATH=$PWD:$PWD/test OPENBLAS_NUM_THREADS=1 python test/td_threshold.py "
+                       f"--replicates {a.replicates} --seed {a.seed} --jobs {a.jobs}",
+            "replicates": int(g.size), "seed": a.seed, "events": 6, "gains": [round(x, 2) for x in gains],
+            "max_gain_quantiles": {"0.5": round(float(np.median(g)), 2), "max": round(float(g.max()), 2)},
+            "argmax_counts": argmax, "wall_s_per_replicate": round(wall_s * a.jobs / max(g.size, 1), 1)}
+
+
+def write(out: dict, path: str) -> None:
+    with open(path, "w") as f:
+        json.dump(out, f, indent=2)
+        f.write("\n")
 
 
 if __name__ == "__main__":

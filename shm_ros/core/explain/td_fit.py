@@ -273,9 +273,10 @@ def find_map(post: EventPosterior, starts: list[np.ndarray]) -> tuple[np.ndarray
     return best_u, best_f
 
 
-def hessian(post: EventPosterior, u: np.ndarray, h: np.ndarray, axes: list[int] | None = None) -> np.ndarray:
+def hessian(post: EventPosterior, u: np.ndarray, h: np.ndarray, axes: list[int] | None = None,
+            grad: list | None = None) -> np.ndarray:
     """Central-difference Hessian of log p at ``u`` with steps ``h`` (one batch of evaluations), over
-    the coordinates ``axes`` (default all)."""
+    the coordinates ``axes`` (default all); the gradient from the same points is appended to ``grad``."""
     ax = list(range(u.size)) if axes is None else list(axes)
     d = len(ax)
     E = np.zeros((d, u.size))
@@ -289,12 +290,60 @@ def hessian(post: EventPosterior, u: np.ndarray, h: np.ndarray, axes: list[int] 
         pts += [u + E[i] + E[j], u + E[i] - E[j], u - E[i] + E[j], u - E[i] - E[j]]
     f = post(np.array(pts))
     H = np.zeros((d, d))
+    if grad is not None:
+        grad.append(np.array([(f[1 + 2 * i] - f[2 + 2 * i]) / (2 * h[i]) for i in range(d)]))
     for i in range(d):
         H[i, i] = (f[1 + 2 * i] - 2 * f[0] + f[2 + 2 * i]) / h[i] ** 2
     for k, (i, j) in enumerate(pairs):
         a = 1 + 2 * d + 4 * k
         H[i, j] = H[j, i] = (f[a] - f[a + 1] - f[a + 2] + f[a + 3]) / (4 * h[i] * h[j])
     return H
+
+
+def _steps(post: EventPosterior, u: np.ndarray) -> np.ndarray:
+    """Finite-difference steps per coordinate, about 0.3 posterior standard deviations (a first
+    diagonal pass with steps of 1e-4)."""
+    h0 = np.full(u.size, 1e-4)
+    inner = u.copy()
+    inner[post.nb:] = np.clip(u[post.nb:], 2e-4, 1 - 2e-4)
+    diag = np.diag(hessian(post, inner, h0))
+    h = np.clip(0.3 / np.sqrt(np.maximum(-diag, 1e-12)), 1e-7, 0.05)
+    h[post.nb:] = np.minimum(h[post.nb:], 0.2)
+    return h
+
+
+def newton_polish(post: EventPosterior, u: np.ndarray, f: float, max_steps: int = 4) -> tuple[np.ndarray, float]:
+    """Newton steps with the central-difference Hessian from a local search's end point.
+
+    These posteriors are very ill-conditioned (an effect's parameter ~1e-5 wide in its unit coordinate,
+    correlated with the stiffnesses through the factors' normalisation), and L-BFGS-B can stop on its
+    relative-reduction test tens of nats short of the maximum (softening seed 2: 56 nats, seen as a
+    disagreement of the two evidence estimators). Only where no candidate parameter sits at its bound
+    (there the Laplace evidence integrates the bound axis one-sidedly)."""
+    for _ in range(max_steps):
+        if np.any((u[post.nb:] < 1e-3) | (u[post.nb:] > 1 - 1e-3)):
+            break
+        h = _steps(post, u)
+        g: list = []
+        H = -hessian(post, u, h, grad=g)
+        if not np.all(np.isfinite(H)) or not np.all(np.isfinite(g[0])):
+            break
+        w, V = np.linalg.eigh(H)
+        if w.min() <= 0:
+            break
+        step = V @ ((V.T @ g[0]) / w)
+        for frac in (1.0, 0.5, 0.25):
+            v = u + frac * step
+            fv = float(post(v)[0])
+            if fv > f + 1e-3:
+                break
+        else:
+            break
+        gained = fv - f
+        u, f = v, fv
+        if gained < 0.01:
+            break
+    return u, f
 
 
 def laplace(post: EventPosterior, u: np.ndarray, f: float) -> Laplace:

@@ -29,6 +29,7 @@ from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import Output, build_state_space, discretize_foh
 
 MAX_NODES = 24
+NODE_GRID = 0.05  # the nodes' range is snapped to multiples of this in ln(factor)
 
 
 def n_nodes(ratio: float) -> int:
@@ -73,8 +74,11 @@ def node_steps(model: AffineModel, rows: np.ndarray, col: int, lo: np.ndarray, h
     """Exact steps of ``rows`` (B, d) with column ``col`` at nodes spanning ``lo``-``hi`` (B,): one set
     serves every event of a draw sampled at ``dt``."""
     rows = np.atleast_2d(np.asarray(rows, float))
-    lo = np.asarray(lo, float)
-    hi = np.maximum(np.asarray(hi, float), lo * (1 + 1e-9))
+    # the range snapped outwards to a grid in log (steps of NODE_GRID): draws a finite-difference step
+    # apart then share their nodes, so the interpolation error (~1e-10) does not add noise to gradients
+    lo = np.exp(np.floor(np.log(np.asarray(lo, float)) / NODE_GRID) * NODE_GRID)
+    hi = np.exp(np.ceil(np.log(np.maximum(np.asarray(hi, float), lo * (1 + 1e-9))) / NODE_GRID) * NODE_GRID)
+    hi = np.where(hi > lo, hi, lo * np.exp(NODE_GRID))
     nodes = _nodes(lo, hi, n_nodes(float(np.max(hi / lo))))
     mats: list[list[np.ndarray]] = [[], [], [], [], []]
     for b in range(rows.shape[0]):

@@ -37,7 +37,7 @@ from shm_ros.core.structure import StructureSpec
 from .candidates._common import amplitude
 from .candidates.base import CANDIDATES, Context
 from .select import decide, shipped_threshold
-from .td_fit import EventPosterior, Segments, find_map, importance_log_z, laplace, spectral_starts
+from .td_fit import EventPosterior, Segments, find_map, importance_log_z, laplace, newton_polish, spectral_starts
 from .td_model import SEGMENT_S, FactorModel, event_data, segment_amplitudes
 from .types import CandidateResult, FitScores, Mismatch, Verdict
 
@@ -93,7 +93,7 @@ def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeD
     nominal = EventPosterior(lik, prior, None)
     u_w, _ = find_map(nominal, spectral_starts(nominal, rng))
     nominal.fix_ar(u_w)  # the residual model of every comparison below
-    u_n, f_n = find_map(nominal, [u_w])
+    u_n, f_n = newton_polish(nominal, *find_map(nominal, [u_w]))
     lap_n = laplace(nominal, u_n, f_n)
     chk_n = importance_log_z(nominal, lap_n, cfg.n_importance, rng)
     before = nominal.nrms(u_n, every)
@@ -195,7 +195,7 @@ def _fit_candidate(cand, lik, prior, u_n, log_z_n, chk_n, train, test, rng, cfg,
     starts = [pts[i] for i in np.argsort(-f)[:2]]
     u_w, _ = find_map(post, starts)
     post.fix_ar(u_w)
-    u_c, f_c = find_map(post, [u_w])
+    u_c, f_c = newton_polish(post, *find_map(post, [u_w]))
     gain_at_map = f_c - nominal_at(post, u_c)
     lap = laplace(post, u_c, f_c)
     chk, chk_se = importance_log_z(post, lap, cfg.n_importance, rng)
