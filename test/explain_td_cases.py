@@ -215,3 +215,18 @@ def check_agrees(v: Any) -> None:
         tol = max(0.5, 3 * float(c.extra["check_err"]))
         assert abs(c.log_evidence_gain - c.log_evidence_gain_check) <= tol, (c.label, c.log_evidence_gain,
                                                                                 c.log_evidence_gain_check, tol)
+
+
+def assert_found(name: str, seed: int) -> None:
+    """The issue's per-case criteria on a series with effect ``name``: right top name, its parameter
+    within 25 % of the truth's equivalent, held-out events improved, evidence check."""
+    s, v = run_series(name, seed)
+    c = top(v)
+    k, k_true = float(next(iter(c.parameters.values()))), truth_k(s, v, c)
+    print(f"seed {seed}: {c.label} k {k:.3f} truth {k_true:.3f} gain {c.log_evidence_gain:.1f} (check "
+          f"{c.log_evidence_gain_check:.1f}) NRMS {v.fit_before.nrms_pct:.1f} -> {c.fit_after.nrms_pct:.1f} %, "
+          f"held out {v.held_out_before.nrms_pct:.1f} -> {c.held_out_after.nrms_pct:.1f} %")
+    assert c.name == name
+    assert abs(k / k_true - 1) <= 0.25
+    assert c.held_out_after.nrms_pct < v.held_out_before.nrms_pct
+    check_agrees(v)

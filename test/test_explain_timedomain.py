@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from explain_td_cases import DAMP, PGAS, STIFF, check_agrees, run_series, top, truth_k
+from explain_td_cases import DAMP, PGAS, STIFF, assert_found, run_series, top
 from predict_synth import FULL
 
 SEEDS = list(range(5)) if FULL else [0]
@@ -41,16 +41,7 @@ def test_series_spread_and_softening():
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_softening_found(seed):
-    s, v = run_series(STIFF, seed)
-    c = top(v)
-    k, k_true = c.parameters["softening_per_accel"], truth_k(s, v, c)
-    print(f"seed {seed}: {c.label} k {k:.3f} truth {k_true:.3f} gain {c.log_evidence_gain:.1f} (check "
-          f"{c.log_evidence_gain_check:.1f}) NRMS {v.fit_before.nrms_pct:.1f} -> {c.fit_after.nrms_pct:.1f} %, "
-          f"held out {v.held_out_before.nrms_pct:.1f} -> {c.held_out_after.nrms_pct:.1f} %")
-    assert c.name == STIFF
-    assert abs(k / k_true - 1) <= 0.25
-    assert c.held_out_after.nrms_pct < v.held_out_before.nrms_pct
-    check_agrees(v)
+    assert_found(STIFF, seed)
 
 
 @pytest.mark.parametrize("seed", SEEDS)

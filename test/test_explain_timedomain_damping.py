@@ -18,7 +18,7 @@ response barely shows the effect: NRMS 12.6 -> 11.1 % (the clean series' level i
 from __future__ import annotations
 
 import pytest
-from explain_td_cases import DAMP, check_agrees, damping_rmse, run_series, top, truth_k
+from explain_td_cases import DAMP, assert_found, damping_rmse, run_series, top
 from predict_synth import FULL
 
 SEEDS = list(range(5)) if FULL else [0]
@@ -26,16 +26,7 @@ SEEDS = list(range(5)) if FULL else [0]
 
 @pytest.mark.parametrize("seed", SEEDS)
 def test_damping_found(seed):
-    s, v = run_series(DAMP, seed)
-    c = top(v)
-    k, k_true = c.parameters["damping_per_accel"], truth_k(s, v, c)
-    print(f"seed {seed}: {c.label} k {k:.3f} truth {k_true:.3f} gain {c.log_evidence_gain:.1f} "
-          f"NRMS {v.fit_before.nrms_pct:.1f} -> {c.fit_after.nrms_pct:.1f} %, held out "
-          f"{v.held_out_before.nrms_pct:.1f} -> {c.held_out_after.nrms_pct:.1f} %")
-    assert c.name == DAMP
-    assert abs(k / k_true - 1) <= 0.25
-    assert c.held_out_after.nrms_pct < v.held_out_before.nrms_pct
-    check_agrees(v)
+    assert_found(DAMP, seed)
 
 
 @pytest.mark.xfail(strict=not FULL, reason="first-mode damping RMSE 0.50 -> 0.36 points (seed 0): model-form bias "
