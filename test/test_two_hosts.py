@@ -119,22 +119,35 @@ def _rx_bytes(ns: str, dev: str) -> int:
 
 def _run_graph(bag: Path, structure: Path, out_bag: Path, acq: str | None, ana: str | None) -> None:
     env = _env(two=acq is not None)
-    ingest = _node(acq, "ingest", {"structure": str(structure), "window_s": WINDOW_S}, env)
+    # reliable recording subscriptions: with UDP only (no shared memory), best-effort samples dropped
+    # from a full socket buffer on a busy host never arrive, and the replay then waits out its drain
+    # limit for acknowledgements that cannot come
+    ingest = _node(acq, "ingest", {"structure": str(structure), "window_s": WINDOW_S, "reliable_input": True}, env)
     identify = _node(ana, "identify", {}, env)
     recorder = _node(ana, "recorder", {"output": str(out_bag),
                                        "topics": "[/shm/windows,/shm/modal_estimates]"}, env)
     procs = [ingest, identify, recorder]
+    problem = ""
     try:
         _probe(ana, env, "ready")
+        # longer than the replay's own drain limit (300 s), so that it reports rather than is killed
         rep = subprocess.run(_prefix(acq) + [sys.executable, "-m", "shm_ros.cli", "replay", str(bag)],
-                             capture_output=True, text=True, timeout=300, env=env)
-        assert rep.returncode == 0, rep.stdout + rep.stderr
-        assert "lost 0" in rep.stdout, rep.stdout
-        _probe(ana, env, "estimates", N_WINDOWS)
+                             capture_output=True, text=True, timeout=420, env=env)
+        if rep.returncode != 0 or "lost 0" not in rep.stdout:
+            problem = f"replay: exit {rep.returncode}\n{rep.stdout}\n{rep.stderr[-3000:]}"
+        else:
+            try:
+                _probe(ana, env, "estimates", N_WINDOWS)
+            except AssertionError as exc:
+                problem = str(exc)
     finally:
         outs = [stop(p) for p in reversed(procs)]
-    for code, text in outs:
-        assert code == 0, text[-3000:]
+    # on a failure, what every node said: the only record of why a graph stalled
+    logs = "\n".join(f"--- {name} (exit {code}):\n{text[-2500:]}"
+                     for name, (code, text) in zip(("recorder", "identify", "ingest"), outs))
+    assert not problem, problem + "\n" + logs
+    for code, _ in outs:
+        assert code == 0, logs
 
 
 def _estimates(bag: Path) -> dict[str, np.ndarray]:

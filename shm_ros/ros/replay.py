@@ -180,6 +180,10 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
             end = time.monotonic() + (0.0 if stalled else drain_timeout_s)
             while node.acknowledged - start_ack < result.published and time.monotonic() < end:
                 rclpy.spin_once(node, timeout_sec=0.05)
+                if node.count_publishers(topics.INGEST_RECEIVED) == 0:  # ingest left: nothing more comes
+                    result.error = result.error or (f"{path}: the ingest node left the graph before "
+                                                    "acknowledging every message")
+                    break
             result.acknowledged = node.acknowledged - start_ack
         else:
             result.acknowledged = result.published
