@@ -144,7 +144,7 @@ def _run_graph(bag: Path, structure: Path, out_bag: Path, acq: str | None, ana: 
         outs = [stop(p) for p in reversed(procs)]
     # on a failure, what every node said: the only record of why a graph stalled
     logs = "\n".join(f"--- {name} (exit {code}):\n{text[-2500:]}"
-                     for name, (code, text) in zip(("recorder", "identify", "ingest"), outs))
+                     for name, (code, text) in zip(("recorder", "identify", "ingest"), outs, strict=True))
     assert not problem, problem + "\n" + logs
     for code, _ in outs:
         assert code == 0, logs
