@@ -82,3 +82,13 @@ def test_held_out_blocks_and_threshold_file():
     assert not train[3 * 144:4 * 144].any() and train[:3 * 144].all()
     th = shipped_threshold()
     assert th["log_bayes_factor"] > 0 and "command" in th
+
+
+def test_time_domain_threshold_is_its_calibration():
+    """The shipped time-domain threshold is the 99th percentile of the clean replicates it records
+    (``test/td_threshold.py``), from at least 100 of them, and few of them exceed it."""
+    th = shipped_threshold("threshold_timedomain.json")
+    g = np.array(th["gains"])
+    assert th["replicates"] == g.size >= 100 and not th["provisional"]
+    assert th["log_bayes_factor"] == pytest.approx(max(round(float(np.quantile(g, 0.99)), 2), 0.0), abs=0.01)
+    assert np.mean(g > th["log_bayes_factor"]) <= 0.02 and "td_threshold.py" in th["command"]
