@@ -38,16 +38,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--summarize", default="", help="re-write the summary of a run's JSON (its gains and labels)")
     a = ap.parse_args(argv)
     if a.summarize:  # e.g. after the statistic's definition changed: the replicates are not re-run
-        old = json.load(open(a.summarize))
-        labels = [k for k, n in old["argmax_counts"].items() for _ in range(n)]
-        runs = list(zip(old["gains"], old.get("labels", labels), strict=True))
-        a.replicates, a.seed, a.jobs = old["replicates"], old["seed"], old.get("jobs", 2)
-        out = summary(runs, a, old["wall_s_per_replicate"] * len(runs) / a.jobs)
-        out["command"] = old["command"]
-        if "labels" not in old:  # the order of the labels was not kept: only their counts
-            del out["labels"]
-        write(out, a.out or a.summarize)
-        return out
+        return resummarize(a)
     t0 = time.time()
     runs: list[tuple[float, str]] = []
     out: dict = {}
@@ -58,6 +49,22 @@ def main(argv: list[str] | None = None) -> dict:
             if a.out:  # after every replicate: a stopped run leaves what it has, marked provisional
                 write(out, a.out)
     print(json.dumps(out, indent=2))
+    return out
+
+
+def resummarize(a: argparse.Namespace) -> dict:
+    """The summary of the run recorded in ``a.summarize`` again, from its gains (and labels: a run
+    written before labels were kept has only their counts, so its output has only the counts too)."""
+    with open(a.summarize) as f:
+        old = json.load(f)
+    labels = old.get("labels") or [k for k, n in old["argmax_counts"].items() for _ in range(n)]
+    a.replicates, a.seed, a.jobs = old["replicates"], old["seed"], old.get("jobs", 2)
+    out = summary(list(zip(old["gains"], labels, strict=True)), a,
+                  old["wall_s_per_replicate"] * len(labels) / a.jobs)
+    out["command"] = old["command"]
+    if "labels" not in old:
+        del out["labels"]
+    write(out, a.out or a.summarize)
     return out
 
 
