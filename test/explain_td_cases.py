@@ -141,7 +141,7 @@ def truth_parameter_within(series: EventSeries, period_s: float, segment_s: floa
 
 def first_mode_damping(structure: dict[str, Any], rows: np.ndarray) -> np.ndarray:
     """First-mode damping ratio of the analysis model (with its dampers, non-classical) at each row
-    ``[parameters, damping shape, stiffness factor, damping factor]`` (:class:`FactorModel`)."""
+    ``[parameters, damping shape, stiffness factor, damping factor, added damping]`` (:class:`FactorModel`)."""
     fm = FactorModel.of(build_model(structure_from_dict(structure)))
     outs = sensor_outputs(fm, [s["id"] for s in structure["sensors"][1:]])
     z = []
@@ -164,7 +164,7 @@ def damping_rmse(series: EventSeries, verdict: Any, c: Any) -> tuple[float, floa
     a, _, z_true = local_truth(series, period, seg)
     w = a ** 2
     th_n = np.array(list(verdict.figures["events"]["nominal_parameters"].values()))
-    z_nom = first_mode_damping(series.structure, np.r_[th_n, 1.0, 1.0])[0]
+    z_nom = first_mode_damping(series.structure, np.r_[th_n, 1.0, 1.0, 0.0])[0]
     k = float(next(iter(c.parameters.values())))
     if c.extra.get("resolution") == "within_event":
         d = (1.0 + k * a) / c.extra["factor_norm"]
@@ -175,8 +175,13 @@ def damping_rmse(series: EventSeries, verdict: Any, c: Any) -> tuple[float, floa
         d = np.repeat((1.0 + k * amp) / c.extra["factor_norm"], counts)
     th_c = np.array(list(c.extra["nominal_parameters"].values()))
     grid = np.linspace(d.min(), d.max() + 1e-9, 16)
+    # d is the first mode's total factor: all of it on the inherent damping, or (added damping) the
+    # inherent part at small amplitude and the rest added in proportion to the stiffness
+    G = c.extra["factor_norm"]
+    cols = (np.column_stack([grid, np.zeros(grid.size)]) if c.extra.get("factor_column") != "added_damping"
+            else np.column_stack([np.full(grid.size, 1.0 / G), grid - 1.0 / G]))
     z_grid = first_mode_damping(series.structure, np.column_stack([np.tile(th_c, (grid.size, 1)),
-                                                                   np.ones(grid.size), grid]))
+                                                                   np.ones(grid.size), cols]))
     z_fit = np.interp(d, grid, z_grid)
     rmse = lambda z: 100 * float(np.sqrt(np.sum(w * (z - z_true) ** 2) / np.sum(w)))  # noqa: E731
     return rmse(np.full(a.size, z_nom)), rmse(z_fit)

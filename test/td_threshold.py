@@ -5,6 +5,11 @@ replicate, and its 99th percentile (with fewer than 100 replicates: the largest 
     cd <repo> && PYTHONPATH=$PWD:$PWD/test OPENBLAS_NUM_THREADS=1 \\
         python test/td_threshold.py --replicates 100 --seed 2000 --jobs 2 \\
         --out shm_ros/core/explain/threshold_timedomain.json
+
+A candidate added to the set later needs only its own fits on the same replicates: ``--extend FILE
+--candidates NAME`` runs NAME alone on the replicates recorded in FILE (same seeds) and keeps, per
+replicate, the larger of the recorded largest gain and NAME's (the other candidates' fits do not depend
+on NAME: each is compared with the same nominal model).
 """
 
 from __future__ import annotations
@@ -17,13 +22,16 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from explain_td_cases import event_series
 
-from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
+from shm_ros.core.explain.timedomain import TD_CANDIDATES, TimeDomainConfig, explain_events
 from shm_ros.core.structure import structure_from_dict
 
 
-def replicate(seed: int, r: int) -> tuple[float, str]:
+def replicate(seed: int, r: int, candidates: tuple[str, ...] = ()) -> tuple[float, str]:
     s = event_series(seed + r, None)
-    v = explain_events(s.events, structure_from_dict(s.structure), TimeDomainConfig(threshold=1e9, seed=r))
+    cfg = TimeDomainConfig(threshold=1e9, seed=r)
+    if candidates:
+        cfg.candidates = candidates
+    v = explain_events(s.events, structure_from_dict(s.structure), cfg)
     best = max(v.tried, key=lambda c: c.log_evidence_gain)
     print(f"replicate {r}: largest gain {best.log_evidence_gain:.2f} ({best.label})", flush=True)
     return float(best.log_evidence_gain), best.label
@@ -36,9 +44,13 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--out", default="")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes")
     ap.add_argument("--summarize", default="", help="re-write the summary of a run's JSON (its gains and labels)")
+    ap.add_argument("--extend", default="", help="a run's JSON to extend by the --candidates on its replicates")
+    ap.add_argument("--candidates", default="", help="comma-separated candidates (with --extend)")
     a = ap.parse_args(argv)
     if a.summarize:  # e.g. after the statistic's definition changed: the replicates are not re-run
         return resummarize(a)
+    if a.extend:
+        return extend(a)
     t0 = time.time()
     runs: list[tuple[float, str]] = []
     out: dict = {}
@@ -52,6 +64,37 @@ def main(argv: list[str] | None = None) -> dict:
     return out
 
 
+def extend(a: argparse.Namespace) -> dict:
+    """The run in ``a.extend`` with ``a.candidates`` added (module doc)."""
+    with open(a.extend) as f:
+        old = json.load(f)
+    cands = tuple(c for c in a.candidates.split(",") if c)
+    if not cands:
+        raise SystemExit("--extend needs --candidates")
+    n, seed = int(old["replicates"]), int(old["seed"])
+    t0 = time.time()
+    new: list[tuple[float, str]] = []
+    with ProcessPoolExecutor(max(a.jobs, 1)) as pool:
+        for run in pool.map(replicate, [seed] * n, range(n), [cands] * n):
+            new.append(run)
+    runs = [(g, lab) if g >= gn else (gn, ln)
+            for g, lab, (gn, ln) in zip(old["gains"], old["labels"], new, strict=True)]
+    a.replicates, a.seed = n, seed
+    out = summary(runs, a, old["wall_s_per_replicate"] * n / a.jobs + time.time() - t0)
+    out["command"] = old["command"]
+    # (a run written before the set was recorded tried the two amplitude candidates of its day)
+    base = old.get("candidates", ["amplitude_stiffness", "amplitude_damping"])
+    out["candidates"] = [*base, *(c for c in cands if c not in base)]
+    out["extended"] = [*old.get("extended", []), {
+        "candidates": list(cands), "gains": [round(g, 2) for g, _ in new],
+        "command": f"PYTHONPATH=$PWD:$PWD/test OPENBLAS_NUM_THREADS=1 python test/td_threshold.py --extend "
+                   f"<the run's JSON> --candidates {','.join(cands)} --jobs {a.jobs}",
+        "wall_s_per_replicate": round((time.time() - t0) * a.jobs / n, 1)}]
+    write(out, a.out or a.extend)
+    print(json.dumps({k: v for k, v in out.items() if k not in ("gains", "labels")}, indent=2))
+    return out
+
+
 def resummarize(a: argparse.Namespace) -> dict:
     """The summary of the run recorded in ``a.summarize`` again, from its gains (and labels: a run
     written before labels were kept has only their counts, so its output has only the counts too)."""
@@ -62,6 +105,9 @@ def resummarize(a: argparse.Namespace) -> dict:
     out = summary(list(zip(old["gains"], labels, strict=True)), a,
                   old["wall_s_per_replicate"] * len(labels) / a.jobs)
     out["command"] = old["command"]
+    for key in ("extended", "candidates"):
+        if key in old:
+            out[key] = old[key]
     if "labels" not in old:
         del out["labels"]
     write(out, a.out or a.summarize)
@@ -83,7 +129,7 @@ def summary(runs: list[tuple[float, str]], a: argparse.Namespace, wall_s: float)
                          "time-domain candidates (fewer than 100 replicates: their largest value)",
             "command": f"PYTHONPATH=$PWD:$PWD/test OPENBLAS_NUM_THREADS=1 python test/td_threshold.py "
                        f"--replicates {a.replicates} --seed {a.seed} --jobs {a.jobs}",
-            "replicates": int(g.size), "seed": a.seed, "jobs": a.jobs, "events": 6,
+            "candidates": list(TD_CANDIDATES), "replicates": int(g.size), "seed": a.seed, "jobs": a.jobs, "events": 6,
             "percentile_interval_90": [round(float(x), 2) for x in np.quantile(boot, [0.05, 0.95])],
             "above_threshold": int(np.sum(g > thr)),
             "gains": [round(x, 2) for x in gains], "labels": [label for _, label in runs],

@@ -22,6 +22,7 @@ from explain_engine_synth import engine_table  # noqa: E402
 from shm_ros.core.explain.config import ExplainConfig  # noqa: E402
 from shm_ros.core.explain.explain import explain, split  # noqa: E402
 from shm_ros.core.explain.select import shipped_threshold  # noqa: E402
+from shm_ros.core.explain.timedomain import TD_CANDIDATES  # noqa: E402
 
 N_WINDOWS = 192
 
@@ -92,3 +93,6 @@ def test_time_domain_threshold_is_its_calibration():
     assert th["replicates"] == g.size >= 100 and not th["provisional"]
     assert th["log_bayes_factor"] == pytest.approx(max(round(float(np.quantile(g, 0.99)), 2), 0.0), abs=0.01)
     assert np.mean(g > th["log_bayes_factor"]) <= 0.02 and "td_threshold.py" in th["command"]
+    for ext in th.get("extended", []):  # a candidate added later: its gains on the same replicates count
+        assert len(ext["gains"]) == g.size and np.all(g >= np.array(ext["gains"]) - 0.01)
+    assert set(TD_CANDIDATES) <= set(th["candidates"])  # calibrated on the candidate set explain tries

@@ -24,8 +24,8 @@ def setup():
     return fm, rec, sensor_outputs(fm, rec.channel_ids)
 
 
-@pytest.mark.parametrize("ratio", [1.2, 3.0, 10.0])
-@pytest.mark.parametrize("which", ["stiffness", "damping"])
+@pytest.mark.parametrize(("ratio", "which"), [(r, w) for w in ("stiffness", "damping") for r in (1.2, 3.0, 10.0)]
+                         + [(3.0, "added_damping"), (50.0, "added_damping")])
 def test_interpolated_steps_match_exact(setup, ratio, which):
     fm, rec, outs = setup
     L = 10
@@ -34,8 +34,10 @@ def test_interpolated_steps_match_exact(setup, ratio, which):
     # a slowly varying factor, as a softening during the strong motion gives, plus jumps
     t = np.arange(J) / J
     vals = np.exp(-np.log(ratio) * np.clip(np.sin(np.pi * t) + 0.1 * rng.standard_normal(J), 0, 1))
-    col = fm.n_base + (0 if which == "stiffness" else 1)
-    row = np.r_[fm.nominal_theta()[:fm.n_base], 1.0, 1.0]
+    col = fm.n_base + ("stiffness", "damping", "added_damping").index(which)
+    if which == "added_damping":  # up to three times the first mode's inherent damping added
+        vals = 3.0 * vals
+    row = np.r_[fm.nominal_theta()[:fm.n_base], 1.0, 1.0, 0.0]
     err = interpolation_error(fm, row, col, vals, L, rec.inputs, rec.dt, outs)
     assert err < 1e-7, err
 
@@ -44,9 +46,9 @@ def test_constant_factor_is_the_invariant_response(setup):
     fm, rec, outs = setup
     L = 10
     J = -(-rec.outputs.shape[0] // L)
-    rows = np.array([np.r_[fm.nominal_theta()[:fm.n_base], f, 1.0] for f in (0.8, 1.1)])
+    rows = np.array([np.r_[fm.nominal_theta()[:fm.n_base], f, 1.0, 0.0] for f in (0.8, 1.1)])
     ref = np.concatenate([Y for _, Y in batch_responses(fm, rows, rec.inputs, rec.dt, outs)])
-    steps = node_steps(fm, np.column_stack([rows[:, :fm.n_base], np.ones((2, 2))]), fm.n_base,
+    steps = node_steps(fm, np.column_stack([rows[:, :fm.n_base], np.ones((2, 2)), np.zeros(2)]), fm.n_base,
                        np.array([0.7, 0.7]), np.array([1.2, 1.2]), rec.dt, outs)
     got = varying_responses(steps, np.repeat(rows[:, [fm.n_base]], J, axis=1), L, rec.inputs)
     assert got.shape == ref.shape

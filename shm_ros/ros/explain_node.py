@@ -7,12 +7,20 @@ when a replay ends (``/shm/replay/done``), it explains all rows so far in a work
 ``/shm/verdict`` (latched) when it is the first or when the set of accepted physics changed, i.e.
 when the support for a missing effect crossed its threshold. ``output_dir`` gets verdict.json, the
 figures' numbers and report.html after every run.
+
+**Event series** (docs/explain.md, Time domain): with a structure that declares a measured input, the
+node also keeps the event windows of ``/shm/windows`` (those ingest flags as events, docs/interfaces.md
+§1) and, once ``min_events`` have arrived and again after every new one, explains them in the time
+domain (amplitude-dependent stiffness and damping, :func:`shm_ros.core.explain.timedomain.explain_events`,
+options ``time_domain.*``) in the same worker; its verdicts go out on ``/shm/verdict`` too (``kind``
+"events", NRMS fields set) when their accepted physics changed, and into ``output_dir/events``.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from rclpy.node import Node
@@ -20,8 +28,9 @@ from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
 from shm_ros.core.explain.config import ExplainConfig
+from shm_ros.core.explain.timedomain import TimeDomainConfig
 from shm_ros.ros import explain_worker, topics
-from shm_ros.ros.convert import tracked_row_from_msg
+from shm_ros.ros.convert import tracked_row_from_msg, window_from_msg
 from shm_ros.ros.diagnostics import Diagnostics
 from shm_ros.ros.node_main import overrides, spin
 from shm_ros.ros.params import load_config
@@ -36,7 +45,12 @@ class ExplainNodeConfig:
     min_windows: int = option(24, "tracked windows received before the first run")
     min_new_windows: int = option(144, "new tracked windows before the next run (144: a day of 10-minute windows)")
     output_dir: str | None = option(None, "directory of verdict.json and report.html, rewritten after "
-                                    "every run (unset: not written)")
+                                    "every run (unset: not written); the event series' in its 'events' folder")
+    events: str = option("auto", "explain the event windows in the time domain: auto (when the structure "
+                         "declares a measured input), on, off", choices=("auto", "on", "off"))
+    min_events: int = option(3, "event windows received before the first time-domain run (then after every "
+                             "new one)")
+    time_domain: TimeDomainConfig = field(default_factory=TimeDomainConfig)
 
 
 def verdict_to_msg(v: dict[str, Any]) -> Any:
@@ -63,6 +77,11 @@ def verdict_to_msg(v: dict[str, Any]) -> Any:
     msg.after_mac_mean = float(f["after"].get("mac_mean", nan))
     msg.held_out_before_frequency_rmse_pct = float(f["held_out"]["before"].get("frequency_rmse_pct", nan))
     msg.held_out_after_frequency_rmse_pct = float(f["held_out"]["after"].get("frequency_rmse_pct", nan))
+    msg.before_nrms_pct = float(f["before"].get("nrms_pct", nan))
+    msg.after_nrms_pct = float(f["after"].get("nrms_pct", nan))
+    msg.held_out_before_nrms_pct = float(f["held_out"]["before"].get("nrms_pct", nan))
+    msg.held_out_after_nrms_pct = float(f["held_out"]["after"].get("nrms_pct", nan))
+    msg.kind = "events" if "nrms_pct" in f["before"] else "modes"
     return msg
 
 
@@ -78,7 +97,17 @@ class ExplainNode(Node):
         from shm_ros.core.models import build_model
         from shm_ros.io.structure import load_structure
 
-        build_model(load_structure(self.settings.structure))  # a bad file stops the node at once
+        model = build_model(load_structure(self.settings.structure))  # a bad file stops the node at once
+        mode = self.settings.events
+        self.with_events = mode == "on" or (mode == "auto" and bool(model.inputs))
+        if mode == "on" and not model.inputs:
+            raise SystemExit(f"{self.get_name()}: events:=on needs a measured input in {self.settings.structure} "
+                             "('input'/'inputs')")
+        self.events: dict[str, Any] = {}
+        self.events_used = 0
+        self.event_future: Any = None
+        self.event_started = 0.0
+        self.event_accepted: tuple[str, ...] | None = None
         self.rows: dict[str, Any] = {}
         self.used = 0
         self.flush = False  # a replay ended: from now on, run on whatever new rows have arrived
@@ -88,13 +117,18 @@ class ExplainNode(Node):
         self.runs = 0
         self.diag = Diagnostics(self, "explain", summary=lambda: (
             "ok", f"{len(self.rows)} windows received, {self.runs} runs"
-            + (", explaining" if self.future is not None else ", idle"), {"received": len(self.rows)}))
+            + (", explaining" if self.future is not None or self.event_future is not None else ", idle")
+            + (f"; {len(self.events)} event windows" if self.with_events else ""),
+            {"received": len(self.rows), "events": len(self.events)}))
         self.pub: Publisher[Any] = self.create_publisher(
             topics.message_class(topics.TYPES[topics.VERDICT]), topics.VERDICT, latched_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.TRACKED_MODES]), topics.TRACKED_MODES,
                                  self._on_row, stream_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.REPLAY_DONE]), topics.REPLAY_DONE,
                                  self._on_replay_done, latched_qos())
+        if self.with_events:
+            self.create_subscription(topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS,
+                                     self._on_window, stream_qos())
         self.workers = WorkerPool(explain_worker.init, (self.settings.structure,), explain_worker.ready)
         steady_timer(self, 0.25, self._poll)
 
@@ -107,6 +141,16 @@ class ExplainNode(Node):
             self.rows[msg.window_id] = tracked_row_from_msg(msg)
         except (ValueError, TypeError) as exc:  # one bad message must not take the node down
             self.diag.report("warn", f"tracked row {msg.window_id!r} skipped: {exc}", "input")
+
+    def _on_window(self, msg: Any) -> None:
+        if not msg.is_event:  # only event windows are kept (a long campaign's windows are not)
+            return
+        try:
+            w = window_from_msg(msg)
+        except (ValueError, TypeError) as exc:  # one bad message must not take the node down
+            self.diag.report("warn", f"window {msg.window_id!r} skipped: {exc}", "input")
+            return
+        self.events[w.window_id] = w
 
     def _on_replay_done(self, _msg: Any) -> None:
         self.flush = True
@@ -125,7 +169,36 @@ class ExplainNode(Node):
             self.future = self.workers.submit(explain_worker.run, list(self.rows.values()), self.config,
                                               self.settings.output_dir)
             self.diag.report("ok", f"explaining {self.used} windows", "progress")
+        if self.event_future is not None and self.event_future.done():
+            self._collect_events()
+        n = len(self.events)
+        if self.event_future is None and n >= max(self.settings.min_events, 1) and n != self.events_used:
+            self.events_used, self.event_started = n, time.time()
+            out = str(Path(self.settings.output_dir) / "events") if self.settings.output_dir else None
+            self.event_future = self.workers.submit(explain_worker.run_events, list(self.events.values()),
+                                                    self.settings.time_domain, out)
+            self.diag.report("ok", f"explaining {n} event windows in the time domain", "progress")
         self.diag.publish()
+
+    def _collect_events(self) -> None:
+        future, self.event_future = self.event_future, None
+        took = time.time() - self.event_started
+        try:
+            verdict, info = future.result()
+        except Exception as exc:  # a failed run (or a lost worker) must not take the node down
+            self.diag.report("error", f"explain with {self.events_used} event windows failed: {exc}",
+                             "events verdict", events=self.events_used)
+            if "BrokenProcessPool" in type(exc).__name__:
+                self.workers.restart()
+            return
+        accepted = tuple(e["name"] for e in verdict["missing_physics"])
+        text = ", ".join(accepted) or "nothing missing"
+        self.diag.report("ok", f"{info['n_events']} event windows in {took:.1f} s: {text}", "events verdict",
+                         events=info["n_events"])
+        if accepted != self.event_accepted:
+            self.event_accepted = accepted
+            self.pub.publish(verdict_to_msg(verdict))
+            self.get_logger().info(f"verdict from {info['n_events']} event windows: {text}")
 
     def _collect(self) -> None:
         future, self.future = self.future, None

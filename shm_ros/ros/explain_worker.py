@@ -46,3 +46,27 @@ def run(rows: list, config: Any, output_dir: str | None) -> tuple[dict[str, Any]
         inputs.explain = ExplainInputs.from_files(output_dir)
         build_report(inputs, output_dir)
     return verdict.to_dict(), {"n_windows": obs.n_windows}
+
+
+def run_events(windows: list, config: Any, output_dir: str | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Explain the event windows received so far in the time domain (as ``shm-ros explain --events``);
+    writes verdict.json, its series and report.html into ``output_dir`` when given."""
+    from shm_ros.core.explain.timedomain import explain_events
+    from shm_ros.core.models import build_model
+    from shm_ros.core.predict import event_from_window
+
+    model = build_model(_state["spec"])
+    windows = sorted(windows, key=lambda w: w.start_ns)  # in time order, as a recording gives them
+    verdict = explain_events([event_from_window(w, model) for w in windows], _state["spec"], config)
+    if output_dir:
+        from dataclasses import asdict
+
+        from shm_ros.io.verdict_files import write_verdict
+        from shm_ros.report.build import build_report
+        from shm_ros.report.inputs import ExplainInputs, ReportInputs
+
+        write_verdict(output_dir, verdict, asdict(config) | {"n_events": len(windows)})
+        inputs = ReportInputs(title=f"shm_ros explain (event series): {_state['spec'].name}")
+        inputs.explain = ExplainInputs.from_files(output_dir)
+        build_report(inputs, output_dir)
+    return verdict.to_dict(), {"n_events": len(windows)}

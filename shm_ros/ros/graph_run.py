@@ -63,7 +63,10 @@ def verdict_record(msg: Any) -> dict[str, Any]:
                                  "parameters": dict(zip(m.parameter_names, m.parameter_values, strict=False)),
                                  "log_evidence_gain": m.log_evidence_gain} for m in msg.missing_physics],
             "before_frequency_rmse_pct": msg.before_frequency_rmse_pct,
-            "after_frequency_rmse_pct": msg.after_frequency_rmse_pct}
+            "after_frequency_rmse_pct": msg.after_frequency_rmse_pct, "kind": msg.kind,
+            "before_nrms_pct": msg.before_nrms_pct, "after_nrms_pct": msg.after_nrms_pct,
+            "held_out_before_nrms_pct": msg.held_out_before_nrms_pct,
+            "held_out_after_nrms_pct": msg.held_out_after_nrms_pct}
 
 
 def read_pipeline_bag(path: Path) -> PipelineRecord:
@@ -127,20 +130,39 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
                          window_s: float, expected_windows: int | None = None,
                          identify: dict | None = None, track: dict | None = None,
                          update: dict | None = None, predict: dict | None = None,
-                         explain: dict | None = None, expected_predictions: int | None = None, timeout_s: float = 600.0,
+                         explain: dict | None = None, expected_predictions: int | None = None,
+                         expected_events: int | None = None, timeout_s: float = 600.0,
                          log: Callable[[str], None] = print) -> GraphRun:
     """Start the analysis nodes and a recorder as processes, replay ``bag``, wait until every
     window is identified (and tracked, and in a posterior, and ``expected_predictions`` predicted,
-    when those nodes run, and explained by the explain node), stop, collect."""
+    when those nodes run, and explained by the explain node: every window, or with ``expected_events``
+    that many event windows in the time domain), stop, collect."""
     nodes = analysis_nodes(structure, window_s, identify=identify, track=track, update=update, predict=predict,
                            explain=explain)
     return run_graph(bag, nodes, workdir, expected_windows=expected_windows,
-                     expected_predictions=expected_predictions, timeout_s=timeout_s, log=log)
+                     expected_predictions=expected_predictions, expected_events=expected_events,
+                     timeout_s=timeout_s, log=log)
+
+
+def _explains_events(node: NodeSpec) -> bool:
+    """Whether an explain node subscribes to the windows (its ``events`` parameter, docs/parameters.md)."""
+    mode = str(node.parameters.get("events", "auto"))
+    if node.kind != "explain" or mode == "off":
+        return False
+    if mode == "on":
+        return True
+    from shm_ros.io.structure import load_structure
+
+    try:
+        return bool(load_structure(node.parameters["structure"]).input_sensor_ids())
+    except Exception:  # the node itself reports a bad file
+        return False
 
 
 def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
               expected_windows: int | None = None, expected_predictions: int | None = None,
-              timeout_s: float = 600.0, log: Callable[[str], None] = print) -> GraphRun:
+              expected_events: int | None = None, timeout_s: float = 600.0,
+              log: Callable[[str], None] = print) -> GraphRun:
     import threading
 
     import rclpy
@@ -167,6 +189,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         seen: dict[str, set[str]] = {"estimates": set(), "tracked": set(), "predicted": set()}
         posterior_windows = [0]
         explained_windows = [0]
+        explained_events = [0]
 
         def on_posterior(m: Any) -> None:
             posterior_windows[0] = max(posterior_windows[0], int(m.n_windows))
@@ -192,6 +215,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                     window_readers[0] = int(values.get("window_readers", 0))
                 elif st.name == "explain: verdict" and "windows" in values:
                     explained_windows[0] = max(explained_windows[0], int(values["windows"]))
+                elif st.name == "explain: events verdict" and "events" in values:
+                    explained_events[0] = max(explained_events[0], int(values["events"]))
 
         from diagnostic_msgs.msg import DiagnosticArray
 
@@ -203,7 +228,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         raw_update = any(n.kind == "update" and n.parameters.get("input") == "estimates" for n in nodes)
         tracked_update = "update" in kinds and not raw_update
         estimate_readers = 1 + ("track" in kinds) + raw_update  # + the watcher's own
-        win_readers = 2 + ("predict" in kinds)  # identify, the recorder, predict
+        # identify, the recorder, predict, explain (event series)
+        win_readers = 2 + ("predict" in kinds) + any(_explains_events(n) for n in nodes)
         ready_by = time.monotonic() + 120.0
         while time.monotonic() < ready_by and not (
                 window_readers[0] >= win_readers
@@ -234,7 +260,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                     and ("track" not in kinds or len(seen["tracked"]) >= expected_windows)
                     and ("update" not in kinds or posterior_windows[0] >= expected_windows)
                     and ("predict" not in kinds or len(seen["predicted"]) >= (expected_predictions or 0))
-                    and ("explain" not in kinds or explained_windows[0] >= expected_windows))
+                    and ("explain" not in kinds or (explained_windows[0] >= expected_windows if expected_events is None
+                                                    else explained_events[0] >= expected_events)))
 
         bar = Progress("graph", every_s=5.0)
         end = time.monotonic() + timeout_s
@@ -255,7 +282,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
             + (f", tracked {len(seen['tracked'])}" if "track" in kinds else "")
             + (f", posterior from {posterior_windows[0]} windows" if "update" in kinds else "")
             + (f", predicted {len(seen['predicted'])}" if "predict" in kinds else "")
-            + (f", explained {explained_windows[0]}" if "explain" in kinds else ""))
+            + (f", explained {explained_windows[0]}" if "explain" in kinds else "")
+            + (f", {explained_events[0]} events explained" if expected_events is not None else ""))
         time.sleep(1.0)  # let the recorder write the last messages
         executor.shutdown()
         spinner.join(timeout=10.0)

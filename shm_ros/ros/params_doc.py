@@ -17,10 +17,12 @@ def _rows(cls: type, prefix: str = "") -> list[tuple[str, OptionSpec]]:
 
 def _nodes() -> list[tuple[str, str, list[type]]]:
     from shm_ros.core.bayes.update import UpdateConfig
+    from shm_ros.core.explain.config import ExplainConfig
     from shm_ros.core.identify import IdentifyConfig
     from shm_ros.core.ingest import IngestConfig
     from shm_ros.core.predict import PredictConfig
     from shm_ros.core.tracking import TrackingConfig
+    from shm_ros.ros.explain_node import ExplainNodeConfig
     from shm_ros.ros.identify_node import IdentifyNodeConfig
     from shm_ros.ros.ingest_node import IngestNodeConfig
     from shm_ros.ros.predict_node import PredictNodeConfig
@@ -36,6 +38,8 @@ def _nodes() -> list[tuple[str, str, list[type]]]:
          [UpdateNodeConfig, UpdateConfig]),
         ("predict", "event windows in, response predictions out (a worker process)",
          [PredictNodeConfig, PredictConfig]),
+        ("explain", "tracked modes (and event windows) in, verdicts on missing physics out (a worker process)",
+         [ExplainNodeConfig, ExplainConfig]),
         ("recorder", "pipeline topics into a bag", [RecorderNodeConfig]),
     ]
 

@@ -99,20 +99,23 @@ class EventPosterior:
                 for j, s in enumerate(self.specs)]
         return np.column_stack(cols) if cols else np.zeros((u.shape[0], 0))
 
-    def factors(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Stiffness and damping factors (B, all events), or (B, all segments) within events."""
+    def factors(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Stiffness factor, damping factor and added damping (B, all events), or (B, all segments)
+        within events (the columns of :class:`.td_model.FactorModel`)."""
         n_w = len(self.lik.parts) if self.segments is None else self.segments.offsets[-1]
         ones = np.ones((u.shape[0], n_w))
         if self.cand is None:
-            return ones, ones
+            return ones, ones, np.zeros_like(ones)
         mod = self.cand.modify(self.phi(u))
         s = np.asarray(mod.groups.get("EI", ones), float)
         d = np.asarray(mod.damping if mod.damping is not None else ones, float)
+        g = np.asarray(mod.added_damping, float) if mod.added_damping is not None else np.zeros_like(ones)
         # relative to the geometric mean over the fitted events: the nominal parameters then stand for
         # the average event with or without the effect, so the nominal MAP is a good start for any effect
         # size (the response's phase makes the time-domain posterior multimodal in the stiffness)
         # (within events: weighted by the response's mean square, so that the reference is the strong
-        # motion the nominal fit was dominated by, not the quiet start and end of each record)
+        # motion the nominal fit was dominated by, not the quiet start and end of each record); the
+        # damping by its first mode's total, inherent and added (both divided alike: they stay positive)
         if self.segments is None:
             w = np.zeros(n_w)
             w[self.idx] = 1.0
@@ -122,15 +125,23 @@ class EventPosterior:
             w[cols] = self.segments.weights[cols]
         w = w / w.sum()
         s = s / np.exp(np.log(s) @ w)[:, None]
-        d = d / np.exp(np.log(d) @ w)[:, None]
-        return s, d
+        G = np.exp(np.log(d + g) @ w)[:, None]
+        return s, d / G, g / G
+
+    @property
+    def varies(self) -> int:
+        """The :class:`.td_model.FactorModel` column (offset from ``nb``) the candidate changes."""
+        if self.cand is None:
+            return 0
+        col = getattr(self.cand, "factor_column", None) or self.acts_on
+        return {"stiffness": 0, "damping": 1, "added_damping": 2}[col]
 
     def rows(self, u: np.ndarray, e: int) -> np.ndarray:
-        """Parameter rows of event ``e`` (per-event resolution; within events: the factors at 1)."""
-        if self.segments is not None:
-            return np.column_stack([u[:, :self.nb], np.ones((u.shape[0], 2))])
-        s, d = self.factors(u)
-        return np.column_stack([u[:, :self.nb], s[:, e], d[:, e]])
+        """Parameter rows of event ``e`` (within events: the factors of its first segment; the one
+        that changes within the event is set per segment by :func:`.td_varying.node_steps`)."""
+        s, d, g = self.factors(u)
+        c = e if self.segments is None else self.segments.offsets[e]
+        return np.column_stack([u[:, :self.nb], s[:, c], d[:, c], g[:, c]])
 
     def _responses(self, v: np.ndarray, events: np.ndarray):
         """Yield (event, first row, Y (B, outputs, N)) for the rows ``v`` (in unit coordinates)."""
@@ -142,21 +153,27 @@ class EventPosterior:
                     yield int(e), a, Y
             return
         seg = self.segments
-        col = self.nb if self.acts_on == "stiffness" else self.nb + 1
+        col = self.nb + self.varies
         step = max(1, self.chunk // 2)
         for a in range(0, v.shape[0], step):
             w = v[a:a + step]
-            s, d = self.factors(w)
-            f = s if col == self.nb else d
+            f = self.factors(w)[self.varies]
             base = self.rows(w, 0)
             used = f[:, seg.columns(events)]
+            lo, hi = used.min(axis=1), used.max(axis=1)
+            if self.varies == 2:
+                # added damping starts from 0 in the quiet parts: interpolated in log above a floor of
+                # 1/50 of the event's largest (below it the added damping is < 2 % of the largest and
+                # the response there is small), so the nodes span at most a factor of 50
+                lo = np.maximum(np.maximum(lo, hi / 50.0), 1e-9)
+                hi = np.maximum(hi, lo)
+                f = np.maximum(f, lo[:, None])
             steps = {}
             for e in events:
                 part = self.lik.parts[e]
                 dt = part.record.dt
                 if dt not in steps:
-                    steps[dt] = node_steps(self.fm, base, col, used.min(axis=1), used.max(axis=1), dt,
-                                           self.lik.outputs)
+                    steps[dt] = node_steps(self.fm, base, col, lo, hi, dt, self.lik.outputs)
                 vals = f[:, seg.offsets[e]:seg.offsets[e + 1]]
                 yield int(e), a, varying_responses(steps[dt], vals, seg.lengths[e], part.record.inputs)
 

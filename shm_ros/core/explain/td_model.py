@@ -6,14 +6,19 @@ existing amplitude candidates (:mod:`.candidates.amplitude_stiffness`, :mod:`.ca
 already turn one covariate value per "window" into a factor, so an event plays the part of a window.
 :class:`FactorModel` is the structure's analysis model with two more parameters appended,
 
-    K = s K(theta),    C = d C_inherent(theta at s = 1) + C_dampers,
+    K = s K(theta),    C = d C_inherent(theta at s = 1) + g (2 zeta_1 / omega_1) K(theta) + C_dampers,
 
 ``s`` a factor on every story's stiffness (the ``EI`` group of a shear building, which is all of
-its K) and ``d`` a factor on the inherent (Rayleigh / modal) damping. The inherent damping matrix is
+its K), ``d`` a factor on the inherent (Rayleigh / modal) damping and ``g`` an added
+stiffness-proportional damping (dashpots beside the story springs, as friction or cracking in the
+stories adds), scaled so that ``g`` is the first mode's added damping ratio in units of its inherent
+one (``zeta_1``, ``omega_1`` of the unsoftened model at ``theta``): a mode ``j`` gains
+``g zeta_1 omega_j / omega_1``. ``g`` is 0 in the nominal model. The inherent damping matrix is
 the one of the unsoftened model: a softening spring leaves its dashpot alone, as in the simulator's
 truth. The damper braces' dashpots are not scaled (their own law, not the structure's damping).
-Rows ``[theta, s, d]`` go through the shared response code (:func:`shm_ros.core.predict.batch.batch_responses`),
-so a batch of parameter sets is one batched discretisation per event.
+Rows ``[theta, r, s, d, g]`` (``r`` the damping shape, :data:`SHAPE_NAME`) go through the shared response code
+(:func:`shm_ros.core.predict.batch.batch_responses`), so a batch of parameter sets is one batched
+discretisation per event.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg import eigh
 from scipy.ndimage import uniform_filter1d
 
 from shm_ros.core.bayes.timedomain import AccelerationRecord
@@ -31,7 +37,7 @@ from shm_ros.core.predict.config import Baseline
 from shm_ros.core.predict.record import EventRecord
 from shm_ros.core.predict.signals import baseline_correct, pre_event_end, strong_motion
 
-FACTOR_NAMES = ("_stiffness_factor", "_damping_factor")
+FACTOR_NAMES = ("_stiffness_factor", "_damping_factor", "_added_damping")
 SHAPE_NAME = "_damping_shape"
 SHAPE_RANGE = (0.25, 4.0)  # log-uniform prior of the damping shape (a nuisance of every model compared)
 
@@ -61,11 +67,16 @@ class FactorModel(AffineModel):
     def of(cls, model: AffineModel) -> FactorModel:
         kw = {f.name: getattr(model, f.name) for f in dataclasses.fields(AffineModel)}
         kw["parameter_names"] = [*model.parameter_names, SHAPE_NAME, *FACTOR_NAMES]
-        kw["K_terms"] = [*model.K_terms, None, None, None]
-        kw["M_terms"] = [*model.M_terms, None, None, None]
-        kw["damping_factors"] = [*model.damping_factors, [], [], []]
+        kw["K_terms"] = [*model.K_terms, None, None, None, None]
+        kw["M_terms"] = [*model.M_terms, None, None, None, None]
+        kw["damping_factors"] = [*model.damping_factors, [], [], [], []]
         kw["sensor_rows"] = dict(model.sensor_rows)
         return cls(**kw, n_base=model.n_parameters + 1)
+
+    def nominal_theta(self) -> np.ndarray:
+        th = np.ones(self.n_parameters)
+        th[self.n_base + 2] = 0.0  # no added damping
+        return th
 
     def damping_ratios_at(self, theta: np.ndarray | None = None) -> np.ndarray:
         th = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
@@ -83,9 +94,14 @@ class FactorModel(AffineModel):
 
     def inherent_damping(self, theta: np.ndarray | None = None) -> np.ndarray:
         th = (self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)).copy()
-        d = th[self.n_base + 1]
+        d, g = th[self.n_base + 1], th[self.n_base + 2]
         th[self.n_base] = 1.0  # the dashpots of the unsoftened structure
-        return d * AffineModel.inherent_damping(self, th)
+        C = d * AffineModel.inherent_damping(self, th)
+        if g != 0.0:
+            K, M = AffineModel.stiffness(self, th), self.mass(th)
+            w1 = math.sqrt(max(float(eigh(K, M, eigvals_only=True, subset_by_index=(0, 0))[0]), 1e-300))
+            C = C + (g * 2.0 * float(self.damping_ratios_at(th)[0]) / w1) * K
+        return C
 
 
 @dataclass

@@ -5,13 +5,13 @@ Input: the structure (a building with a declared base input, docs/interfaces.md 
 
 1. the nominal parameters (the file's ``parameters:``) calibrated jointly on every event (MAP of the
    joint time-domain likelihood with the AR(p) residual model, :mod:`.td_fit`); NRMS per event;
-2. each time-domain candidate (the amplitude candidates of the registry) at two resolutions: an event
-   playing the part of a window (one stiffness or damping factor per event from its amplitude), and
-   within events, a segment of a fraction of a second playing that part (the factor from the local
-   amplitude, so a stiffness that softens in the strong motion and recovers after it is followed,
-   :mod:`.td_varying`); fitted with the nominal parameters re-fitted jointly and the candidate's own
-   residual model (AR coefficients at its white-noise MAP); evidence gain by Laplace, checked by
-   importance sampling;
+2. each time-domain candidate (the amplitude candidates of the registry: stiffness, damping scaled alike in
+   every mode, damping added in proportion to the stiffness) at two resolutions: an event playing the part of
+   a window (one stiffness or damping factor per event from its amplitude), and within events, a segment of a
+   fraction of a second playing that part (the factor from the local amplitude, so a stiffness that softens in
+   the strong motion and recovers after it is followed, :mod:`.td_varying`; the added damping within events
+   only); fitted with the nominal parameters re-fitted jointly and the candidate's own residual model (AR
+   coefficients at its white-noise MAP); evidence gain by Laplace, checked by importance sampling;
 3. held out: a fixed split of events (in amplitude order every ``held_out_every``-th from the second,
    so the weakest and strongest events stay in the fit: the held-out ones are interpolated); nominal
    and candidate are re-fitted without them and predict them;
@@ -30,6 +30,7 @@ import numpy as np
 
 from shm_ros.core.bayes.priors import priors_from_specs
 from shm_ros.core.bayes.records import JointTimeDomainLikelihood, RecordSet
+from shm_ros.core.config import option
 from shm_ros.core.models import build_model
 from shm_ros.core.predict.record import EventRecord
 from shm_ros.core.structure import StructureSpec
@@ -42,24 +43,27 @@ from .td_model import SEGMENT_S, FactorModel, event_data, segment_amplitudes
 from .types import CandidateResult, FitScores, Mismatch, Verdict
 
 THRESHOLD_FILE = "threshold_timedomain.json"
-TD_CANDIDATES = ("amplitude_stiffness", "amplitude_damping")
+TD_CANDIDATES = ("amplitude_stiffness", "amplitude_damping", "amplitude_added_damping")
 
 
 @dataclass
 class TimeDomainConfig:
-    amplitude: str = "rms_accel_m_s2"  # the events' amplitude covariate: rms_accel_m_s2 or pga_m_s2
-    ar_order: int = 2
-    error_guess: float = 0.1
-    held_out_every: int = 3
-    n_importance: int = 300
-    threshold: float | None = None  # unset: the shipped calibration
-    tie_nats: float = 2.0
-    seed: int = 0
-    candidates: tuple[str, ...] = TD_CANDIDATES
+    amplitude: str = option("rms_accel_m_s2", "the events' amplitude covariate (per event)",
+                            choices=("rms_accel_m_s2", "pga_m_s2"))
+    ar_order: int = option(2, "order of each event's autoregressive residual model")
+    error_guess: float = option(0.1, "prediction-error scale of the inverse-gamma prior, relative to the records' RMS")
+    held_out_every: int = option(3, "in amplitude order, every n-th event from the second is held out")
+    n_importance: int = option(300, "importance samples of the evidence check")
+    threshold: float | None = option(None, "log Bayes factor to accept a candidate (unset: the shipped "
+                                     "calibration, threshold_timedomain.json)")
+    tie_nats: float = option(2.0, "candidates within this many nats of the best are reported together")
+    seed: int = option(0, "random seed (starting points, importance sampling)")
+    candidates: list[str] = option(list(TD_CANDIDATES), "time-domain candidates tried (registry labels)")
     # per_event: one factor per event from its amplitude; within_event: one per segment of an event
     # from the local amplitude (td_varying.py), so softening during the strong motion is followed
-    resolutions: tuple[str, ...] = ("per_event", "within_event")
-    segment_s: float = SEGMENT_S
+    resolutions: list[str] = option(["per_event", "within_event"], "resolutions tried: per_event (a factor "
+                                    "per event), within_event (per segment of an event)")
+    segment_s: float = option(SEGMENT_S, "within-event segment length, s")
 
 
 def held_out_events(amplitude: np.ndarray, every: int) -> np.ndarray:
@@ -115,7 +119,8 @@ def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeD
     ctx_in = Context(times_s=seg_t, covariates={"rms_accel_m_s2": np.concatenate(seg_amp)},
                      hints={"covariate": "rms_accel_m_s2"})
     for label in cfg.candidates:
-        for res in cfg.resolutions:
+        only = getattr(CANDIDATES.get(label), "resolutions", None)  # a candidate may need one resolution
+        for res in (r for r in cfg.resolutions if only is None or r in only):
             say(f"fitting {label} ({res.replace('_', ' ')})")
             within = res == "within_event"
             cand = CANDIDATES.get(label)("EI", ctx_in if within else ctx)
@@ -211,8 +216,9 @@ def _fit_candidate(cand, lik, prior, u_n, log_z_n, chk_n, train, test, rng, cfg,
     u_tr, _ = find_map(post_tr, [u_c])
     held = post_tr.nrms(u_tr, test)
     post.set_ar(nominal_ar)
-    s, d = post.factors(u_c[None, :])
+    s, d, g = post.factors(u_c[None, :])
     acts_on = "damping" if cand.vocabulary.endswith("damping") else "stiffness"
+    column = ("stiffness", "damping", "added_damping")[post.varies]
     # the model's first-mode inherent damping ratio at this fit: what a damping factor multiplies
     # (at small amplitude: the factors are relative to the fitted events' average, raw / G)
     raw = cand.modify(post.phi(u_c[None, :]))
@@ -220,7 +226,9 @@ def _fit_candidate(cand, lik, prior, u_n, log_z_n, chk_n, train, test, rng, cfg,
     raw_s = np.asarray(raw.groups.get("EI", np.ones_like(s)), float)
     # G: the fitted factors are raw / G (relative to the fitted events' average, EventPosterior.factors)
     norm = float(raw_s[0, 0] / s[0, 0]) if acts_on == "stiffness" else float(raw_d[0, 0] / d[0, 0])
-    zeta1 = float(lik.model.damping_ratios_at(np.r_[u_c[:nb], 1.0, 1.0])[0]) * float(d[0, 0] / raw_d[0, 0])
+    zeta1 = float(lik.model.damping_ratios_at(np.r_[u_c[:nb], 1.0, 1.0, 0.0])[0]) * float(d[0, 0] / raw_d[0, 0])
+    # the first mode's damping factor per event: inherent and added (FactorModel's g is in units of it)
+    first_mode = d + g
     return CandidateResult(
         name=cand.vocabulary, label=cand.label, form=cand.form(phi[:1]), where=cand.group,
         parameters={specs[0].name: float(phi[0])}, intervals={specs[0].name: (float(phi[1]), float(phi[2]))},
@@ -231,7 +239,8 @@ def _fit_candidate(cand, lik, prior, u_n, log_z_n, chk_n, train, test, rng, cfg,
                "check_err": check_err,
                "check_agrees": bool(abs(gain - check) <= max(0.5, 3 * check_err)),
                "held_out_metric": "nrms_pct", "acts_on": acts_on, "gain_at_map": float(gain_at_map),
-               "factors": _per_event((s if acts_on == "stiffness" else d)[0], segments),
+               "factors": _per_event((s if acts_on == "stiffness" else first_mode)[0], segments),
+               "factor_column": column,
                "nominal_parameters": dict(zip(lik.model.parameter_names[:nb], map(float, u_c[:nb]), strict=True)),
                "inherent_damping_ratio_1": zeta1})
 

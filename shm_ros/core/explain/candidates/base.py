@@ -46,10 +46,14 @@ class Context:
 
 @dataclass
 class Modification:
-    """A candidate's effect for a batch: factors (B, W) per group name; ``damping`` (B, W) or None."""
+    """A candidate's effect for a batch: factors (B, W) per group name; ``damping`` (B, W) or None;
+    ``added_damping`` (B, W) or None: stiffness-proportional damping added to the inherent one, as
+    the first mode's added ratio in units of its inherent one (time domain only,
+    :class:`shm_ros.core.explain.td_model.FactorModel`)."""
 
     groups: dict[str, np.ndarray]
     damping: np.ndarray | None = None
+    added_damping: np.ndarray | None = None
 
 
 class Candidate(ABC):
