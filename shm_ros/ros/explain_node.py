@@ -10,10 +10,11 @@ figures' numbers and report.html after every run.
 
 **Event series** (docs/explain.md, Time domain): with a structure that declares a measured input, the
 node also keeps the event windows of ``/shm/windows`` (those ingest flags as events, docs/interfaces.md
-§1) and, once ``min_events`` have arrived and again after every new one, explains them in the time
-domain (amplitude-dependent stiffness and damping, :func:`shm_ros.core.explain.timedomain.explain_events`,
-options ``time_domain.*``) in the same worker; its verdicts go out on ``/shm/verdict`` too (``kind``
-"events", NRMS fields set) when their accepted physics changed, and into ``output_dir/events``.
+§1, the newest ``max_events``) and, once ``min_events`` have arrived and again after every new one,
+explains them in the time domain (amplitude-dependent stiffness and damping,
+:func:`shm_ros.core.explain.timedomain.explain_events`, options ``time_domain.*``) in the same worker;
+its verdicts go out on ``/shm/verdict`` too (``kind`` "events", NRMS fields set) when their accepted
+physics changed, and into ``output_dir/events``.
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ class ExplainNodeConfig:
                          "declares a measured input), on, off", choices=("auto", "on", "off"))
     min_events: int = option(3, "event windows received before the first time-domain run (then after every "
                              "new one)")
+    max_events: int = option(24, "event windows kept for the time-domain runs, the newest (each run fits them "
+                             "all: cost grows with their number)")
     time_domain: TimeDomainConfig = field(default_factory=TimeDomainConfig)
 
 
@@ -104,6 +107,7 @@ class ExplainNode(Node):
             raise SystemExit(f"{self.get_name()}: events:=on needs a measured input in {self.settings.structure} "
                              "('input'/'inputs')")
         self.events: dict[str, Any] = {}
+        self.events_seen: set[str] = set()  # every event window id received (runs go on after the cap)
         self.events_used = 0
         self.event_future: Any = None
         self.event_started = 0.0
@@ -118,8 +122,8 @@ class ExplainNode(Node):
         self.diag = Diagnostics(self, "explain", summary=lambda: (
             "ok", f"{len(self.rows)} windows received, {self.runs} runs"
             + (", explaining" if self.future is not None or self.event_future is not None else ", idle")
-            + (f"; {len(self.events)} event windows" if self.with_events else ""),
-            {"received": len(self.rows), "events": len(self.events)}))
+            + (f"; {len(self.events_seen)} event windows" if self.with_events else ""),
+            {"received": len(self.rows), "events": len(self.events_seen)}))
         self.pub: Publisher[Any] = self.create_publisher(
             topics.message_class(topics.TYPES[topics.VERDICT]), topics.VERDICT, latched_qos())
         self.create_subscription(topics.message_class(topics.TYPES[topics.TRACKED_MODES]), topics.TRACKED_MODES,
@@ -151,6 +155,9 @@ class ExplainNode(Node):
             self.diag.report("warn", f"window {msg.window_id!r} skipped: {exc}", "input")
             return
         self.events[w.window_id] = w
+        self.events_seen.add(w.window_id)
+        while len(self.events) > max(self.settings.max_events, 1):
+            del self.events[min(self.events, key=lambda k: self.events[k].start_ns)]
 
     def _on_replay_done(self, _msg: Any) -> None:
         self.flush = True
@@ -171,7 +178,7 @@ class ExplainNode(Node):
             self.diag.report("ok", f"explaining {self.used} windows", "progress")
         if self.event_future is not None and self.event_future.done():
             self._collect_events()
-        n = len(self.events)
+        n = len(self.events_seen)
         if self.event_future is None and n >= max(self.settings.min_events, 1) and n != self.events_used:
             self.events_used, self.event_started = n, time.time()
             out = str(Path(self.settings.output_dir) / "events") if self.settings.output_dir else None
@@ -194,7 +201,7 @@ class ExplainNode(Node):
         accepted = tuple(e["name"] for e in verdict["missing_physics"])
         text = ", ".join(accepted) or "nothing missing"
         self.diag.report("ok", f"{info['n_events']} event windows in {took:.1f} s: {text}", "events verdict",
-                         events=info["n_events"])
+                         events=self.events_used)  # received so far (the run fitted the newest max_events)
         if accepted != self.event_accepted:
             self.event_accepted = accepted
             self.pub.publish(verdict_to_msg(verdict))
