@@ -111,13 +111,12 @@ class ExplainNode(Node):
         self.events_used = 0
         self.event_future: Any = None
         self.event_started = 0.0
-        self.event_accepted: tuple[str, ...] | None = None
         self.rows: dict[str, Any] = {}
         self.used = 0
         self.flush = False  # a replay ended: from now on, run on whatever new rows have arrived
         self.future: Any = None
         self.started = 0.0
-        self.accepted: tuple[str, ...] | None = None
+        self.last: dict[str, tuple[str, ...]] = {}  # the accepted physics of the last verdict of each kind
         self.runs = 0
         self.diag = Diagnostics(self, "explain", summary=lambda: (
             "ok", f"{len(self.rows)} windows received, {self.runs} runs"
@@ -189,45 +188,33 @@ class ExplainNode(Node):
 
     def _collect_events(self) -> None:
         future, self.event_future = self.event_future, None
-        took = time.time() - self.event_started
-        try:
-            verdict, info = future.result()
-        except Exception as exc:  # a failed run (or a lost worker) must not take the node down
-            self.diag.report("error", f"explain with {self.events_used} event windows failed: {exc}",
-                             "events verdict", events=self.events_used)
-            if "BrokenProcessPool" in type(exc).__name__:
-                self.workers.restart()
-            return
-        accepted = tuple(e["name"] for e in verdict["missing_physics"])
-        text = ", ".join(accepted) or "nothing missing"
-        self.diag.report("ok", f"{info['n_events']} event windows in {took:.1f} s: {text}", "events verdict",
-                         events=self.events_used)  # received so far (the run fitted the newest max_events)
-        if accepted != self.event_accepted:
-            self.event_accepted = accepted
-            self.pub.publish(verdict_to_msg(verdict))
-            self.get_logger().info(f"verdict from {info['n_events']} event windows: {text}")
+        self._finish(future, self.event_started, "events verdict", "event windows", self.events_used, "events")
 
     def _collect(self) -> None:
         future, self.future = self.future, None
-        took = time.time() - self.started
+        if self._finish(future, self.started, "verdict", "windows", self.used, "windows") is not None:
+            self.runs += 1
+
+    def _finish(self, future: Any, started: float, name: str, unit: str, count: int, key: str) -> tuple | None:
+        """A run's end: its diagnostics (status ``name``, value ``key`` = ``count`` of ``unit`` explained),
+        and its Verdict published when the accepted physics changed from the last of its kind, i.e. when
+        the support for an effect crossed its threshold. None when the run failed."""
+        took = time.time() - started
         try:
-            verdict, info = future.result()
+            verdict, _ = future.result()
         except Exception as exc:  # a failed run (or a lost worker) must not take the node down
-            self.diag.report("error", f"explain with {self.used} windows failed: {exc}", "verdict",
-                             windows=self.used)
+            self.diag.report("error", f"explain with {count} {unit} failed: {exc}", name, **{key: count})
             if "BrokenProcessPool" in type(exc).__name__:
                 self.workers.restart()
-            return
-        self.runs += 1
+            return None
         accepted = tuple(e["name"] for e in verdict["missing_physics"])
         text = ", ".join(accepted) or "nothing missing"
-        self.diag.report("ok", f"{info['n_windows']} windows in {took:.1f} s: {text}", "verdict",
-                         windows=info["n_windows"])
-        if accepted != self.accepted:  # the support for an effect crossed its threshold
-            self.accepted = accepted
+        self.diag.report("ok", f"{count} {unit} in {took:.1f} s: {text}", name, **{key: count})
+        if accepted != self.last.get(name):
+            self.last[name] = accepted
             self.pub.publish(verdict_to_msg(verdict))
-            self.get_logger().info(f"verdict from {info['n_windows']} windows: {text}")
-
+            self.get_logger().info(f"verdict from {count} {unit}: {text}")
+        return accepted
 
 def make_node(name: str, parameters: dict[str, Any]) -> ExplainNode:
     return ExplainNode(name, parameters)

@@ -16,12 +16,14 @@ from typing import ClassVar
 import numpy as np
 
 from ._common import amplitude
-from .base import CANDIDATES, Candidate, Modification, ParamSpec
+from .amplitude_damping import AmplitudeDamping
+from .base import CANDIDATES, Modification
 
 
 @CANDIDATES.register("amplitude_added_damping")
-class AmplitudeAddedDamping(Candidate):
-    vocabulary = "amplitude_dependent_damping"
+class AmplitudeAddedDamping(AmplitudeDamping):
+    """The parameter and its prior are :class:`AmplitudeDamping`'s (the first mode's slope)."""
+
     explanation = ("Damping grows when the structure shakes harder, added story by story beside the "
                    "springs (friction in joints, cracks rubbing), so the higher modes gain the most.")
     default_groups: ClassVar[tuple[str, ...]] = ()  # needs the time-domain model (not a modal factor)
@@ -29,11 +31,6 @@ class AmplitudeAddedDamping(Candidate):
     # within events only: per event, the uniform factor of amplitude_damping stands for it (on the
     # series of the tests the two per-event forms differ by ~14 nats, within events by ~100)
     resolutions: ClassVar[tuple[str, ...]] = ("within_event",)
-
-    def params(self) -> list[ParamSpec]:
-        _, a = amplitude(self.context)
-        top = max(float(np.nanmax(a)) if a.size else 1.0, 1e-9)
-        return [ParamSpec("damping_per_accel", 0.0, 1e2 / top, null=0.0, unit="s^2/m")]
 
     def modify(self, theta: np.ndarray) -> Modification:
         k = np.atleast_2d(np.asarray(theta, float))[:, 0]
