@@ -163,8 +163,8 @@ class EventPosterior:
             lo, hi = used.min(axis=1), used.max(axis=1)
             if self.varies == 2:
                 # added damping starts from 0 in the quiet parts: interpolated in log above a floor of
-                # 1/50 of the event's largest (below it the added damping is < 2 % of the largest and
-                # the response there is small), so the nodes span at most a factor of 50
+                # 1/50 of the draw's largest over the events (below it the added damping is < 2 % of the
+                # largest and the response there is small), so the nodes span at most a factor of 50
                 lo = np.maximum(np.maximum(lo, hi / 50.0), 1e-9)
                 hi = np.maximum(hi, lo)
                 f = np.maximum(f, lo[:, None])
