@@ -56,6 +56,11 @@ class ExplainNodeConfig:
     time_domain: TimeDomainConfig = field(default_factory=TimeDomainConfig)
 
 
+def explains_events(mode: str, has_input: bool) -> bool:
+    """Whether the node explains event windows: its ``events`` parameter and the structure's input."""
+    return mode == "on" or (mode == "auto" and has_input)
+
+
 def verdict_to_msg(v: dict[str, Any]) -> Any:
     """verdict.json's content -> ``shm_interfaces/msg/Verdict``."""
     from shm_interfaces.msg import MissingPhysics, Verdict
@@ -102,7 +107,7 @@ class ExplainNode(Node):
 
         model = build_model(load_structure(self.settings.structure))  # a bad file stops the node at once
         mode = self.settings.events
-        self.with_events = mode == "on" or (mode == "auto" and bool(model.inputs))
+        self.with_events = explains_events(mode, bool(model.inputs))
         if mode == "on" and not model.inputs:
             raise SystemExit(f"{self.get_name()}: events:=on needs a measured input in {self.settings.structure} "
                              "('input'/'inputs')")

@@ -146,17 +146,16 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
 
 def _explains_events(node: NodeSpec) -> bool:
     """Whether an explain node subscribes to the windows (its ``events`` parameter, docs/parameters.md)."""
-    mode = str(node.parameters.get("events", "auto"))
-    if node.kind != "explain" or mode == "off":
+    if node.kind != "explain":
         return False
-    if mode == "on":
-        return True
     from shm_ros.io.structure import load_structure
+    from shm_ros.ros.explain_node import explains_events
 
     try:
-        return bool(load_structure(node.parameters["structure"]).input_sensor_ids())
+        has_input = bool(load_structure(node.parameters["structure"]).input_sensor_ids())
     except Exception:  # the node itself reports a bad file
-        return False
+        has_input = False
+    return explains_events(str(node.parameters.get("events", "auto")), has_input)
 
 
 def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
