@@ -27,13 +27,16 @@ def test_explain_events_writes_a_time_domain_verdict(tmp_path, capsys):
     n_events = sum(w.is_event for w in windows)
     assert n_events >= 3
     out = tmp_path / "x"
+    # per event only (the within-event fits are tested in test_explain_timedomain*.py): the options reach
+    # the time-domain configuration
     assert main(["explain", "--structure", str(s_path), "--events", str(bag), "--window", str(WINDOW_S),
-                 "--out", str(out)]) == 0
+                 "--out", str(out), "--time-domain.resolutions", "per_event"]) == 0
     v = json.loads((out / "verdict.json").read_text())
     fit = v["fit"]
     assert fit["before"]["nrms_pct"] > 0 and "frequency_rmse_pct" not in fit["before"]
     tried = {c["name"] for c in v["candidates"]}
     assert {"amplitude_dependent_stiffness", "amplitude_dependent_damping"} <= tried
+    assert not any(c["label"].endswith("within_event") for c in v["candidates"])
     assert f"calibrated on {n_events} events" in v["mismatch"]["summary"]
     assert "NRMS" in capsys.readouterr().out
     # the report draws the time-domain figures: per-event NRMS, the strongest event's record

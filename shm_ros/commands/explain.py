@@ -20,6 +20,7 @@ from pathlib import Path
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from shm_ros.commands.options import add_options
     from shm_ros.core.explain.config import ExplainConfig
+    from shm_ros.core.explain.timedomain import TimeDomainConfig
 
     p = sub.add_parser("explain", help="locate the mismatch, name the missing physics, show the fit improve",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -34,6 +35,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     add_options(p.add_argument_group("explain (ExplainConfig; the explain node's parameters of the same names)"),
                 ExplainConfig)
+    add_options(p.add_argument_group("--events: time domain (TimeDomainConfig; the explain node's time_domain.*)"),
+                TimeDomainConfig, "time_domain.")
     p.set_defaults(func=run)
 
 
@@ -92,8 +95,10 @@ MIN_EVENTS = 3  # a calibration set and at least one held-out event
 
 def _events_verdict(args: argparse.Namespace, spec, config):
     """The time-domain path: the bag's event windows (docs/interfaces.md §1) as records of the
-    structure's measured input and outputs, explained by :func:`explain_events`. Of the options,
-    ``--threshold``, ``--tie-nats`` and ``--seed`` apply (the others are the modal path's)."""
+    structure's measured input and outputs, explained by :func:`explain_events`. The options
+    ``--time-domain.*`` apply, and of the modal path's ``--threshold``, ``--tie-nats`` and ``--seed``
+    (a ``--time-domain.`` option of the same name wins)."""
+    from shm_ros.commands.options import config_from_args
     from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
     from shm_ros.core.models import build_model
     from shm_ros.core.predict import event_from_window
@@ -108,7 +113,8 @@ def _events_verdict(args: argparse.Namespace, spec, config):
         raise ValueError(f"{args.events}: {len(events)} event window(s) among {len(windows)}; the time-domain "
                          f"path needs at least {MIN_EVENTS}")
     model = build_model(spec)
-    cfg = TimeDomainConfig(threshold=config.threshold, tie_nats=config.tie_nats, seed=config.seed)
+    cfg = config_from_args(TimeDomainConfig, args, "time_domain.",
+                           TimeDomainConfig(threshold=config.threshold, tie_nats=config.tie_nats, seed=config.seed))
     return explain_events([event_from_window(w, model) for w in events], spec, cfg,
                           progress=lambda text: print(f"shm-ros explain: {text}", file=sys.stderr))
 
