@@ -192,3 +192,18 @@ def test_single_process_graph_stops_on_sigint(tmp_path, mode):
     proc.send_signal(signal.SIGINT)
     proc.wait(timeout=30)
     assert proc.returncode == 0, out.text(join_timeout=10)
+
+
+def test_a_replay_asks_ingest_for_reliable_delivery():
+    """The graph runner's replay paces itself by ingest's acknowledgements; with a best-effort recording
+    subscription a sample dropped over UDP stalls it (seen between two hosts), so ingest subscribes
+    reliably when replaying unless its parameters say otherwise."""
+    from shm_ros.ros.graph_run import analysis_nodes, for_replay
+    from shm_ros.ros.supervisor import NodeSpec
+
+    nodes = for_replay(analysis_nodes(STRUCTURE, 60.0))
+    ingest = next(n for n in nodes if n.kind == "ingest")
+    assert ingest.parameters["reliable_input"] is True
+    assert "reliable_input" not in next(n for n in nodes if n.kind == "identify").parameters
+    told = for_replay([NodeSpec("ingest", "ingest", {"reliable_input": False})])
+    assert told[0].parameters["reliable_input"] is False

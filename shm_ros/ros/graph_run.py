@@ -158,6 +158,14 @@ def _explains_events(node: NodeSpec) -> bool:
     return explains_events(str(node.parameters.get("events", "auto")), has_input)
 
 
+def for_replay(nodes: list[NodeSpec]) -> list[NodeSpec]:
+    """The nodes with ingest subscribing to the recording reliably unless told otherwise: the replay
+    publishes reliably and paces itself by ingest's acknowledgements, so nothing is lost, also between
+    hosts over UDP (where best-effort samples can drop on a loaded host)."""
+    return [NodeSpec(n.name, n.kind, {"reliable_input": True, **n.parameters}) if n.kind == "ingest" else n
+            for n in nodes]
+
+
 def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
               expected_windows: int | None = None, expected_predictions: int | None = None,
               expected_events: int | None = None, timeout_s: float = 600.0,
@@ -172,6 +180,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
     from shm_ros.ros.qos import latched_qos, pipeline_qos, stream_qos
     from shm_ros.ros.replay import replay_bag
 
+    nodes = for_replay(nodes)
     kinds = {n.kind for n in nodes}
     workdir = Path(workdir)
     out_bag = workdir / "pipeline_bag"
