@@ -32,7 +32,7 @@ from scipy.linalg import eigh
 from scipy.ndimage import uniform_filter1d
 
 from shm_ros.core.bayes.timedomain import AccelerationRecord
-from shm_ros.core.models.base import AffineModel
+from shm_ros.core.models.base import AffineModel, generalized_modes_batch
 from shm_ros.core.predict.config import Baseline
 from shm_ros.core.predict.record import EventRecord
 from shm_ros.core.predict.signals import baseline_correct, pre_event_end, strong_motion
@@ -84,6 +84,12 @@ class FactorModel(AffineModel):
         r = th[self.n_base - 1]
         return np.r_[z[:1], z[1:] * r] if z.size > 1 else np.r_[z, z * r]
 
+    def damping_ratios_batch(self, thetas: np.ndarray) -> np.ndarray:
+        th = self._thetas(thetas)
+        z = AffineModel.damping_ratios_batch(self, th)
+        r = th[:, self.n_base - 1, None]
+        return np.column_stack([z[:, :1], z[:, 1:] * r]) if z.shape[1] > 1 else np.column_stack([z, z * r])
+
     def stiffness(self, theta: np.ndarray | None = None) -> np.ndarray:
         th = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
         return th[self.n_base] * AffineModel.stiffness(self, th)
@@ -101,6 +107,19 @@ class FactorModel(AffineModel):
             K, M = AffineModel.stiffness(self, th), self.mass(th)
             w1 = math.sqrt(max(float(eigh(K, M, eigvals_only=True, subset_by_index=(0, 0))[0]), 1e-300))
             C = C + (g * 2.0 * float(self.damping_ratios_at(th)[0]) / w1) * K
+        return C
+
+    def inherent_damping_batch(self, thetas: np.ndarray) -> np.ndarray:
+        th = self._thetas(thetas).copy()
+        d, g = th[:, self.n_base + 1], th[:, self.n_base + 2]
+        th[:, self.n_base] = 1.0  # the dashpots of the unsoftened structure
+        C = d[:, None, None] * AffineModel.inherent_damping_batch(self, th)
+        on = g != 0.0
+        if np.any(on):
+            K, M = AffineModel.stiffness_batch(self, th[on]), self.mass_batch(th[on])
+            w1 = 2 * np.pi * np.maximum(generalized_modes_batch(K, M, 1).frequencies_hz[:, 0], 1e-150)
+            z1 = self.damping_ratios_batch(th[on])[:, 0]
+            C[on] += (g[on] * 2.0 * z1 / w1)[:, None, None] * K
         return C
 
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from shm_ros.core.models.base import AffineModel
-from shm_ros.core.response import Output, build_state_space, discretize_foh
+from shm_ros.core.response import Output, build_state_space, build_state_spaces, discretize_foh
 
 MAX_NODES = 24
 NODE_GRID = 0.05  # the nodes' range is snapped to multiples of this in ln(factor)
@@ -80,18 +80,12 @@ def node_steps(model: AffineModel, rows: np.ndarray, col: int, lo: np.ndarray, h
     hi = np.exp(np.ceil(np.log(np.maximum(np.asarray(hi, float), lo * (1 + 1e-9))) / NODE_GRID) * NODE_GRID)
     hi = np.where(hi > lo, hi, lo * np.exp(NODE_GRID))
     nodes = _nodes(lo, hi, n_nodes(float(np.max(hi / lo))))
-    mats: list[list[np.ndarray]] = [[], [], [], [], []]
-    for b in range(rows.shape[0]):
-        per: list[list[np.ndarray]] = [[], [], [], [], []]
-        for v in nodes[b]:
-            r = rows[b].copy()
-            r[col] = v
-            d = discretize_foh(build_state_space(model, r, outputs), dt)
-            for k, m in enumerate((d.Phi, d.G1, d.G2, d.C, d.D)):
-                per[k].append(m)
-        for k in range(5):
-            mats[k].append(np.stack(per[k]))
-    return NodeSteps(nodes, *(np.stack(m) for m in mats))
+    B, n = nodes.shape
+    at = np.repeat(rows, n, axis=0)
+    at[:, col] = nodes.ravel()
+    steps = [discretize_foh(ss, dt) for ss in build_state_spaces(model, at, outputs)]
+    return NodeSteps(nodes, *(np.stack([getattr(d, m) for d in steps]).reshape(B, n, *getattr(steps[0], m).shape)
+                              for m in ("Phi", "G1", "G2", "C", "D")))
 
 
 def varying_responses(steps: NodeSteps, values: np.ndarray, seg_len: int, u: np.ndarray) -> np.ndarray:

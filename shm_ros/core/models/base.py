@@ -119,8 +119,6 @@ class AffineModel:
                 row = np.zeros(self.n_dof)
                 row[dof] = 1.0
                 self.sensor_rows[sid] = row
-        self._K_stack: np.ndarray | None = None
-        self._M_stack: np.ndarray | None = None
 
     @property
     def n_dof(self) -> int:
@@ -157,14 +155,6 @@ class AffineModel:
                 M += t * Mi
         return M
 
-    def _stacks(self) -> tuple[np.ndarray, np.ndarray]:
-        if self._K_stack is None:
-            z = np.zeros_like(self.K0)
-            self._K_stack = np.stack([z if t is None else t for t in self.K_terms]) if self.K_terms else z[None] * 0
-            self._M_stack = np.stack([z if t is None else t for t in self.M_terms]) if self.M_terms else z[None] * 0
-        assert self._M_stack is not None  # filled together with the stiffness stack
-        return self._K_stack, self._M_stack
-
     def _thetas(self, thetas: np.ndarray) -> np.ndarray:
         thetas = np.asarray(thetas, dtype=float)
         if thetas.ndim == 1:
@@ -178,18 +168,12 @@ class AffineModel:
     def stiffness_batch(self, thetas: np.ndarray) -> np.ndarray:
         """K(theta) for each row of ``thetas`` (B, n_parameters) -> (B, n, n)."""
         thetas = self._thetas(thetas)
-        Ks, _ = self._stacks()
-        if self.n_parameters == 0:
-            return np.broadcast_to(self.K0, (thetas.shape[0], *self.K0.shape)).copy()
-        return self.K0 + np.tensordot(thetas, Ks, axes=(1, 0))
+        return _affine_batch(self.K0, self.K_terms, thetas)
 
     def mass_batch(self, thetas: np.ndarray) -> np.ndarray:
         """M(theta) for each row of ``thetas`` (B, n_parameters) -> (B, n, n)."""
         thetas = self._thetas(thetas)
-        _, Ms = self._stacks()
-        if self.n_parameters == 0:
-            return np.broadcast_to(self.M0, (thetas.shape[0], *self.M0.shape)).copy()
-        return self.M0 + np.tensordot(thetas, Ms, axes=(1, 0))
+        return _affine_batch(self.M0, self.M_terms, thetas)
 
     # -- modes ---------------------------------------------------------------------------------
     def modes(self, theta: np.ndarray | None = None, n_modes: int = 6) -> ModalSolution:
@@ -215,6 +199,15 @@ class AffineModel:
                 r[i] *= t
         return r
 
+    def damping_ratios_batch(self, thetas: np.ndarray) -> np.ndarray:
+        """:meth:`damping_ratios_at` for each row of ``thetas`` -> (B, n_ratios)."""
+        thetas = self._thetas(thetas)
+        z = np.tile(np.asarray(self.damping_ratios, dtype=float), (thetas.shape[0], 1))
+        for i, idx in enumerate(self.damping_factors):
+            for j in idx:
+                z[:, j] *= thetas[:, i]
+        return z
+
     def modal_damping_ratios(self, theta: np.ndarray | None = None, n_modes: int = 6) -> np.ndarray:
         """Damping ratio of each of the lowest ``n_modes`` modes under this model's damping."""
         theta = self.nominal_theta() if theta is None else np.asarray(theta, dtype=float)
@@ -232,10 +225,7 @@ class AffineModel:
         the first two columns)."""
         thetas = self._thetas(thetas)
         f = np.atleast_2d(np.asarray(frequencies_hz, dtype=float))
-        z = np.tile(np.asarray(self.damping_ratios, dtype=float), (thetas.shape[0], 1))
-        for i, idx in enumerate(self.damping_factors):
-            for j in idx:
-                z[:, j] *= thetas[:, i]
+        z = self.damping_ratios_batch(thetas)
         k = f.shape[1]
         if self.damping_kind == "modal":
             cols = [min(c, z.shape[1] - 1) for c in range(k)]
@@ -285,6 +275,23 @@ class AffineModel:
             return 2 * z[0] * w[0] * M
         a0, a1 = rayleigh_coefficients(w[0], w[1], z[0], z[1])
         return a0 * M + a1 * K
+
+    def inherent_damping_batch(self, thetas: np.ndarray) -> np.ndarray:
+        """:meth:`inherent_damping` for each row of ``thetas`` -> (B, n, n) (batched eigensolutions)."""
+        thetas = self._thetas(thetas)
+        K, M = self.stiffness_batch(thetas), self.mass_batch(thetas)
+        z = self.damping_ratios_batch(thetas)
+        if self.damping_kind == "modal":
+            sol = generalized_modes_batch(K, M, self.n_dof)
+            w = 2 * np.pi * sol.frequencies_hz
+            zeta = z[:, [min(k, z.shape[1] - 1) for k in range(w.shape[1])]]
+            Mphi = M @ sol.shapes
+            return (Mphi * (2 * zeta * w)[:, None, :]) @ np.swapaxes(Mphi, -1, -2)
+        w = 2 * np.pi * generalized_modes_batch(K, M, 2).frequencies_hz
+        if w.shape[1] < 2:  # one DOF: mass-proportional damping gives the ratio exactly
+            return (2 * z[:, 0] * w[:, 0])[:, None, None] * M
+        a0, a1 = rayleigh_coefficients(w[:, 0], w[:, 1], z[:, 0], z[:, 1])
+        return np.asarray(a0)[:, None, None] * M + np.asarray(a1)[:, None, None] * K
 
     # -- sensors -------------------------------------------------------------------------------
     def sensor_matrix(self, sensor_ids: list[str]) -> np.ndarray:
@@ -353,6 +360,17 @@ class AffineModel:
                 raise KeyError(f"sensor {sid!r} of model {self.name!r} is not located on a DOF")
             out.append(self.sensor_dofs[sid])
         return out
+
+
+def _affine_batch(X0: np.ndarray, terms: list[np.ndarray | None], thetas: np.ndarray) -> np.ndarray:
+    """``X0 + sum_i theta_i X_i`` for each row of ``thetas``, term by term as :meth:`AffineModel.stiffness`
+    adds them: each row's matrix is then the same bit for bit whatever the batch (a single matrix
+    product over the batch rounds differently with the batch's size)."""
+    X = np.broadcast_to(X0, (thetas.shape[0], *X0.shape)).copy()
+    for i, Xi in enumerate(terms):
+        if Xi is not None:
+            X += thetas[:, i, None, None] * Xi
+    return X
 
 
 def generalized_modes_batch(K: np.ndarray, M: np.ndarray, n_modes: int) -> BatchModalSolution:

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 from shm_ros.core.models.base import AffineModel
-from shm_ros.core.response import Output, StateSpace, build_state_space, discretize_foh, simulate
+from shm_ros.core.response import Output, StateSpace, build_state_spaces, discretize_foh, simulate
 from shm_ros.core.structure import InputSpec
 
 _MAX_COND = 1e8  # as shm_ros.core.response.simulate: the modal route keeps ~1e-8 accuracy below it
@@ -48,7 +48,7 @@ def batch_responses(model: AffineModel, thetas: np.ndarray, u: np.ndarray, dt: f
     starts = list(range(0, thetas.shape[0], step))
 
     def work(a: int) -> np.ndarray:
-        return _run_chunk([build_state_space(model, th, outputs, ins) for th in thetas[a:a + step]], u, dt)
+        return _run_chunk(build_state_spaces(model, thetas[a:a + step], outputs, ins), u, dt)
 
     if threads <= 1 or len(starts) <= 1:
         for a in starts:

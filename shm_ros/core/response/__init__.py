@@ -24,7 +24,7 @@ from shm_ros.core.structure import InputSpec
 from .discretize import DiscreteSystem, discretize_foh
 from .outputs import Output, Quantity, drift_outputs, node_row, sensor_outputs
 from .simulate import simulate
-from .statespace import StateSpace, build_state_space
+from .statespace import StateSpace, build_state_space, build_state_spaces
 from .supports import Supports, partition
 
 __all__ = [
@@ -34,6 +34,7 @@ __all__ = [
     "StateSpace",
     "Supports",
     "build_state_space",
+    "build_state_spaces",
     "discretize_foh",
     "drift_outputs",
     "node_row",

@@ -110,19 +110,35 @@ def partition(model: AffineModel, theta: np.ndarray, inputs: Sequence[InputSpec]
         if ld is not None and prescribed and np.any(np.abs(ld[prescribed]) > _TOL):
             raise ValueError(f"input {inputs[k].sensor!r}: the force acts on a DOF whose motion is prescribed")
 
-    T = np.zeros((n + 1, len(support_dofs)))
-    Kff = K[np.ix_(free, free)]
+    T = influence(model, K[None], free, support_dofs)[0]
+    return Supports(free, support_dofs, input_support, loads, T, known, ground_moves)
+
+
+def influence(model: AffineModel, K: np.ndarray, free: np.ndarray, support_dofs: Sequence[int | None]) -> np.ndarray:
+    """``T`` of :class:`Supports` (B, n_dof + 1, n_supports) for stiffness matrices ``K`` (B, n, n):
+    every node's quasi-static displacement per unit support displacement."""
+    B, n = K.shape[0], model.n_dof
+    r = np.zeros(n) if model.base_influence is None else np.asarray(model.base_influence, dtype=float)
+    T = np.zeros((B, n + 1, len(support_dofs)))
+    Kff = K[:, free][:, :, free]
     for s, dof in enumerate(support_dofs):
         if dof is None:
-            T[n, s] = 1.0
+            T[:, n, s] = 1.0
             if free.size:
-                T[free, s] = np.linalg.solve(Kff, (K @ r)[free])
+                T[:, free, s] = np.linalg.solve(Kff, (K @ r)[:, free, None])[..., 0]
         else:
-            T[dof, s] = 1.0
+            T[:, dof, s] = 1.0
             if free.size:
-                T[free, s] = -np.linalg.solve(Kff, K[free, dof])
-    T[np.abs(T) < _TOL * max(1.0, float(np.max(np.abs(T), initial=0.0)))] = 0.0
-    return Supports(free, support_dofs, input_support, loads, T, known, ground_moves)
+                T[:, free, s] = -np.linalg.solve(Kff, K[:, free, dof][..., None])[..., 0]
+    return clean_rows(T.reshape(B, -1)).reshape(T.shape)
+
+
+def clean_rows(v: np.ndarray) -> np.ndarray:
+    """Zero the round-off of exact zeros in each row of ``v`` (B, m): entries below ``_TOL`` relative to
+    the row's largest (at least 1), as of a rigid motion's extension computed through K^-1."""
+    v = np.array(v, dtype=float)
+    v[np.abs(v) < _TOL * np.maximum(1.0, np.max(np.abs(v), axis=-1, keepdims=True, initial=0.0))] = 0.0
+    return v
 
 
 def _supported_part(model: AffineModel, K: np.ndarray, M: np.ndarray, free: np.ndarray, r: np.ndarray
