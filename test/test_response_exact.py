@@ -18,7 +18,17 @@ import pytest
 from scipy import signal
 
 from shm_ros.core.models import build_model
-from shm_ros.core.response import Output, Quantity, drift_outputs, response, sensor_outputs
+from shm_ros.core.response import (
+    Output,
+    Quantity,
+    build_state_space,
+    build_state_spaces,
+    discretize_foh,
+    drift_outputs,
+    response,
+    sensor_outputs,
+    simulate,
+)
 from shm_ros.core.structure import structure_from_dict
 
 MASSES = [3.0e5, 2.8e5, 2.8e5, 2.6e5, 2.6e5, 2.2e5]
@@ -194,8 +204,11 @@ def _rel_err(y: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return np.max(np.abs(y - ref), axis=1) / np.max(np.abs(ref), axis=1)
 
 
+@pytest.mark.parametrize("batched", [False, True], ids=["one", "batch"])
 @pytest.mark.parametrize("case", list(CASES))
-def test_response_equals_independent_exact_computation(case):
+def test_response_equals_independent_exact_computation(case, batched):
+    """``batch``: THETA's state space taken from a batch of three parameter sets
+    (:func:`build_state_spaces`, batched assembly), the others' equal to their own build bit for bit."""
     inputs, dampers, free, prescribed = CASES[case]
     spec = structure_from_dict(_spec_dict(inputs, dampers), f"{case}.yaml")
     model = build_model(spec)
@@ -204,7 +217,15 @@ def test_response_equals_independent_exact_computation(case):
     sensors = [f"f{k}" for k in known]
     drifts = [d for k, d in enumerate(drift_outputs(model, ratio=True), start=1) if k in known and k - 1 in known]
     outputs = sensor_outputs(model, sensors) + drifts
-    y = response(model, THETA, records, DT, outputs)
+    if batched:
+        thetas = np.array([THETA * [0.8, 1.1], THETA, THETA * [1.3, 0.9]])
+        systems = build_state_spaces(model, thetas, outputs)
+        for k in (0, 2):
+            one = build_state_space(model, thetas[k], outputs)
+            assert all(np.array_equal(getattr(systems[k], m), getattr(one, m)) for m in "ABCD")
+        y = simulate(discretize_foh(systems[1], DT), records)
+    else:
+        y = response(model, THETA, records, DT, outputs)
 
     hand_in = _hand_inputs(inputs)
     driven = [i["node"] for i in hand_in if i["kind"] != "force"]

@@ -4,6 +4,8 @@ time-invariant response code."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from explain_td_cases import event_series
@@ -14,6 +16,7 @@ from shm_ros.core.models import build_model
 from shm_ros.core.predict.batch import batch_responses
 from shm_ros.core.response import sensor_outputs
 from shm_ros.core.structure import structure_from_dict
+from shm_ros.io.structure import load_structure
 
 
 @pytest.fixture(scope="module")
@@ -53,3 +56,24 @@ def test_constant_factor_is_the_invariant_response(setup):
     got = varying_responses(steps, np.repeat(rows[:, [fm.n_base]], J, axis=1), L, rec.inputs)
     assert got.shape == ref.shape
     assert np.max(np.abs(got - ref)) <= 1e-7 * np.max(np.abs(ref))
+
+
+def test_batched_damping_equals_one_at_a_time(setup):
+    """The batched inherent damping (numpy's stacked eigensolver, used to build a batch of state spaces)
+    against the one-row route (scipy's generalised eigensolver) of the factor model: damping shape,
+    damping factor and added damping varied, and of a model with modal damping."""
+    fm, _, _ = setup
+    rng = np.random.default_rng(5)
+    th = np.tile(fm.nominal_theta(), (6, 1))
+    th[:, :fm.n_base] *= rng.uniform(0.6, 1.5, (6, fm.n_base))
+    th[:, fm.n_base:] = rng.uniform(0.5, 2.0, (6, 3))
+    th[0, fm.n_base + 2] = 0.0  # no added damping in one row
+    C = fm.inherent_damping_batch(th)
+    for k in range(6):
+        one = fm.inherent_damping(th[k])
+        assert np.max(np.abs(C[k] - one)) < 1e-10 * np.max(np.abs(one))
+    modal = build_model(load_structure(Path(__file__).parents[1] / "examples" / "matrices.yaml"))
+    assert modal.damping_kind == "modal"
+    one = modal.inherent_damping(None)
+    batch = modal.inherent_damping_batch(modal.nominal_theta()[None])[0]
+    assert np.max(np.abs(batch - one)) < 1e-12 * np.max(np.abs(one))
