@@ -46,14 +46,18 @@ def _nodes(lo: np.ndarray, hi: np.ndarray, n: int) -> np.ndarray:
 
 
 def _lagrange(nodes: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """(B, J, n) Lagrange weights of the nodes (B, n) (in log) at the values ``s`` (B, J)."""
+    """(B, J, n) Lagrange weights of the nodes (B, n) (in log) at the values ``s`` (B, J), in the
+    barycentric form ``l(x) w_i / (x - x_i)`` (a value on a node gets that node's weight exactly)."""
     ln, ls = np.log(nodes), np.log(s)
     n = nodes.shape[1]
-    W = np.ones((*s.shape, n))
-    for i in range(n):
-        for j in range(n):
-            if i != j:
-                W[:, :, i] *= (ls - ln[:, j:j + 1]) / (ln[:, i:i + 1] - ln[:, j:j + 1])
+    gap = ln[:, :, None] - ln[:, None, :] + np.eye(n)  # (B, n, n), 1 on the diagonal
+    w = 1.0 / np.prod(gap, axis=2)  # (B, n)
+    d = ls[:, :, None] - ln[:, None, :]  # (B, J, n)
+    on = d == 0.0
+    d = np.where(on, 1.0, d)
+    W = np.prod(d, axis=2, keepdims=True) * w[:, None, :] / d
+    hit = on.any(axis=2)
+    W[hit] = on[hit]
     return W
 
 
@@ -94,31 +98,34 @@ def varying_responses(steps: NodeSteps, values: np.ndarray, seg_len: int, u: np.
     segment to the end); ``u`` (n_inputs, N) as for :func:`shm_ros.core.predict.batch.batch_responses`."""
     values = np.atleast_2d(np.asarray(values, float))
     u = np.atleast_2d(np.asarray(u, float))
-    B, N, J = values.shape[0], u.shape[1], values.shape[1]
-    W = _lagrange(steps.nodes, values)  # (B, J, n)
-    Phi, G1, G2, C, D = (np.einsum("bjk,bk...->bj...", W, M)
-                         for M in (steps.Phi, steps.G1, steps.G2, steps.C, steps.D))
+    (B, J), N, n = values.shape, u.shape[1], steps.nodes.shape[1]
     L = max(int(seg_len), 1)
     if J * L < N:
         raise ValueError(f"{J} segments of {L} samples do not cover {N} samples")
-    up = np.zeros((u.shape[0], J * L + 1))
+    W = _lagrange(steps.nodes, values)  # (B, J, n)
+
+    def interp(M: np.ndarray) -> np.ndarray:  # (B, n, r, c) at the segments' values: (B, J, r, c)
+        return (W @ M.reshape(B, n, -1)).reshape(B, J, *M.shape[2:])
+
+    Phi, G1, G2, C, D = (interp(M) for M in (steps.Phi, steps.G1, steps.G2, steps.C, steps.D))
+    up = np.zeros((u.shape[0], J * L + 1))  # the input held at its last value past the end
     up[:, :N] = u
     up[:, N:] = u[:, -1:]
-    du = np.diff(up, axis=1)[:, :J * L].reshape(-1, J, L)
+    seg_u = up[:, :J * L].reshape(-1, J, L).swapaxes(0, 1)  # (J, m, L)
+    seg_du = np.diff(up, axis=1)[:, :J * L].reshape(-1, J, L).swapaxes(0, 1)
     # drive[b, j, l] = G1 u[k] + G2 (u[k+1] - u[k]), k = j L + l, with the step of segment j
-    drive = (np.einsum("bjim,mjl->bjli", G1, up[:, :J * L].reshape(-1, J, L))
-             + np.einsum("bjim,mjl->bjli", G2, du))
-    n = Phi.shape[2]
-    z = np.zeros((B, J, L, n))
-    x = np.zeros((B, n, 1))
+    drive = (G1 @ seg_u + G2 @ seg_du).swapaxes(2, 3)  # (B, J, L, ns)
+    ns = Phi.shape[-1]
+    z = np.zeros((B, J, L, ns))
+    x = np.zeros((B, ns, 1))
     for j in range(J):
         P = np.ascontiguousarray(Phi[:, j])
         for k in range(L):
             z[:, j, k] = x[:, :, 0]
             x = np.matmul(P, x)
             x[:, :, 0] += drive[:, j, k]
-    y = np.einsum("bjoi,bjli->bjlo", C, z) + np.einsum("bjom,mjl->bjlo", D, up[:, :J * L].reshape(-1, J, L))
-    return np.moveaxis(y.reshape(B, J * L, -1)[:, :N], 1, 2)
+    y = C @ z.swapaxes(2, 3) + D @ seg_u  # (B, J, o, L)
+    return y.swapaxes(1, 2).reshape(B, -1, J * L)[:, :, :N]
 
 
 def exact_varying_response(model: AffineModel, row: np.ndarray, col: int, values: np.ndarray, seg_len: int,
