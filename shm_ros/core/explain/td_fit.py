@@ -60,8 +60,7 @@ class Segments:
         return np.concatenate([np.arange(o[e], o[e + 1]) for e in np.atleast_1d(events)]).astype(int)
 
 THETA_BOUNDS = (0.1, 10.0)  # nominal parameters are factors on the file's values
-FTOL, GTOL = 1e-10, 1e-4  # L-BFGS-B in scaled coordinates, on log p relative to its start (find_map)
-ROUND_NATS, MAX_ROUNDS = 0.01, 8  # find_map repeats its scaled search until a round gains less
+FTOL, GTOL = 1e-12, 1e-7  # L-BFGS-B on the log posterior scaled by its value at the start (~2e5 nats)
 
 
 @dataclass
@@ -270,60 +269,24 @@ def _grad(post: EventPosterior, u: np.ndarray, h: float = 1e-6) -> tuple[float, 
     return float(f[0]), np.where(np.isfinite(g), g, 0.0)
 
 
-def curvature(post: EventPosterior, u: np.ndarray, h: float = 1e-4) -> np.ndarray:
-    """Diagonal of the Hessian of log p at ``u`` (central differences, one batch of ``2 dim + 1``)."""
-    d = u.size
-    f = post(np.vstack([u, u + h * np.eye(d), u - h * np.eye(d)]))
-    with np.errstate(invalid="ignore"):
-        return (f[1:d + 1] - 2 * f[0] + f[d + 1:]) / h ** 2
-
-
-def _scaled_search(post: EventPosterior, u0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, float]:
-    """One L-BFGS-B run in coordinates scaled per axis by the posterior's width at ``u0``."""
-    inner = u0.copy()  # the curvature's points inside the box
-    inner[post.nb:] = np.clip(u0[post.nb:], 2e-4, 1 - 2e-4)
-    c = curvature(post, inner)
-    # an axis that is flat or convex at the start, or whose difference left the prior, keeps the unit scale
-    s = np.clip(1.0 / np.sqrt(np.maximum(np.where(np.isfinite(c), -c, 0.0), 1e-12)), 1e-7, 1.0)
-    f0 = float(post(u0)[0])
-    ref = f0 if math.isfinite(f0) else 0.0
-
-    def obj(v: np.ndarray) -> tuple[float, np.ndarray]:
-        f, g = _grad(post, np.clip(u0 + s * v, lo, hi))
-        return (ref - f, -g * s) if math.isfinite(f) else (1e30, np.zeros_like(v))
-
-    r = minimize(obj, np.zeros(u0.size), jac=True, method="L-BFGS-B",
-                 bounds=list(zip((lo - u0) / s, (hi - u0) / s, strict=True)),
-                 options={"maxiter": 200, "ftol": FTOL, "gtol": GTOL})
-    u = np.clip(u0 + s * np.asarray(r.x, float), lo, hi)
-    return u, float(post(u)[0])
-
-
 def find_map(post: EventPosterior, starts: list[np.ndarray]) -> tuple[np.ndarray, float]:
-    """Best local maximum from ``starts`` (L-BFGS-B on batched central-difference gradients).
-
-    In coordinates scaled per axis by the posterior's width (``1 / sqrt(-d2 log p)``): the widths
-    differ by five orders of magnitude (an effect's parameter ~1e-5 of its prior range, the nominal
-    factors ~1e-3), and unscaled L-BFGS-B took 25-80 iterations even from a converged point; scaled,
-    8-15. The scale is only as good as the point it was taken at: from a start far from the maximum
-    (an axis convex there keeps the unit scale, far too wide near the maximum) the search can stop after
-    two iterations thousands of nats short, so it is repeated from its own end point with a fresh scale
-    ("rounds") until a round gains less than ``ROUND_NATS``. Tolerances are in nats: gradient 1e-4
-    nats per width, change 1e-10 nats."""
+    """Best local maximum from ``starts`` (L-BFGS-B on batched central-difference gradients)."""
     lo = np.r_[np.full(post.nb, THETA_BOUNDS[0] * 1.01), np.zeros(post.dim - post.nb)]
     hi = np.r_[np.full(post.nb, THETA_BOUNDS[1] * 0.99), np.ones(post.dim - post.nb)]
     best_u, best_f = starts[0], -math.inf
-    for start in starts:
-        u, f = np.clip(start, lo, hi), -math.inf
-        for _ in range(MAX_ROUNDS):
-            u_r, f_r = _scaled_search(post, u, lo, hi)
-            gain = f_r - f
-            if f_r > f:
-                u, f = u_r, f_r
-            if not gain >= ROUND_NATS:  # also stops on a non-finite round
-                break
+    for u0 in starts:
+        f0 = float(post(u0)[0])
+        scale = max(abs(f0), 1.0) if math.isfinite(f0) else 1.0
+
+        def obj(u: np.ndarray, scale: float = scale) -> tuple[float, np.ndarray]:
+            f, g = _grad(post, np.clip(u, lo, hi))
+            return (-f / scale, -g / scale) if math.isfinite(f) else (1e30, np.zeros_like(u))
+
+        r = minimize(obj, np.clip(u0, lo, hi), jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi, strict=True)),
+                     options={"maxiter": 200, "ftol": FTOL, "gtol": GTOL})
+        f = float(post(r.x)[0])
         if f > best_f:
-            best_u, best_f = u, f
+            best_u, best_f = np.asarray(r.x, float), f
     return best_u, best_f
 
 
