@@ -27,7 +27,7 @@ setup(
     package_data={"shm_ros": ["py.typed", "core/explain/*.json"]},
     python_requires=">=3.10",
     install_requires=["numpy", "scipy", "PyYAML", "rosbags", "mcap", "zstandard", "lz4", "emcee",
-                      "dynesty", "arviz", "matplotlib", "threadpoolctl", "obspy",
+                      "dynesty", "arviz", "matplotlib", "threadpoolctl", "obspy", "numba",
                       "dask[distributed]"],
     zip_safe=True,
     maintainer="shm_ros maintainers",

@@ -34,6 +34,7 @@ DEPENDENCIES: dict[str, tuple[str, str | None]] = {
     "scipy": ("python3-scipy", "scipy"),
     "yaml": ("python3-yaml", "PyYAML"),
     "matplotlib": ("python3-matplotlib", "matplotlib"),
+    "numba": ("python3-numba", "numba"),
     "rosbags": ("python3-rosbags-pip", "rosbags"),
     "mcap": ("python3-mcap-pip", "mcap"),
     "zstandard": ("python3-zstandard-pip", "zstandard"),

@@ -107,8 +107,7 @@ class JointTimeDomainLikelihood:
         ss = np.zeros((thetas.shape[0], len(self.outputs)))
         for part in self.parts:
             for a, Y in self._responses(thetas, part.record):
-                for b in range(Y.shape[0]):
-                    ss[a + b] += part.innovation_ss(Y[b].T)
+                ss[a:a + Y.shape[0]] += part.innovation_ss_batch(Y)
         return ss
 
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:

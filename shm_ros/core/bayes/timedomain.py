@@ -106,20 +106,16 @@ def ar_fit(residual: np.ndarray, order: int) -> np.ndarray:
     return coef
 
 
-def ar_innovation_ss(residual: np.ndarray, order: int, coef: np.ndarray | None = None) -> np.ndarray:
-    """Sum of squared one-step prediction errors of an AR(``order``) model of each column of
-    ``residual`` (N, c), with the given coefficients (c, order), or coefficients fitted by least
-    squares to this residual when ``coef`` is None; ``order=0``: the plain sum of squares."""
+def innovation_ss_rows(residual: np.ndarray, order: int, coef: np.ndarray) -> np.ndarray:
+    """Per channel: the sum of squared one-step prediction errors of an AR(``order``) model with
+    coefficients ``coef`` (c, order) of residuals with time last, (..., c, N) (e.g. a batch of draws;
+    the products run along contiguous samples); ``order=0``: the plain sum of squares."""
     r = np.asarray(residual, dtype=float)
-    if order == 0:
-        return np.sum(r**2, axis=0)
-    if coef is None:
-        coef = ar_fit(r, order)
-    n = r.shape[0]
-    e = r[order:].copy()
+    n = r.shape[-1]
+    e = r[..., order:].copy()
     for j in range(1, order + 1):
-        e -= coef[:, j - 1][None, :] * r[order - j: n - j]
-    return np.sum(e**2, axis=0)
+        e -= coef[:, j - 1, None] * r[..., order - j: n - j]
+    return np.einsum("...n,...n->...", e, e)
 
 
 class TimeDomainLikelihood:
@@ -167,8 +163,12 @@ class TimeDomainLikelihood:
     def innovation_ss(self, predicted: np.ndarray) -> np.ndarray:
         """Per channel: the sum of squared innovations of ``outputs - predicted`` ((N, c), e.g. one
         of a batch of responses computed elsewhere) under the fixed AR coefficients."""
+        return self.innovation_ss_batch(np.asarray(predicted, float).T[None])[0]
+
+    def innovation_ss_batch(self, Y: np.ndarray) -> np.ndarray:
+        """(B, c) sums of squared innovations of the responses ``Y`` (B, c, N), as :meth:`innovation_ss`."""
         coef = self.ar_coef if self.ar_coef is not None else np.zeros((len(self.record.channel_ids), self.ar_order))
-        return ar_innovation_ss(self.record.outputs - predicted, self.ar_order, coef)
+        return innovation_ss_rows(self.record.outputs.T[None] - Y, self.ar_order, coef)
 
     def fix_ar(self, theta: np.ndarray) -> None:
         """Estimate the residual's AR coefficients once, at ``theta`` (the white-noise MAP), and keep

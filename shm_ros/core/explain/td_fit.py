@@ -195,9 +195,7 @@ class EventPosterior:
         v = u[ok]
         ss = np.zeros((v.shape[0], len(self.lik.outputs)))
         for e, a, Y in self._responses(v, self.idx):
-            part = self.lik.parts[e]
-            for b in range(Y.shape[0]):
-                ss[a + b] += part.innovation_ss(Y[b].T)
+            ss[a:a + Y.shape[0]] += self.lik.parts[e].innovation_ss_batch(Y)
         ll = sum(ig_marginal_loglik(ss[:, j], self.n, p) for j, p in enumerate(self.lik.priors))
         # the file's parameters' prior, and the damping shape's (the last baseline column)
         lp = self.prior.logpdf(v[:, :self.nb - 1]) if self.nb > 1 else 0.0

@@ -14,8 +14,8 @@ Chebyshev nodes spanning the draw's range of the factor (in ``log`` of it) and i
 to each segment's value. :func:`interpolation_error` measures it against the exact per-segment steps
 (``test/test_td_varying.py``: below 1e-7 of the response on the test's events).
 
-The recursion itself is a loop over samples, batched over the draws (numpy, no compiled helper: scipy
-has no time-varying state-space filter, and a draw's step matrices change every segment).
+The recursion itself is a loop over samples (:func:`shm_ros.core.response.kernels.segment_response`,
+compiled: scipy has no time-varying state-space filter, and a draw's step matrices change every segment).
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import numpy as np
 
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import Output, build_state_space, build_state_spaces, discretize_foh
+from shm_ros.core.response.kernels import segment_response
 
 MAX_NODES = 24
 NODE_GRID = 0.05  # the nodes' range is snapped to multiples of this in ln(factor)
@@ -97,35 +98,14 @@ def varying_responses(steps: NodeSteps, values: np.ndarray, seg_len: int, u: np.
     (B, J; inside the nodes' range) in samples ``j * seg_len`` to ``(j + 1) * seg_len`` (the last
     segment to the end); ``u`` (n_inputs, N) as for :func:`shm_ros.core.predict.batch.batch_responses`."""
     values = np.atleast_2d(np.asarray(values, float))
-    u = np.atleast_2d(np.asarray(u, float))
-    (B, J), N, n = values.shape, u.shape[1], steps.nodes.shape[1]
-    L = max(int(seg_len), 1)
-    if J * L < N:
-        raise ValueError(f"{J} segments of {L} samples do not cover {N} samples")
+    B, n = values.shape[0], steps.nodes.shape[1]
     W = _lagrange(steps.nodes, values)  # (B, J, n)
 
     def interp(M: np.ndarray) -> np.ndarray:  # (B, n, r, c) at the segments' values: (B, J, r, c)
-        return (W @ M.reshape(B, n, -1)).reshape(B, J, *M.shape[2:])
+        return (W @ M.reshape(B, n, -1)).reshape(B, W.shape[1], *M.shape[2:])
 
-    Phi, G1, G2, C, D = (interp(M) for M in (steps.Phi, steps.G1, steps.G2, steps.C, steps.D))
-    up = np.zeros((u.shape[0], J * L + 1))  # the input held at its last value past the end
-    up[:, :N] = u
-    up[:, N:] = u[:, -1:]
-    seg_u = up[:, :J * L].reshape(-1, J, L).swapaxes(0, 1)  # (J, m, L)
-    seg_du = np.diff(up, axis=1)[:, :J * L].reshape(-1, J, L).swapaxes(0, 1)
-    # drive[b, j, l] = G1 u[k] + G2 (u[k+1] - u[k]), k = j L + l, with the step of segment j
-    drive = (G1 @ seg_u + G2 @ seg_du).swapaxes(2, 3)  # (B, J, L, ns)
-    ns = Phi.shape[-1]
-    z = np.zeros((B, J, L, ns))
-    x = np.zeros((B, ns, 1))
-    for j in range(J):
-        P = np.ascontiguousarray(Phi[:, j])
-        for k in range(L):
-            z[:, j, k] = x[:, :, 0]
-            x = np.matmul(P, x)
-            x[:, :, 0] += drive[:, j, k]
-    y = C @ z.swapaxes(2, 3) + D @ seg_u  # (B, J, o, L)
-    return y.swapaxes(1, 2).reshape(B, -1, J * L)[:, :, :N]
+    return segment_response(interp(steps.Phi), interp(steps.G1), interp(steps.G2), interp(steps.C),
+                            interp(steps.D), u, max(int(seg_len), 1))
 
 
 def exact_varying_response(model: AffineModel, row: np.ndarray, col: int, values: np.ndarray, seg_len: int,

@@ -7,8 +7,9 @@ step (:func:`shm_ros.core.response.discretize_foh`) of every pole is a scalar fo
     q[k+1] = e^{z} q[k] + h (phi1(z) - phi2(z)) b u[k] + h phi2(z) b u[k+1],   z = s h,
     phi1(z) = (e^z - 1) / z,   phi2(z) = (e^z - 1 - z) / z^2,   b = V^-1 B,
 
-and each pole (one of each conjugate pair) is one compiled first-order filter. A draw whose
-eigenbasis is ill-conditioned (a Jordan block of support integrator states) falls back to
+and each pole (one of each conjugate pair) is one compiled first-order filter
+(:func:`shm_ros.core.response.kernels.first_order_filters`). A draw whose eigenbasis is
+ill-conditioned (a Jordan block of support integrator states) falls back to
 :func:`shm_ros.core.response.simulate` on the matrix-exponential step.
 
 Chunks may run on ``threads`` threads (the products and eigenproblems release the GIL). Callers
@@ -25,10 +26,10 @@ from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
-from scipy.signal import lfilter
 
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import Output, StateSpace, build_state_spaces, discretize_foh, simulate
+from shm_ros.core.response.kernels import first_order_filters
 from shm_ros.core.structure import InputSpec
 
 _MAX_COND = 1e8  # as shm_ros.core.response.simulate: the modal route keeps ~1e-8 accuracy below it
@@ -133,22 +134,15 @@ def _run_chunk(systems: list[StateSpace], u: np.ndarray, dt: float) -> np.ndarra
     beta = (dt * p2)[:, :, None] * bt  # weight of u[k+1]
     alpha = (dt * (p1 - p2))[:, :, None] * bt  # weight of u[k]
     CV = np.take_along_axis(C.astype(complex) @ V, keep[:, None, :], 2) * w_k[:, None, :]  # (b, o, nk)
-    # real and imaginary parts of the modal responses, stored apart for two real products
-    Qre = np.zeros((idx.size, nk * m, N))
-    Qim = np.zeros((idx.size, nk * m, N))
-    den = np.ones(2, dtype=complex)
-    num = np.empty(2, dtype=complex)
-    for b, j in zip(*np.nonzero(w_k), strict=True):
-        den[1] = -pole[b, j]
-        for i in range(m):
-            num[0], num[1] = beta[b, j, i], alpha[b, j, i]
-            # from rest: q[0] = 0, so the filter's first output beta u[0] is cancelled by its state
-            q = lfilter(num, den, u[i], zi=[-num[0] * u[i, 0]])[0]
-            Qre[b, j * m + i] = q.real
-            Qim[b, j * m + i] = q.imag
+    # one filter per draw, kept pole and input (rows in that order: (b, j) major, input i minor)
+    bj = np.nonzero(w_k)
+    Q4 = np.zeros((idx.size, nk, m, N), dtype=complex)
+    Q4[bj] = first_order_filters(np.repeat(pole[bj], m), alpha[bj].ravel(), beta[bj].ravel(), u,
+                                 np.tile(np.arange(m), bj[0].size)).reshape(-1, m, N)
+    Q = Q4.reshape(idx.size, nk * m, N)
     coef = np.repeat(CV, m, axis=2)  # (b, o, nk m): the same output row for every input
-    y = coef.real @ Qre
-    y -= coef.imag @ Qim
+    y = coef.real @ np.ascontiguousarray(Q.real)
+    y -= coef.imag @ np.ascontiguousarray(Q.imag)
     if idx.size == B:
         out += y
     else:
