@@ -112,10 +112,11 @@ def innovation_ss_rows(residual: np.ndarray, order: int, coef: np.ndarray) -> np
     the products run along contiguous samples); ``order=0``: the plain sum of squares."""
     r = np.asarray(residual, dtype=float)
     n = r.shape[-1]
-    e = r[..., order:].copy()
-    for j in range(1, order + 1):
-        e -= coef[:, j - 1, None] * r[..., order - j: n - j]
-    return np.einsum("...n,...n->...", e, e)
+    with np.errstate(over="ignore", invalid="ignore"):  # a wild draw's response: inf, and log p -inf
+        e = r[..., order:].copy()
+        for j in range(1, order + 1):
+            e -= coef[:, j - 1, None] * r[..., order - j: n - j]
+        return np.einsum("...n,...n->...", e, e)
 
 
 class TimeDomainLikelihood:

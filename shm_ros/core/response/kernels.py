@@ -11,8 +11,9 @@ Two recursions run sample by sample and so cannot be vectorised over time:
   time-varying state-space filter; in numpy the loop costs a batched 16x16 product per sample
   (~5 us, mostly call overhead).
 
-Both are plain loops compiled by numba (cached on disk after the first call of a process) and give
-the results of plain loops to round-off (``test/test_response_kernels.py``).
+Both are plain loops compiled by numba (cached on disk after the first call of a process; the GIL
+released, so chunks on threads run in parallel) and give the results of plain loops to round-off
+(``test/test_response_kernels.py``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _filters(pole: np.ndarray, alpha: np.ndarray, beta: np.ndarray, u: np.ndarray, which: np.ndarray,
              out: np.ndarray) -> None:  # pragma: no cover - compiled
     n = u.shape[1]
@@ -46,7 +47,7 @@ def first_order_filters(pole: np.ndarray, alpha: np.ndarray, beta: np.ndarray, u
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _segments(Phi: np.ndarray, G1: np.ndarray, G2: np.ndarray, C: np.ndarray, D: np.ndarray, up: np.ndarray,
               L: int, y: np.ndarray) -> None:  # pragma: no cover - compiled
     B, J, ns = Phi.shape[0], Phi.shape[1], Phi.shape[2]
