@@ -1,19 +1,16 @@
 """Run a discretised system from rest over a record, like ``scipy.signal.lsim`` but exact.
 
-The recursion z[k+1] = Phi z[k] + d[k] (d from the inputs, computed for all k at once) is run in
-modal coordinates when Phi has a well-conditioned eigenbasis: each eigenvalue is then a first-order
-filter (``scipy.signal.lfilter``, compiled). Otherwise (integrator states of supports form a Jordan
-block) the recursion runs step by step.
+The recursion z[k+1] = Phi z[k] + G1 u[k] + G2 (u[k+1] - u[k]) runs in the system's own coordinates,
+sample by sample, compiled (:func:`.kernels.segment_response` with one segment): no eigenbasis, so
+integrator states of supports (a Jordan block) need no other route.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import lfilter
 
 from .discretize import DiscreteSystem
-
-_MAX_COND = 1e8  # eigenbasis condition number up to which the modal route keeps ~1e-8 accuracy
+from .kernels import segment_response
 
 
 def simulate(sys: DiscreteSystem, u: np.ndarray) -> np.ndarray:
@@ -21,27 +18,7 @@ def simulate(sys: DiscreteSystem, u: np.ndarray) -> np.ndarray:
     u = np.atleast_2d(np.asarray(u, dtype=float))
     if u.shape[0] != sys.G1.shape[1]:
         raise ValueError(f"u must have {sys.G1.shape[1]} rows (one per input), got {u.shape}")
-    N = u.shape[1]
-    n = sys.n_states
-    z = np.zeros((n, N))
-    if n and N > 1:
-        drive = sys.G1 @ u[:, :-1] + sys.G2 @ np.diff(u, axis=1)  # (n, N - 1)
-        z[:, 1:] = _recursion(sys.Phi, drive)
-    return sys.C @ z + sys.D @ u
-
-
-def _recursion(Phi: np.ndarray, drive: np.ndarray) -> np.ndarray:
-    """z[k+1] = Phi z[k] + drive[:, k] from z[0] = 0; returns z[1:] (n, N - 1)."""
-    lam, V = np.linalg.eig(Phi)
-    if np.linalg.cond(V) < _MAX_COND:
-        g = np.linalg.solve(V, drive)
-        q = np.empty_like(g)
-        for k in range(lam.size):
-            q[k] = lfilter([1.0], [1.0, -lam[k]], g[k])
-        return np.real(V @ q)
-    out = np.empty_like(drive)
-    zk = np.zeros(Phi.shape[0])
-    for k in range(drive.shape[1]):
-        zk = Phi @ zk + drive[:, k]
-        out[:, k] = zk
-    return out
+    if u.shape[1] == 0:
+        return np.zeros((sys.C.shape[0], 0))
+    return segment_response(sys.Phi[None, None], sys.G1[None, None], sys.G2[None, None], sys.C[None, None],
+                            sys.D[None, None], u, u.shape[1])[0]
