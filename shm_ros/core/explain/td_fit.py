@@ -201,8 +201,8 @@ class EventPosterior:
         lp = self.prior.logpdf(v[:, :self.nb - 1]) if self.nb > 1 else 0.0
         lp = lp + shape_logprior(v[:, self.nb - 1])
         # log-uniform candidate parameters: density 1 in u as well (u is the log position)
-        lp = ll + lp
-        out[ok] = np.where(np.isnan(lp), -np.inf, lp)  # a wild draw (response inf - inf)
+        logp = ll + lp
+        out[ok] = np.where(np.isnan(logp), -np.inf, logp)  # a wild draw (response inf - inf)
         return out
 
     def predict(self, u: np.ndarray, e: int) -> np.ndarray:
