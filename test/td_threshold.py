@@ -6,6 +6,9 @@ replicate, and its 99th percentile (with fewer than 100 replicates: the largest 
         python test/td_threshold.py --replicates 100 --seed 2000 --jobs 2 \\
         --out shm_ros/core/explain/threshold_timedomain.json
 
+``--more FILE --replicates N`` continues a run to N series (the same seeds, so the same result as a run
+of N).
+
 A candidate added to the set later needs only its own fits on the same replicates: ``--extend FILE
 --candidates NAME`` runs NAME alone on the replicates recorded in FILE (same seeds) and keeps, per
 replicate, the larger of the recorded largest gain and NAME's (the other candidates' fits do not depend
@@ -46,7 +49,10 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--summarize", default="", help="re-write the summary of a run's JSON (its gains and labels)")
     ap.add_argument("--extend", default="", help="a run's JSON to extend by the --candidates on its replicates")
     ap.add_argument("--candidates", default="", help="comma-separated candidates (with --extend)")
+    ap.add_argument("--more", default="", help="a run's JSON to continue to --replicates series (same seeds)")
     a = ap.parse_args(argv)
+    if a.more:
+        return more(a)
     if a.summarize:  # e.g. after the statistic's definition changed: the replicates are not re-run
         return resummarize(a)
     if a.extend:
@@ -91,6 +97,26 @@ def extend(a: argparse.Namespace) -> dict:
                    f"<the run's JSON> --candidates {','.join(cands)} --jobs {a.jobs}",
         "wall_s_per_replicate": round((time.time() - t0) * a.jobs / n, 1)}]
     write(out, a.out or a.extend)
+    print(json.dumps({k: v for k, v in out.items() if k not in ("gains", "labels")}, indent=2))
+    return out
+
+
+def more(a: argparse.Namespace) -> dict:
+    """The run in ``a.more`` continued to ``a.replicates`` series: replicate ``r`` depends only on
+    ``seed + r``, so the result is the run ``--replicates N`` would have made (module doc)."""
+    with open(a.more) as f:
+        old = json.load(f)
+    if "extended" in old:
+        raise SystemExit("--more needs a run of every candidate (not one extended by --extend)")
+    n, a.seed = int(old["replicates"]), int(old["seed"])
+    t0 = time.time()
+    runs = list(zip(old["gains"], old["labels"], strict=True))
+    with ProcessPoolExecutor(max(a.jobs, 1)) as pool:
+        for run in pool.map(replicate, [a.seed] * (a.replicates - n), range(n, a.replicates)):
+            runs.append(run)
+            out = summary(runs, a, old["wall_s_per_replicate"] * n / a.jobs + time.time() - t0)
+            out["provisional"] = len(runs) < a.replicates
+            write(out, a.out or a.more)
     print(json.dumps({k: v for k, v in out.items() if k not in ("gains", "labels")}, indent=2))
     return out
 
