@@ -12,7 +12,7 @@ and each pole (one of each conjugate pair) is one compiled first-order filter
 ill-conditioned (a Jordan block of support integrator states) falls back to
 :func:`shm_ros.core.response.simulate` on the matrix-exponential step.
 
-Chunks may run on ``threads`` threads (the products and eigenproblems release the GIL). Callers
+Chunks may run on ``threads`` threads (the products, eigenproblems and filters release the GIL). Callers
 should hold BLAS to one thread (``single_blas_thread``, as :func:`.predict.predict_event` does):
 the matrices are small, and a BLAS thread pool only waits on them (on a loaded machine, a hundred
 times slower). Results do not depend on ``threads`` or on the chunk size.
@@ -136,13 +136,14 @@ def _run_chunk(systems: list[StateSpace], u: np.ndarray, dt: float) -> np.ndarra
     CV = np.take_along_axis(C.astype(complex) @ V, keep[:, None, :], 2) * w_k[:, None, :]  # (b, o, nk)
     # one filter per draw, kept pole and input (rows in that order: (b, j) major, input i minor)
     bj = np.nonzero(w_k)
-    Q4 = np.zeros((idx.size, nk, m, N), dtype=complex)
-    Q4[bj] = first_order_filters(np.repeat(pole[bj], m), alpha[bj].ravel(), beta[bj].ravel(), u,
-                                 np.tile(np.arange(m), bj[0].size)).reshape(-1, m, N)
-    Q = Q4.reshape(idx.size, nk * m, N)
+    re, im = first_order_filters(np.repeat(pole[bj], m), alpha[bj].ravel(), beta[bj].ravel(), u,
+                                 np.tile(np.arange(m), bj[0].size))
+    Qre = np.zeros((idx.size, nk, m, N))
+    Qim = np.zeros((idx.size, nk, m, N))
+    Qre[bj], Qim[bj] = re.reshape(-1, m, N), im.reshape(-1, m, N)
     coef = np.repeat(CV, m, axis=2)  # (b, o, nk m): the same output row for every input
-    y = coef.real @ np.ascontiguousarray(Q.real)
-    y -= coef.imag @ np.ascontiguousarray(Q.imag)
+    y = coef.real @ Qre.reshape(idx.size, nk * m, N)
+    y -= coef.imag @ Qim.reshape(idx.size, nk * m, N)
     if idx.size == B:
         out += y
     else:

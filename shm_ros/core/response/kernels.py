@@ -7,9 +7,8 @@ Two recursions run sample by sample and so cannot be vectorised over time:
   :mod:`shm_ros.core.predict.batch`). ``scipy.signal.lfilter`` takes one filter per call: a call
   per pole, draw and input cost ~50 us each, mostly overhead.
 * :func:`segment_response`: the first-order-hold state recursion whose matrices change segment by
-  segment (:mod:`shm_ros.core.explain.td_varying`). scipy has no
-  time-varying state-space filter; in numpy the loop costs a batched 16x16 product per sample
-  (~5 us, mostly call overhead).
+  segment (:mod:`shm_ros.core.explain.td_varying`). scipy has no time-varying state-space filter;
+  in numpy the loop costs a batched 16x16 product per sample (~5 us, mostly call overhead).
 
 Both are plain loops compiled by numba (cached on disk after the first call of a process; the GIL
 released, so chunks on threads run in parallel) and give the results of plain loops to round-off
@@ -24,27 +23,31 @@ from numba import njit
 
 @njit(cache=True, nogil=True)
 def _filters(pole: np.ndarray, alpha: np.ndarray, beta: np.ndarray, u: np.ndarray, which: np.ndarray,
-             out: np.ndarray) -> None:  # pragma: no cover - compiled
+             re: np.ndarray, im: np.ndarray) -> None:  # pragma: no cover - compiled
     n = u.shape[1]
     for r in range(pole.shape[0]):
         p, a, b = pole[r], alpha[r], beta[r]
         x = u[which[r]]
         q = 0.0j
-        out[r, 0] = q
+        re[r, 0] = 0.0
+        im[r, 0] = 0.0
         for k in range(1, n):
             q = p * q + b * x[k] + a * x[k - 1]
-            out[r, k] = q
+            re[r, k] = q.real
+            im[r, k] = q.imag
 
 
 def first_order_filters(pole: np.ndarray, alpha: np.ndarray, beta: np.ndarray, u: np.ndarray,
-                        which: np.ndarray) -> np.ndarray:
-    """(R, N) complex outputs of R filters ``q[k] = pole q[k-1] + beta u[k] + alpha u[k-1]``, ``q[0] = 0``,
-    filter ``r`` driven by the input row ``u[which[r]]`` (``u`` real, (m, N))."""
+                        which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Real and imaginary parts, (R, N) each, of R filters ``q[k] = pole q[k-1] + beta u[k] +
+    alpha u[k-1]``, ``q[0] = 0``, filter ``r`` driven by the input row ``u[which[r]]`` (``u`` real,
+    (m, N)); apart, since the outputs are formed by two real products."""
     pole, alpha, beta = (np.ascontiguousarray(v, dtype=complex).ravel() for v in (pole, alpha, beta))
     u = np.ascontiguousarray(u, dtype=float)
-    out = np.empty((pole.size, u.shape[1]), dtype=complex)
-    _filters(pole, alpha, beta, u, np.ascontiguousarray(which, dtype=np.int64).ravel(), out)
-    return out
+    re = np.empty((pole.size, u.shape[1]))
+    im = np.empty_like(re)
+    _filters(pole, alpha, beta, u, np.ascontiguousarray(which, dtype=np.int64).ravel(), re, im)
+    return re, im
 
 
 @njit(cache=True, nogil=True)
