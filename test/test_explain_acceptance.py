@@ -132,3 +132,6 @@ def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss(seed):
     assert b is not None and a is not None and a <= 0.5 * b, (b, a)
     held = d["fit"]["held_out"]
     assert held["after"]["frequency_rmse_pct"] < held["before"]["frequency_rmse_pct"], held
+    # every refit on top of the first effect is in the table of candidates, the accepted one and the rest
+    on_top = [c for c in d["candidates"] if " on top of " in " ".join(c["reasons"])]
+    assert sum(c["accepted"] for c in on_top) == 1 and len(on_top) >= (1 if FULL else 3), on_top

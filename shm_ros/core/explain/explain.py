@@ -441,11 +441,11 @@ POOL = 4  # candidates refitted on top per round: the most supported ones alone
 
 def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config,
                   say, z_all=None) -> tuple[list[CandidateResult], FitScores, FitScores, tuple | None]:
-    """Greedy forward selection: every other candidate that cleared the threshold alone is refitted on
-    top of the effects accepted so far (held at their MAP); the best one is accepted when its gain
-    over them clears the same threshold, it improves the held-out windows further and its key
-    parameter excludes the null; repeated up to ``MAX_EFFECTS`` effects, with the ``POOL`` candidates
-    most supported alone. Candidates tied with an
+    """Greedy forward selection: other candidates are refitted on top of the effects accepted so far
+    (held at their MAP); the best one is accepted when its gain over them clears the same
+    ``threshold``, it improves the held-out windows further and its key parameter excludes the null;
+    repeated up to ``MAX_EFFECTS`` effects, with the ``POOL`` candidates most supported alone. Every
+    refit joins ``tried`` (the report's table of candidates), accepted or not. Candidates tied with an
     accepted one, or of the same name and group, are not tried again."""
     best = accepted[0]
     fixed = [(jobs[best.label][0].cand, jobs[best.label][1].theta_map)]
@@ -474,6 +474,10 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
         if not results:
             break
         results.sort(key=lambda t: -t[0].log_evidence_gain)
+        for other, _, _ in results[1:]:
+            other.reasons = [f"not the best on top of {', '.join(other.extra['on_top_of'])}: evidence gain "
+                             f"{other.log_evidence_gain:.1f} nats vs {results[0][0].log_evidence_gain:.1f}"]
+            tried.append(other)
         res, job, fr = results[0]
         key = job.cand.key_parameter()
         null = next(sp.null for sp in job.specs if sp.name == key)
@@ -491,6 +495,7 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
                        f"{'passed' if held < ref else 'failed'}: held-out {metric} {held:.3f} vs {ref:.3f} "
                        "without it"]
         if not ok:
+            tried.append(res)
             break
         res.accepted = True
         if config.nested_check:  # the second estimator, of the gain over nominal, less the same base
