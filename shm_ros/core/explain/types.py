@@ -102,7 +102,9 @@ class Verdict:
                             "log_evidence_gain_err": c.log_evidence_gain_err,
                             "log_evidence_gain_check_err": c.extra.get("check_err"),
                             "check_agrees": c.extra.get("check_agrees"),
-                            "prior_sensitivity": dict(c.prior_sensitivity)} for c in self.tried],
+                            "prior_sensitivity": dict(c.prior_sensitivity),
+                            **{k: float(c.extra[k]) for k in ("relative_support", "shape_log_likelihood")
+                               if k in c.extra}} for c in self.tried],
             "threshold": dict(self.threshold),
             "notes": list(self.notes),
         }
