@@ -13,7 +13,9 @@
 4. **Fit** every proposal (:mod:`.fit`: MAP, evidence by importance sampling, intervals, prior
    sensitivity) on the surrogate (:mod:`.surrogate`), the catch-all in closed form; the nested-sampling
    check for those that clear the threshold.
-5. **Select** (:mod:`.select`) and score the fit before / after, on training and held-out windows.
+5. **Select** (:mod:`.select`) and score the fit before / after, on training and held-out windows;
+   candidates tied on frequencies are compared again with the identified shapes (:mod:`.shapes`),
+   and more effects are fitted on top of the accepted one (the second round).
 """
 
 from __future__ import annotations
