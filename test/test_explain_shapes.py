@@ -93,3 +93,22 @@ def test_explain_names_the_span_not_its_mirror():
     mirror = [c for c in d["candidates"] if c["label"] == "stiffness_change_at_time/step/EI:1"]
     assert mirror and not mirror[0]["accepted"], mirror
     assert any("identified shapes" in r for r in mirror[0]["reasons"]), mirror[0]["reasons"]
+
+
+def test_second_round_takes_the_span_the_shapes_name():
+    """Two effects (a knee on the whole deck, then a loss in span 3; 192 windows): on top of the knee
+    the loss in span 1 and in span 3 gain the same to 0.1 nats; the shapes choose span 3."""
+    from explain_cases import draw_case
+
+    from shm_ros.core.explain.explain import explain
+
+    case = draw_case(9010, "temperature_dependent_stiffness", kind="girder", n_windows=192, form="bilinear",
+                     second_step=True)
+    assert case.truth.second is not None and case.truth.second.where == "EI:3"
+    d = explain(case.obs, structure_from_dict(case.structure)).to_dict()
+    step = [m for m in d["missing_physics"] if m["name"] == "stiffness_change_at_time"]
+    assert [m["where"] for m in step] == ["EI:3"], d["missing_physics"]
+    mirror = [c for c in d["candidates"] if c["label"] == "stiffness_change_at_time/step/EI:1"
+              and " on top of " in " ".join(c["reasons"])]
+    assert mirror and not mirror[0]["accepted"] and mirror[0]["shape_log_likelihood"] < -100, mirror
+    assert abs(mirror[0]["log_evidence_gain"] - step[0]["log_evidence_gain"]) < 2.0

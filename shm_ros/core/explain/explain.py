@@ -438,6 +438,27 @@ def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoc
 
 # -- ties: the shapes as a second witness ---------------------------------------------------------------
 
+def _shape_terms(fits: list[tuple[CandidateResult, _Job, FitResult]], sur: Surrogate, obs: ModalObservations,
+                 kept: list[int], train: np.ndarray) -> dict[str, float] | None:
+    """Each fit's shape log-likelihood at its MAP (:mod:`.shapes`; whole-structure groups level among
+    themselves), by label; None without identified shapes or where a candidate changes no group."""
+    if not obs.has_shapes or obs.shapes is None:
+        return None
+    try:
+        S = sur.groups.model.sensor_matrix(list(obs.sensor_ids))
+    except KeyError:
+        return None
+    observed = obs.shapes[:, kept, :]
+    ll = {}
+    for c, job, fr in fits:
+        mod = job.cand.modify(np.atleast_2d(fr.theta_map))
+        if not mod.groups:  # a damping candidate changes no shape
+            return None
+        ll[c.label] = shape_log_likelihood(observed, predicted_shapes(sur, {g: x[0] for g, x in mod.groups.items()},
+                                                                      S), train)
+    return shape_terms(ll, {c.label: c.where for c, _, _ in fits})
+
+
 def _shape_tiebreak(tied: list[CandidateResult], jobs, sur: Surrogate, obs: ModalObservations, kept: list[int],
                     train: np.ndarray, tie_nats: float) -> list[CandidateResult]:
     """Candidates tied on frequencies, compared again with the identified shapes' changes added
@@ -445,22 +466,9 @@ def _shape_tiebreak(tied: list[CandidateResult], jobs, sur: Surrogate, obs: Moda
     than ``tie_nats`` behind it in evidence and shapes together, leaves the tie (not accepted, with
     the reason); the rest stay tied with their relative support recomputed. Returns the tie, best
     first."""
-    if len(tied) < 2 or not obs.has_shapes or obs.shapes is None:
+    ll = _shape_terms([(c, *jobs[c.label]) for c in tied], sur, obs, kept, train) if len(tied) > 1 else None
+    if ll is None:
         return tied
-    try:
-        S = sur.groups.model.sensor_matrix(list(obs.sensor_ids))
-    except KeyError:
-        return tied
-    observed = obs.shapes[:, kept, :]
-    ll = {}
-    for c in tied:
-        job, fr = jobs[c.label]
-        mod = job.cand.modify(np.atleast_2d(fr.theta_map))
-        if not mod.groups:  # a damping candidate changes no shape
-            return tied
-        ll[c.label] = shape_log_likelihood(observed, predicted_shapes(sur, {g: x[0] for g, x in mod.groups.items()},
-                                                                      S), train)
-    ll = shape_terms(ll, {c.label: c.where for c in tied})
     top = max(ll.values())
     total = {c.label: c.log_evidence_gain + ll[c.label] - top for c in tied}
     best = max(tied, key=lambda c: total[c.label])
@@ -493,7 +501,8 @@ POOL = 4  # candidates refitted on top per round: the most supported ones alone
 
 
 def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config,
-                  say, z_all=None) -> tuple[list[CandidateResult], FitScores, FitScores, tuple | None]:
+                  say, z_all=None, obs: ModalObservations | None = None, kept: list[int] | None = None,
+                  ) -> tuple[list[CandidateResult], FitScores, FitScores, tuple | None]:
     """Greedy forward selection: other candidates are refitted on top of the effects accepted so far
     (held at their MAP); the best one is accepted when its gain over them clears the same
     ``threshold``, it improves the held-out windows further and its key parameter excludes the null;
@@ -527,9 +536,19 @@ def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_
         if not results:
             break
         results.sort(key=lambda t: -t[0].log_evidence_gain)
+        # refits the frequencies cannot tell apart (a loss in either mirror span): the shapes choose
+        level = [t for t in results if results[0][0].log_evidence_gain - t[0].log_evidence_gain <= config.tie_nats]
+        ll = _shape_terms(level, sur, obs, kept, train) if len(level) > 1 and obs is not None and kept else None
+        if ll is not None:
+            top = max(ll.values())
+            for r, _, _ in level:
+                r.extra["shape_log_likelihood"] = ll[r.label] - top
+            results.sort(key=lambda t: -(t[0].log_evidence_gain + t[0].extra.get("shape_log_likelihood", 0.0)))
         for other, _, _ in results[1:]:
             other.reasons = [f"not the best on top of {', '.join(other.extra['on_top_of'])}: evidence gain "
-                             f"{other.log_evidence_gain:.1f} nats vs {results[0][0].log_evidence_gain:.1f}"]
+                             f"{other.log_evidence_gain:.1f} nats vs {results[0][0].log_evidence_gain:.1f}"
+                             + (f", shapes {other.extra['shape_log_likelihood']:+.1f} nats against it"
+                                if "shape_log_likelihood" in other.extra else "")]
             tried.append(other)
         res, job, fr = results[0]
         key = job.cand.key_parameter()
@@ -692,7 +711,8 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     last = (jobs[accepted[0].label][0], jobs[accepted[0].label][1].theta_map) if accepted else None
     if accepted and config.second_round:
         more_accepted, fit_after, held_after, more_last = _more_effects(
-            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config, say, z_all)
+            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config, say, z_all,
+            obs, kept)
         accepted += more_accepted
         last = more_last or last
     catch = None
