@@ -39,7 +39,7 @@ from .fit import Box, FitResult, evidence_check, fit
 from .groups import GroupModel, build_groups
 from .likelihood import S_RANGE, CandidateLikelihood, catch_all_gain
 from .select import decide, shipped_threshold
-from .shapes import predicted_shapes, shape_log_likelihood, shape_terms
+from .shapes import break_tie, shape_terms_of
 from .surrogate import Surrogate
 from .types import Baseline, CandidateResult, FitScores, Mismatch, Proposal, Verdict
 
@@ -440,58 +440,16 @@ def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoc
 
 def _shape_terms(fits: list[tuple[CandidateResult, _Job, FitResult]], sur: Surrogate, obs: ModalObservations,
                  kept: list[int], train: np.ndarray) -> dict[str, float] | None:
-    """Each fit's shape log-likelihood at its MAP (:mod:`.shapes`; whole-structure groups level among
-    themselves), by label; None without identified shapes or where a candidate changes no group."""
-    if not obs.has_shapes or obs.shapes is None:
-        return None
-    try:
-        S = sur.groups.model.sensor_matrix(list(obs.sensor_ids))
-    except KeyError:
-        return None
-    observed = obs.shapes[:, kept, :]
-    ll = {}
-    for c, job, fr in fits:
-        mod = job.cand.modify(np.atleast_2d(fr.theta_map))
-        if not mod.groups:  # a damping candidate changes no shape
-            return None
-        ll[c.label] = shape_log_likelihood(observed, predicted_shapes(sur, {g: x[0] for g, x in mod.groups.items()},
-                                                                      S), train)
-    return shape_terms(ll, {c.label: c.where for c, _, _ in fits})
+    """Each fit's shape term at its MAP (:func:`.shapes.shape_terms_of`), by label."""
+    return shape_terms_of([(c.label, c.where, job.cand.modify(np.atleast_2d(fr.theta_map))) for c, job, fr in fits],
+                          sur, obs, kept, train)
 
 
 def _shape_tiebreak(tied: list[CandidateResult], jobs, sur: Surrogate, obs: ModalObservations, kept: list[int],
                     train: np.ndarray, tie_nats: float) -> list[CandidateResult]:
-    """Candidates tied on frequencies, compared again with the identified shapes' changes added
-    (:mod:`.shapes`): one that the shapes put more than ``tie_nats`` behind the best, and that is more
-    than ``tie_nats`` behind it in evidence and shapes together, leaves the tie (not accepted, with
-    the reason); the rest stay tied with their relative support recomputed. Returns the tie, best
-    first."""
+    """Candidates tied on frequencies compared again with their shapes (:func:`.shapes.break_tie`)."""
     ll = _shape_terms([(c, *jobs[c.label]) for c in tied], sur, obs, kept, train) if len(tied) > 1 else None
-    if ll is None:
-        return tied
-    top = max(ll.values())
-    total = {c.label: c.log_evidence_gain + ll[c.label] - top for c in tied}
-    best = max(tied, key=lambda c: total[c.label])
-    keep = []
-    for c in tied:
-        c.extra["shape_log_likelihood"] = ll[c.label] - ll[best.label]
-        behind = ll[best.label] - ll[c.label]
-        if c is not best and behind > tie_nats and total[best.label] - total[c.label] > tie_nats:
-            c.accepted = False
-            c.tied_with = []
-            c.extra.pop("relative_support", None)
-            c.reasons.append(f"failed: the identified shapes' changes prefer {best.label} by {behind:.1f} nats "
-                             "(the frequencies cannot tell them apart)")
-        else:
-            keep.append(c)
-    keep.sort(key=lambda c: -total[c.label])
-    z = [math.exp(total[c.label] - total[best.label]) for c in keep]
-    for c, zi in zip(keep, z, strict=True):
-        c.tied_with = [o.label for o in keep if o is not c]
-        c.extra["relative_support"] = zi / sum(z)
-        c.reasons.append(f"shapes: log-likelihood of the shape changes {c.extra['shape_log_likelihood']:+.1f} "
-                         f"nats against {best.label}")
-    return keep
+    return tied if ll is None else break_tie(tied, ll, tie_nats)
 
 
 # -- second round: more effects on top of the accepted ones --------------------------------------------

@@ -24,9 +24,15 @@ keep equal shape terms and stay tied, and two candidates that both scale the who
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from shm_ros.core.bayes.observations import ModalObservations
+
+from .candidates.base import Modification
 from .surrogate import Surrogate, _eig
+from .types import CandidateResult
 
 N_LEVELS = 24  # factor levels per group at which shapes are computed (steps need two)
 # groups that scale the whole structure: they move shapes only through what they leave out (a deck's
@@ -90,3 +96,53 @@ def shape_log_likelihood(observed: np.ndarray, predicted: np.ndarray, train: np.
     n = ok.sum(axis=(0, 2))
     use = (n > 0) & (sse > 0)
     return float(np.sum(-0.5 * n[use] * np.log(sse[use] / n[use])))
+
+
+def shape_terms_of(fits: list[tuple[str, str, Modification]], sur: Surrogate, obs: ModalObservations,
+                   kept: list[int], train: np.ndarray) -> dict[str, float] | None:
+    """The shape term of each fit ``(label, group, its modification at the MAP)``, by label
+    (:func:`shape_terms`); None without identified shapes or where a candidate changes no group."""
+    if not obs.has_shapes or obs.shapes is None:
+        return None
+    try:
+        S = sur.groups.model.sensor_matrix(list(obs.sensor_ids))
+    except KeyError:
+        return None
+    observed = obs.shapes[:, kept, :]
+    ll = {}
+    for label, _, mod in fits:
+        if not mod.groups:  # a damping candidate changes no shape
+            return None
+        ll[label] = shape_log_likelihood(observed, predicted_shapes(sur, {g: x[0] for g, x in mod.groups.items()}, S),
+                                         train)
+    return shape_terms(ll, {label: where for label, where, _ in fits})
+
+
+def break_tie(tied: list[CandidateResult], ll: dict[str, float], tie_nats: float) -> list[CandidateResult]:
+    """The tie again with the shape terms ``ll`` added to the evidence gains: a candidate more than
+    ``tie_nats`` behind the best in shapes, and more than ``tie_nats`` behind it in evidence and shapes
+    together, leaves the tie (not accepted, with the reason); the rest stay tied with their relative
+    support recomputed. Returns the tie, best first."""
+    top = max(ll.values())
+    total = {c.label: c.log_evidence_gain + ll[c.label] - top for c in tied}
+    best = max(tied, key=lambda c: total[c.label])
+    keep = []
+    for c in tied:
+        c.extra["shape_log_likelihood"] = ll[c.label] - ll[best.label]
+        behind = ll[best.label] - ll[c.label]
+        if c is not best and behind > tie_nats and total[best.label] - total[c.label] > tie_nats:
+            c.accepted = False
+            c.tied_with = []
+            c.extra.pop("relative_support", None)
+            c.reasons.append(f"failed: the identified shapes' changes prefer {best.label} by {behind:.1f} nats "
+                             "(the frequencies cannot tell them apart)")
+        else:
+            keep.append(c)
+    keep.sort(key=lambda c: -total[c.label])
+    z = [math.exp(total[c.label] - total[best.label]) for c in keep]
+    for c, zi in zip(keep, z, strict=True):
+        c.tied_with = [o.label for o in keep if o is not c]
+        c.extra["relative_support"] = zi / sum(z)
+        c.reasons.append(f"shapes: log-likelihood of the shape changes {c.extra['shape_log_likelihood']:+.1f} "
+                         f"nats against {best.label}")
+    return keep
