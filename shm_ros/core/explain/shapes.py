@@ -1,9 +1,9 @@
 """Mode shapes as a second witness where frequencies cannot tell candidates apart.
 
-Two candidates tie on frequencies when their changes of ln f are the same: a stiffness loss in the
-first or in the last span of a symmetric girder, in the second or the second-last story. Their
-shapes do change differently (mirror images of each other), and a tracked-modes table carries the
-identified shapes per window. Per tied candidate at its MAP, the exact model's shapes at the sensors
+Two candidates tie on frequencies when their changes of ln f are the same: a stiffness loss or an
+added mass in the first or in the last span of a symmetric girder. Their shapes do change
+differently (mirror images of each other), and a tracked-modes table carries the identified shapes
+per window. Per tied candidate at its MAP, the exact model's shapes at the sensors
 are computed per window (the group factors quantised to :data:`N_LEVELS` levels, one eigen-solution
 each) and compared with the identified ones, both unit-normalised with their signs aligned:
 
@@ -15,7 +15,7 @@ each) and compared with the identified ones, both unit-normalised with their sig
   changes over the training windows and sensors (``n_k`` entries).
 
 Differences of this log-likelihood between tied candidates are added to their evidence gains
-(:func:`shape_support`): the shapes are extra data, assumed independent of the frequencies, and the
+(:func:`break_tie`): the shapes are extra data, assumed independent of the frequencies, and the
 parameters stay at each candidate's frequency MAP (a plug-in approximation; the shapes' share of the
 information on the parameters is small). Candidates that change no shape in a way the sensors see
 keep equal shape terms and stay tied, and two candidates that both scale the whole structure
