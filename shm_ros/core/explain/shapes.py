@@ -63,16 +63,12 @@ def predicted_shapes(sur: Surrogate, factors: dict[str, np.ndarray], sensor_matr
     """Model shapes at the sensors (W, K, S) of the paired modes for per-window group factors (W,)."""
     names = list(factors)
     X = np.column_stack([np.asarray(factors[g], float) for g in names])  # (W, G)
-    levels = np.empty_like(X)
-    for j in range(X.shape[1]):
-        u = np.unique(X[:, j])
-        if u.size > N_LEVELS:  # quantise a continuous factor (shapes move smoothly with it)
-            edges = np.linspace(u.min(), u.max(), N_LEVELS + 1)
+    levels = X.copy()
+    for j, x in enumerate(X.T):
+        if np.unique(x).size > N_LEVELS:  # quantise a continuous factor (shapes move smoothly with it)
+            edges = np.linspace(x.min(), x.max(), N_LEVELS + 1)
             mids = 0.5 * (edges[1:] + edges[:-1])
-            u = mids[np.clip(np.searchsorted(edges, X[:, j]) - 1, 0, N_LEVELS - 1)]
-            levels[:, j] = u
-        else:
-            levels[:, j] = X[:, j]
+            levels[:, j] = mids[np.clip(np.searchsorted(edges, x) - 1, 0, N_LEVELS - 1)]
     uniq, inv = np.unique(levels, axis=0, return_inverse=True)
     K, M = sur.groups.matrices({g: uniq[:, j] for j, g in enumerate(names)})
     _, phi = _eig(K, M, sur.n_modes)
