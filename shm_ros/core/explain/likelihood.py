@@ -13,9 +13,14 @@ candidate's change ``D_wk(theta) = ln f_model(theta) - ln f_baseline`` (:mod:`.s
   baseline MAP but their linearised re-calibration is integrated out of the mean part (flat prior on
   the directions of their sensitivities), so a candidate whose average shifts all modes like the
   nominal stiffness does is not penalised for it.
-* ``eta_k`` ~ N(0, tau^2): the analysis model's sensitivity of mode k to the effect is itself off by
-  a model-form error (tau = 10 % by default); integrated out (Laplace, exact in eta given sigma),
-  with eta held within 3 tau.
+* ``eta_k`` ~ N(0, tau_k^2): the analysis model's sensitivity of mode k to the effect is itself off by
+  a model-form error; integrated out (Laplace, exact in eta given sigma), with eta held within
+  3 tau_k. The error of a mode's change is ``tau`` (10 % by default) of the larger of that change
+  and the typical mode's (RMS over the modes): tau_k = tau max(1, u / u_k). A mode that barely feels
+  the effect in the analysis model may feel it several times more in the structure (a local
+  stiffness change and a mode whose curvature in that span the model puts elsewhere), so its error
+  is not a fraction of its own tiny change; without this, such a mode, precise over hundreds of
+  windows, pulls the effect's size far off (a span's knee 30 % too steep).
 * ``eps_wk`` ~ N(0, sigma_k^2): identification scatter, sigma_k^2 inverse-gamma (shape a, mode
   ``noise_guess^2``) and integrated out in closed form: ``-(a + m/2) ln(b + SSW/2)``.
 
@@ -70,8 +75,11 @@ class _Part:
         d = np.where(self.ok, d, 0.0)
         return np.where(self.ok, d - d.sum(axis=1, keepdims=True) / np.maximum(self.n, 1), 0.0)
 
-    def loglik(self, d: np.ndarray | None, tau: float) -> np.ndarray:
-        """Within-mode log marginal (B, K) of residuals minus (1 + eta) d, eta ~ N(0, tau^2)."""
+    def loglik(self, d: np.ndarray | None, tau: float, spread: bool = False) -> np.ndarray:
+        """Within-mode log marginal (B, K) of residuals minus (1 + eta) d, eta ~ N(0, tau_k^2).
+
+        ``spread``: tau_k = tau max(1, u / u_k), u_k the RMS of mode k's change over the windows and
+        u its RMS over the modes (module docstring); else tau_k = tau."""
         m = np.maximum(self.n - 1, 0)
         alpha = self.a + 0.5 * m
         s0 = np.sum(self.r ** 2, axis=0)
@@ -82,8 +90,14 @@ class _Part:
         S0 = np.sum(e ** 2, axis=1)
         A = np.sum(dc ** 2, axis=1)
         c = np.sum(dc * e, axis=1)
+        tau_k = np.full_like(A, tau)
+        if spread:
+            u2 = A / np.maximum(self.n, 1)
+            tau_k = tau * np.sqrt(np.maximum(1.0, np.mean(u2, axis=1, keepdims=True) / np.maximum(u2, 1e-300)))
+        tau = tau_k
         sig2 = (self.b + 0.5 * S0) / (alpha + 1.0)
         eta = np.zeros_like(S0)
+        ssw = S0
         for _ in range(3):  # eta given sigma^2, sigma^2 given eta (converges in a few steps)
             prec = A / sig2 + 1.0 / tau ** 2
             # at most 3 tau: with thousands of windows a free eta could even flip the effect's sign
@@ -137,7 +151,7 @@ class CandidateLikelihood:
         return _logsumexp(ll, axis=1) - math.log(len(v))
 
     def _total(self, d: np.ndarray | None, dd: np.ndarray | None) -> np.ndarray:
-        out = self.freq.loglik(d, self.tau).sum(axis=1)
+        out = self.freq.loglik(d, self.tau, spread=True).sum(axis=1)
         dbar = None
         if d is not None:
             dm = np.where(self.freq.ok, d, 0.0)
