@@ -17,8 +17,8 @@ from shm_ros.core.structure import structure_from_dict
 # seeds of draw_case(seed, "stiffness_change_at_time", n_windows=192) whose change window and the one
 # before it are held out: 11 of 31000-31039. On the nine whose verdict holds a step (2026-11-27) it
 # lands on the truth's window in all nine; fitted on the training windows it was off by 5, -4, -2,
-# -2, 1, 4, 3, -2, -1. CI takes three (girder and building).
-SEEDS = (31001, 31002, 31024)
+# -2, 1, 4, 3, -2, -1. CI takes two (a girder and a building; 5 and -4 before).
+SEEDS = (31001, 31002)
 
 
 def test_a_change_inside_a_held_out_block_is_placed_by_its_windows():
