@@ -4,9 +4,9 @@ analysis model's class: per-mode offsets no parameter explains, out-of-plane mod
 ones), scored by test/explain_scoring.py against the truth.
 
 Full size (``SHM_FULL=1``): 5 cases per vocabulary name (40), 864 windows each; 50 clean seeds;
-5 cases of two effects. Criteria (docs/explain.md): the right top name in >= 90 % overall and >= 60 %
+15 cases of two effects. Criteria (docs/explain.md): the right top name in >= 90 % overall and >= 60 %
 per name, and among those every parameter / fit check in >= 90 %; no false alarm in >= 95 % of the
-clean seeds; both effects with their checks in >= 4 of 5 two-effect cases.
+clean seeds; both effects with every check in >= 13 of 15 two-effect cases.
 
 Reduced size (CI): one case per name (8) at 192 windows, 6 clean seeds, one two-effect case, with
 thresholds that a method meeting the full-size rates passes with >= 99 % probability:
@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 from explain_cases import draw_case
@@ -39,7 +40,7 @@ NAMES = ("temperature_dependent_stiffness", "amplitude_dependent_stiffness", "am
 PER_NAME = 5 if FULL else 1
 WINDOWS = 864 if FULL else 192
 CLEAN_SEEDS = 50 if FULL else 6
-TWO = 5 if FULL else 1
+TWO = 15 if FULL else 1
 
 
 def _run(case):
@@ -113,25 +114,45 @@ def test_unmodelled_modes_listed_exactly():
         assert top_entry(d) is None, d["missing_physics"]
 
 
-@pytest.mark.parametrize("seed", range(TWO))
-def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss(seed):
+def _two_effects(seed: int) -> dict[str, bool]:
+    """Seed ``9000 + seed`` of the freezing knee and the later loss: each criterion, True or False."""
     case = draw_case(9000 + seed, "temperature_dependent_stiffness", kind="girder", n_windows=WINDOWS,
                      form="bilinear", second_step=True)
     v, d = _run(case)
     _check_evidence(d)
     found = [m for m in d["missing_physics"] if m["name"] != "unmodelled_modes"]
     names = [m["name"] for m in found]
-    assert "temperature_dependent_stiffness" in names and "stiffness_change_at_time" in names, found
+    out = {"both": "temperature_dependent_stiffness" in names and "stiffness_change_at_time" in names}
+    if not out["both"]:
+        return out
     knee = next(m for m in found if m["name"] == "temperature_dependent_stiffness")
     step = next(m for m in found if m["name"] == "stiffness_change_at_time")
     checks = parameter_checks("temperature_dependent_stiffness", knee, case.truth, case.obs.times)
-    assert checks.get("knee") and checks.get("slope"), (checks, knee["parameters"], case.truth)
-    assert abs(int(step["change_window"]) - int(case.truth.second.change_index)) <= 6, (step, case.truth.second)
+    out.update(knee=bool(checks.get("knee")), slope=bool(checks.get("slope")),
+               time=abs(int(step["change_window"]) - int(case.truth.second.change_index)) <= 6)
     # the fit of both together (not the top entry's name, which may be the step's tied twin)
     b, a = truth_misfit(case, v.figures)
-    assert b is not None and a is not None and a <= 0.5 * b, (b, a)
+    out["halved"] = b is not None and a is not None and a <= 0.5 * b
     held = d["fit"]["held_out"]
-    assert held["after"]["frequency_rmse_pct"] < held["before"]["frequency_rmse_pct"], held
+    out["held_out"] = held["after"]["frequency_rmse_pct"] < held["before"]["frequency_rmse_pct"]
     # every refit on top of the first effect is in the table of candidates, the accepted one and the rest
     on_top = [c for c in d["candidates"] if " on top of " in " ".join(c["reasons"])]
-    assert sum(c["accepted"] for c in on_top) == 1 and len(on_top) >= (1 if FULL else 3), on_top
+    out["listed"] = sum(c["accepted"] for c in on_top) == 1 and len(on_top) >= (1 if FULL else 3)
+    return out
+
+
+@pytest.mark.skipif(FULL, reason="at full size: test_two_effects_over_seeds")
+def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss():
+    checks = _two_effects(0)
+    assert all(checks.values()), checks
+
+
+@pytest.mark.skipif(not FULL, reason="full size only (SHM_FULL=1)")
+def test_two_effects_over_seeds():
+    """15 seeds; every criterion in at least 13 (the named cases' 90 % per check, 13.5 of 15, less
+    the half case a finite count cannot meet)."""
+    with ProcessPoolExecutor(2) as pool:  # the named cases' test runs beside it: two cores in all
+        rows = dict(zip(range(TWO), pool.map(_two_effects, range(TWO)), strict=True))
+    bad = {seed: [k for k, ok in c.items() if not ok] for seed, c in rows.items() if not all(c.values())}
+    print(f"two effects: {TWO - len(bad)}/{TWO} meet every criterion; failures {bad}")
+    assert TWO - len(bad) >= 13, bad

@@ -67,6 +67,8 @@ class CandidateResult:
             out["change_window"] = int(self.extra["change_window"])  # first window after the change
         if self.tied_with:
             out["tied_with"] = list(self.tied_with)
+        if "estimated_on" in self.extra:
+            out["estimated_on"] = str(self.extra["estimated_on"])
         return out
 
 
