@@ -292,9 +292,14 @@ def _patterns(effects: list[_Effect], X: np.ndarray, Z: np.ndarray, ok: np.ndarr
 
 def _rank_groups(p: np.ndarray, se: np.ndarray, sens: dict[str, np.ndarray], cfg: LocateConfig
                  ) -> list[tuple[str, float]]:
-    """Groups by the weighted misfit of p = c s_g (chi-square per degree of freedom), best first."""
+    """Groups by the weighted misfit of p = c s_g (chi-square per degree of freedom), best first.
+
+    The model-form allowance of a mode is a share of the larger of its own shift and the typical
+    mode's (RMS over the modes), as in the candidates' likelihood: a mode that barely moves may move
+    several times more or less in the structure than the model says."""
     out = []
-    var = se ** 2 + (cfg.model_form_allowance * np.abs(p)) ** 2 + 1e-10
+    typical = float(np.sqrt(np.mean(p ** 2)))
+    var = se ** 2 + (cfg.model_form_allowance * np.maximum(np.abs(p), typical)) ** 2 + 1e-10
     for g, s in sens.items():
         s = np.asarray(s, float)
         if s.shape != p.shape or not np.any(np.abs(s) > 1e-6):
@@ -316,7 +321,13 @@ def _proposals_for(e: _Effect, ranked: list[tuple[str, float]], cfg: LocateConfi
     if not ranked:
         return []
     best = ranked[0][1]
-    groups = [g for g, chi in ranked if chi <= max(3.0 * best, best + 2.0)][:cfg.groups_per_effect]
+    groups = [g for g, chi in ranked if chi <= max(3.0 * best, best + 2.0)]
+    # at most groups_per_effect, but never one of a pair of equal fits without the other (a span
+    # and its mirror image: the frequencies cannot tell them apart, the shapes can)
+    chi = dict(ranked)
+    keep = groups[:cfg.groups_per_effect]
+    last = chi[keep[-1]] if keep else 0.0
+    groups = keep + [g for g in groups[len(keep):] if abs(chi[g] - last) <= 1e-6 * max(1.0, last)]
     out: list[Proposal] = []
     h = dict(e.hints)
     for g in groups:
