@@ -11,7 +11,7 @@ clean seeds; both effects with every check in >= 13 of 15 two-effect cases.
 Reduced size (CI): one case per name (8) at 192 windows, 6 clean seeds, one two-effect case, with
 thresholds that a method meeting the full-size rates passes with >= 99 % probability:
 * named cases: a case counts when its top name and all its checks hold; with a per-case rate of 0.95
-  (the full-size requirement 0.9 x 0.9 is below what the method reaches, 0.96 in the recorded run),
+  (the full-size requirement 0.9 x 0.9 is below what the method reaches, 0.95 in the recorded run),
   P(at least 6 of 8) = 0.994;
 * clean: the threshold is the 99th percentile of the largest gain on clean replicates, so the per-seed
   false-alarm rate is about 1 %: P(at most 1 of 6) = 0.9985;
