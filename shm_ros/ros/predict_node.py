@@ -15,10 +15,9 @@ prediction, as ``shm-ros predict`` does. Predictions run one at a time in a work
 
 from __future__ import annotations
 
-import multiprocessing
 import time
 from collections import OrderedDict, deque
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +36,7 @@ from shm_ros.ros.node_main import overrides, spin
 from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
+from shm_ros.ros.worker_pool import WorkerPool
 
 REQUEST = "/shm/predict_request"  # std_msgs/msg/String: the id of a window to predict
 MAX_FILED = 100  # predictions kept for output_dir's files (the newest)
@@ -115,25 +115,13 @@ class PredictNode(Node):
                                  stream_qos())
         self.results: deque = deque(maxlen=MAX_FILED)  # (prediction, Table-3 row, model label) for output_dir
         self.waiting_since: float | None = None  # monotonic time of the first window held for the posterior
-        self._workers: set = set()
-        self.pool: ProcessPoolExecutor | None = self._new_pool() if self.enabled else None
+        self.workers: WorkerPool | None = (WorkerPool(predict_worker.init, (self.structure,), predict_worker.ready)
+                                           if self.enabled else None)
         steady_timer(self, 0.1, self._poll)
 
-    def _new_pool(self) -> ProcessPoolExecutor:
-        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=predict_worker.init, initargs=(self.structure,))
-        before = set(multiprocessing.active_children())
-        pool.submit(predict_worker.ready)
-        self._workers |= set(multiprocessing.active_children()) - before
-        return pool
-
     def destroy_node(self) -> None:
-        if self.pool is not None:
-            self.pool.shutdown(wait=False, cancel_futures=True)
-        for proc in self._workers:
-            if proc.is_alive():
-                proc.terminate()
-                proc.join(5.0)
+        if self.workers is not None:
+            self.workers.shutdown()
         super().destroy_node()
 
     def _on_window(self, msg: Any) -> None:
@@ -161,7 +149,8 @@ class PredictNode(Node):
                 pred, row = future.result()
             except BrokenProcessPool as exc:
                 self.diag.report("error", f"prediction failed: worker process lost ({exc})", "prediction")
-                self.pool = self._new_pool()
+                if self.workers is not None:
+                    self.workers.restart()
             except Exception as exc:  # a failed prediction must not take the node down
                 self.diag.report("error", f"prediction failed: {exc}", "prediction")
             else:
@@ -173,12 +162,12 @@ class PredictNode(Node):
                 self.diag.report("ok", f"{pred.window_id}: NRMS floor 4 {row.get('accel_floor4')}, "
                                  f"floor 8 {row.get('accel_floor8')}", "prediction")
             self.diag.publish()
-        if self.future is None and self.queue and self.pool is not None:
+        if self.future is None and self.queue and self.workers is not None:
             posterior = self._posterior_or_wait()
             if posterior is False:
                 return
             w = self.queue.popleft()
-            self.future = self.pool.submit(predict_worker.run, w, self.config, posterior)
+            self.future = self.workers.submit(predict_worker.run, w, self.config, posterior)
             self.future_model = "updated" if posterior and _posterior_file(posterior).is_file() else "nominal"
 
     def _write_files(self) -> None:

@@ -51,7 +51,13 @@ def stop_process(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, st
         out, _ = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
         proc.kill()
-        out, _ = proc.communicate()
+        try:
+            out, _ = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:  # a process the node started still holds its output pipe
+            out = ""
+            proc.wait()
+            if proc.stdout is not None:
+                proc.stdout.close()
         return -9, out or ""
     return proc.returncode, out or ""
 

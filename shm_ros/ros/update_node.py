@@ -22,9 +22,8 @@ every window received, at the start and end of a run and every 30 s during one.
 from __future__ import annotations
 
 import enum
-import multiprocessing
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
@@ -43,6 +42,7 @@ from shm_ros.ros.node_main import overrides, spin
 from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
+from shm_ros.ros.worker_pool import WorkerPool
 
 PROGRESS_EVERY_S = 30.0
 
@@ -106,32 +106,12 @@ class UpdateNode(Node):
         topic = topics.TRACKED_MODES if self.input is UpdateInput.TRACKED else topics.MODAL_ESTIMATES
         self.create_subscription(topics.message_class(topics.TYPES[topic]), topic, self._on_window,
                                  stream_qos())
-        self._workers: set[multiprocessing.process.BaseProcess] = set()
-        self.pool = self._new_pool()
+        self.workers = WorkerPool(update_worker.init, (self.structure,), update_worker.ready)
         steady_timer(self, 0.25, self._poll)
-
-    # worker process ---------------------------------------------------------------------------
-
-    def _new_pool(self) -> ProcessPoolExecutor:
-        # spawn, not fork: this process runs DDS threads, which a forked child would inherit dead
-        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=update_worker.init, initargs=(self.structure,))
-        self._submit(pool, update_worker.ready)  # start the process now, not at the first run
-        return pool
-
-    def _submit(self, pool: ProcessPoolExecutor, fn: Any, *args: Any) -> Future:
-        before = set(multiprocessing.active_children())
-        future = pool.submit(fn, *args)
-        self._workers |= set(multiprocessing.active_children()) - before
-        return future
 
     def destroy_node(self) -> None:
         """Stop a run in progress: the worker process is terminated, not waited for."""
-        self.pool.shutdown(wait=False, cancel_futures=True)
-        for proc in self._workers:
-            if proc.is_alive():
-                proc.terminate()
-                proc.join(5.0)
+        self.workers.shutdown()
         super().destroy_node()
 
     # runs -------------------------------------------------------------------------------------
@@ -150,11 +130,7 @@ class UpdateNode(Node):
             self.used = self.run_windows = n
             self.run_started = time.time()
             args = (list(self.windows.values()), self.input.value, self.config, self.posterior)
-            try:
-                self.future = self._submit(self.pool, update_worker.run, *args)
-            except BrokenProcessPool:  # the worker died while idle: once more with a new one
-                self.pool = self._new_pool()
-                self.future = self._submit(self.pool, update_worker.run, *args)
+            self.future = self.workers.submit(update_worker.run, *args)
 
     def _poll(self) -> None:
         """Timer (executor thread): collect a finished run, publish it, start the next one."""
@@ -171,7 +147,7 @@ class UpdateNode(Node):
         except BrokenProcessPool as exc:  # the worker died (e.g. out of memory): start another
             self.diag.report("error", f"update with {n} windows failed: worker process lost ({exc})",
                              "posterior")
-            self.pool = self._new_pool()
+            self.workers.restart()
         except Exception as exc:  # a failed update must not take the node down
             self.diag.report("error", f"update with {n} windows failed: {exc}", "posterior")
         else:

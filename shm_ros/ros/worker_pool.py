@@ -3,15 +3,35 @@
 Long, Python-bound work in the node's own process would hold the GIL and stall its executor; in a
 process of its own it does not, and the node can stop it at once (terminate). The process is
 spawned, not forked: the node's process runs DDS threads, which a forked child would inherit dead.
+A worker ends with its node: if the node is killed (SIGKILL, out of memory) it cannot terminate the
+worker, which would otherwise wait for tasks forever and keep the node's stdout pipe open.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
+import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
+
+PARENT_CHECK_S = 0.5
+
+
+def _exit_with_parent(parent: int) -> None:
+    # polling, not prctl(PR_SET_PDEATHSIG): that signal follows the thread that spawned the worker,
+    # which for a process pool can be any thread of the node
+    while os.getppid() == parent:
+        time.sleep(PARENT_CHECK_S)
+    os._exit(1)
+
+
+def _guarded_init(parent: int, init: Callable[..., None], initargs: tuple) -> None:
+    threading.Thread(target=_exit_with_parent, args=(parent,), name="parent-watch", daemon=True).start()
+    init(*initargs)
 
 
 class WorkerPool:
@@ -24,7 +44,8 @@ class WorkerPool:
 
     def _new(self) -> ProcessPoolExecutor:
         pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=self._init, initargs=self._initargs)
+                                   initializer=_guarded_init,
+                                   initargs=(os.getpid(), self._init, self._initargs))
         self._submit(pool, self._ready)  # start the process now, not at the first task
         return pool
 
