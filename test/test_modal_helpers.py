@@ -122,3 +122,13 @@ def test_json_round_trip_of_numpy_values(tmp_path):
 def test_json_refuses_unknown_objects():
     with pytest.raises(TypeError, match="object"):
         jsonio.dumps({"x": object()})
+
+
+def test_sign_aligned_uses_common_components_and_batches():
+    from shm_ros.core.modal import sign_aligned
+
+    ref = np.array([1.0, 2.0, np.nan])
+    assert np.array_equal(sign_aligned(np.array([-1.0, -1.0, 5.0]), ref), [1.0, 1.0, -5.0])
+    assert np.array_equal(sign_aligned(np.array([np.nan, np.nan, 3.0]), ref)[2:], [3.0])  # nothing shared
+    batch = np.array([[1.0, 1.0, 0.0], [-2.0, -1.0, 0.0]])
+    np.testing.assert_array_equal(sign_aligned(batch, ref), [[1.0, 1.0, 0.0], [2.0, 1.0, -0.0]])

@@ -4,7 +4,8 @@
   components missing (NaN) in either shape are left out);
 * :func:`mac_matrix` - MAC of every shape of one set against every shape of another (batched);
 * :func:`real_shape` - a complex shape rotated to its best real phase, largest component +1;
-* :func:`unit_max` - a real shape scaled so its largest-magnitude component is +1.
+* :func:`unit_max` - a real shape scaled so its largest-magnitude component is +1;
+* :func:`sign_aligned` - real shapes with the sign that agrees with a reference (batched).
 
 All accept complex shapes: MAC = |a^H b|^2 / (|a|^2 |b|^2), which is the usual real formula for real
 shapes. Where a shape is all zeros the MAC is 0 (not NaN).
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["mac", "mac_matrix", "real_shape", "unit_max"]
+__all__ = ["mac", "mac_matrix", "real_shape", "sign_aligned", "unit_max"]
 
 
 def mac(a: np.ndarray, b: np.ndarray, min_common: int = 1) -> np.ndarray:
@@ -74,3 +75,12 @@ def unit_max(v: np.ndarray) -> np.ndarray:
         return v.astype(float)
     k = int(np.argmax(np.abs(v)))
     return v / v[k] if v[k] != 0 else np.zeros(v.shape)
+
+
+def sign_aligned(shape: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Real ``shape`` with the sign that agrees with ``ref`` (along the last axis, broadcasting) on
+    their common finite components; unchanged where they share none or are orthogonal."""
+    a, b = np.asarray(shape, dtype=float), np.asarray(ref, dtype=float)
+    ok = np.isfinite(a) & np.isfinite(b)
+    dot = np.sum(np.where(ok, a * b, 0.0), axis=-1, keepdims=True)
+    return np.where(dot < 0, -a, a)

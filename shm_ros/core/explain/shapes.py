@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.modal import sign_aligned
 
 from .candidates.base import Modification
 from .surrogate import Surrogate, _eig
@@ -54,9 +55,7 @@ def shape_terms(ll: dict[str, float], where: dict[str, str]) -> dict[str, float]
 def _unit(phi: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """Unit-normalised (over the last axis, NaN ignored) with the sign that agrees with ``ref``."""
     n = np.sqrt(np.nansum(phi ** 2, axis=-1, keepdims=True))
-    u = phi / np.where(n > 0, n, 1.0)
-    s = np.sign(np.nansum(u * ref, axis=-1, keepdims=True))
-    return u * np.where(s == 0, 1.0, s)
+    return sign_aligned(phi / np.where(n > 0, n, 1.0), ref)
 
 
 def predicted_shapes(sur: Surrogate, factors: dict[str, np.ndarray], sensor_matrix: np.ndarray) -> np.ndarray:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from shm_ros.core.modal import mac as modal_mac
+from shm_ros.core.modal import sign_aligned
 from shm_ros.core.types import ModalEstimate
 
 
@@ -27,8 +28,7 @@ def mac_table(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def aligned(shape: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """``shape`` with the sign that agrees with ``ref`` on their common sensors."""
-    ok = np.isfinite(shape) & np.isfinite(ref)
-    return -shape if ok.any() and float(shape[ok] @ ref[ok]) < 0 else shape
+    return sign_aligned(shape, ref)
 
 
 def widen(shapes: np.ndarray, n_sensors: int) -> np.ndarray:
