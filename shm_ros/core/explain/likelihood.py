@@ -90,14 +90,12 @@ class _Part:
         S0 = np.sum(e ** 2, axis=1)
         A = np.sum(dc ** 2, axis=1)
         c = np.sum(dc * e, axis=1)
-        tau_k = np.full_like(A, tau)
+        tau = np.full_like(A, tau)  # tau_k
         if spread:
             u2 = A / np.maximum(self.n, 1)
-            tau_k = tau * np.sqrt(np.maximum(1.0, np.mean(u2, axis=1, keepdims=True) / np.maximum(u2, 1e-300)))
-        tau = tau_k
+            tau = tau * np.sqrt(np.maximum(1.0, np.mean(u2, axis=1, keepdims=True) / np.maximum(u2, 1e-300)))
         sig2 = (self.b + 0.5 * S0) / (alpha + 1.0)
         eta = np.zeros_like(S0)
-        ssw = S0
         for _ in range(3):  # eta given sigma^2, sigma^2 given eta (converges in a few steps)
             prec = A / sig2 + 1.0 / tau ** 2
             # at most 3 tau: with thousands of windows a free eta could even flip the effect's sign
