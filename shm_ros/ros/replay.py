@@ -113,13 +113,17 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 node.publisher(topic, msgtype)
             except (ImportError, AttributeError):
                 result.skipped_topics[topic] = f"{msgtype} (type not available)"
+        # /clock before the wait: a node whose clock subscription matches after the replay began
+        # would take the first windows at time 0 (as `ros2 bag play --clock`, time is published
+        # only once the clock's readers are matched)
+        clock = _Clock(node, clock_hz) if clock_hz > 0 else None
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.05)
             # With flow control, wait for a first count from the ingest node: it may have taken
             # other bags before, and credits are counted from where its count stands now.
             if all(p.get_subscription_count() > 0 for p in node.pubs.values()) and (
-                    rate > 0 or node.ack_seen):
+                    rate > 0 or node.ack_seen) and (clock is None or clock.matched(node)):
                 break
         flow = rate <= 0 and node.count_publishers(topics.INGEST_RECEIVED) > 0
         if rate <= 0 and not flow:
@@ -133,7 +137,6 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         in_flight_bytes = 0
         acked_upto = 0
         messages = reader(list(node.pubs))
-        clock = _Clock(node, clock_hz) if clock_hz > 0 else None
         for k, m in enumerate(_until_error(messages, result)):
             t0_bag = m.receive_ns if t0_bag is None else t0_bag
             last_bag = m.receive_ns
@@ -214,6 +217,11 @@ class _Clock:
         self.pub = node.create_publisher(Clock, "/clock", QoSProfile(
             history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.VOLATILE))
+
+    def matched(self, node: Node) -> bool:
+        """Every /clock reader the graph shows (at least one) has matched this publisher."""
+        seen = node.count_subscribers("/clock")
+        return seen > 0 and self.pub.get_subscription_count() >= seen
 
     def at(self, t_ns: int) -> None:
         if self.next_ns is not None and t_ns < self.next_ns:

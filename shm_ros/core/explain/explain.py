@@ -15,15 +15,13 @@
    check for those that clear the threshold.
 5. **Select** (:mod:`.select`) and score the fit before / after, on training and held-out windows;
    candidates tied on frequencies are compared again with the identified shapes (:mod:`.shapes`),
-   and more effects are fitted on top of the accepted one (the second round).
+   and more effects are fitted on top of the accepted one (the second round, :mod:`.rounds`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
-from datetime import datetime, timezone
 
 import numpy as np
 from scipy.optimize import minimize
@@ -34,15 +32,18 @@ from shm_ros.core.bayes.priors import priors_from_specs
 from shm_ros.core.models import build_model
 from shm_ros.core.structure import StructureSpec
 
-from .candidates.base import CANDIDATES, Candidate, Context, ParamSpec
+from .candidates.base import CANDIDATES, Candidate, Context
 from .config import ExplainConfig
 from .fit import Box, FitResult, evidence_check, fit
 from .groups import GroupModel, build_groups
+from .jobs import Job, iso_time, result
 from .likelihood import S_RANGE, CandidateLikelihood, catch_all_gain
+from .rounds import final_estimates, more_effects, shape_terms
+from .scoring import damping_scores, scatter, scores
 from .select import decide, shipped_threshold
-from .shapes import break_tie, shape_terms_of
+from .shapes import break_tie
 from .surrogate import Surrogate
-from .types import Baseline, CandidateResult, FitScores, Mismatch, Proposal, Verdict
+from .types import Baseline, CandidateResult, Mismatch, Proposal, Verdict
 
 Progress = Callable[[str, float], None]
 
@@ -167,56 +168,6 @@ def calibrate_baseline(obs: ModalObservations, spec: StructureSpec, train: np.nd
     return base, J
 
 
-# -- scores ------------------------------------------------------------------------------------------
-
-def _rmse_pct(res: np.ndarray) -> float:
-    v = res[np.isfinite(res)]
-    return float(100.0 * np.sqrt(np.mean(np.expm1(v) ** 2))) if v.size else float("nan")
-
-
-def scores(r: np.ndarray, delta: np.ndarray | None, train: np.ndarray) -> tuple[FitScores, FitScores]:
-    """Frequency RMSE (%) on the training and held-out windows of residuals ``r`` (W, K) after the
-    change ``delta`` (W, K), each mode's constant offset taken from the training windows."""
-    e = r if delta is None else r - delta
-    off = np.nanmean(e[train], axis=0)
-    e = e - off
-    return FitScores(_rmse_pct(e[train])), FitScores(_rmse_pct(e[~train]))
-
-
-def scatter(x: np.ndarray | None, scale: float = 100.0) -> float | None:
-    """The identification scatter of ``x`` (W, K) in time order, times ``scale``: per mode the robust
-    spread of differences between consecutive windows over sqrt(2) (slow effects and single steps hardly
-    enter), pooled as a root mean square over the modes. No model can fit below it: the misfit beyond
-    it (``sqrt(RMSE^2 - scatter^2)``) is what a candidate can explain."""
-    if x is None:
-        return None
-    out = []
-    for k in range(x.shape[1]):
-        v = x[np.isfinite(x[:, k]), k]
-        if v.size > 3:
-            d = np.diff(v)
-            out.append((1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2)) ** 2)
-    return float(scale * math.sqrt(np.mean(out))) if out else None
-
-
-def damping_scores(z: np.ndarray | None, ln_factor: np.ndarray | None, train: np.ndarray
-                   ) -> tuple[float | None, float | None]:
-    """Damping-ratio RMSE in percentage points on the training and held-out windows: the observed
-    ratios ``z`` (W, K) against each mode's typical ratio (geometric mean over the training windows)
-    times the candidate's factor ``exp(ln_factor)`` (W, 1 or K; None: no change)."""
-    if z is None:
-        return None, None
-    lz = np.log(np.where(z > 0, z, np.nan))
-    lf = 0.0 if ln_factor is None else ln_factor
-    off = np.nanmean((lz - lf)[train], axis=0)
-    e = z - np.exp(off + lf)
-
-    def rms(a: np.ndarray) -> float | None:
-        v = a[np.isfinite(a)]
-        return float(100 * np.sqrt(np.mean(v ** 2))) if v.size else None
-
-    return rms(e[train]), rms(e[~train])
-
 
 # -- proposals ---------------------------------------------------------------------------------------
 
@@ -278,334 +229,15 @@ def catch_all_basis(context: Context) -> tuple[np.ndarray, list[str]]:
     return np.column_stack(cols), names
 
 
-# -- one candidate -----------------------------------------------------------------------------------
-
-def _iso(epoch: float, t: float | None) -> str | None:
-    if t is None:
-        return None
-    return datetime.fromtimestamp(epoch + t, tz=timezone.utc).isoformat().replace("+00:00", "Z")
-
-
-class _Job:
-    """A candidate bound to the data: its gain function on the training windows."""
-
-    def __init__(self, cand: Candidate, sur: Surrogate, lik: CandidateLikelihood, train: np.ndarray):
-        self.cand, self.sur, self.lik, self.train = cand, sur, lik, train
-        self.specs: list[ParamSpec] = cand.params()
-
-    def deltas(self, theta: np.ndarray, windows: np.ndarray | None = None):
-        mod = self.cand.modify(np.atleast_2d(theta))
-        sel = slice(None) if windows is None else windows
-        d = None
-        if mod.groups:
-            from .candidates.base import Modification
-
-            d = self.sur.delta(Modification({g: x[:, sel] for g, x in mod.groups.items()}))
-        dd = None if mod.damping is None else np.log(np.maximum(mod.damping[:, sel], 1e-9))[..., None]
-        return d, dd
-
-    def gain(self, theta: np.ndarray) -> np.ndarray:
-        d, dd = self.deltas(theta, self.train)
-        return self.lik.gain(d, dd)
-
-
-class _OnTopJob(_Job):
-    """An effect on top of accepted ones, evaluated cheaply: the accepted effects' change of the
-    log-frequencies (exact, computed once) plus the new effect's own change (the surrogate of its
-    groups alone) plus a cross term, the exact joint change less those two, computed at one point
-    (``anchor``: the new effect's MAP of a first pass) and held fixed. Where several groups change
-    with continuous covariates the joint surrogate needs a small eigenproblem per window and draw;
-    this costs one. The joint model at the MAP is exact by construction; away from it the error is
-    second order in the parameters' deviation (the candidates' surrogate check reports it)."""
-
-    def __init__(self, cand: _OnTop, sur: Surrogate, lik: CandidateLikelihood, train: np.ndarray):
-        super().__init__(cand, sur, lik, train)
-        from .candidates.base import Modification
-
-        self.new_cand: Candidate = cand.new
-        fixed = Modification({}, None)
-        for c, th in cand.fixed:
-            f = c.modify(th[None])
-            for g, x in f.groups.items():
-                fixed.groups[g] = fixed.groups[g] * x if g in fixed.groups else np.array(x, dtype=float)
-            if f.damping is not None:
-                fixed.damping = f.damping if fixed.damping is None else fixed.damping * f.damping
-        self.fixed_mod = fixed
-        self.d_fixed = sur.delta(fixed)[0] if fixed.groups else None  # (W, K)
-        self.cross: np.ndarray | None = None
-
-    def anchor(self, theta: np.ndarray) -> None:
-        """Exact joint change at ``theta`` less the two parts: the cross term."""
-        self.cross = None
-        joint, _ = _Job.deltas(self, theta)
-        parts, _ = self.deltas(theta)
-        self.cross = None if joint is None or parts is None else (joint - parts)[0]
-
-    def deltas(self, theta: np.ndarray, windows: np.ndarray | None = None):
-        from .candidates.base import Modification
-
-        sel = slice(None) if windows is None else windows
-        new = self.new_cand.modify(np.atleast_2d(theta))
-        d = None
-        if new.groups:
-            d = self.sur.delta(Modification({g: x[:, sel] for g, x in new.groups.items()}))
-        if self.d_fixed is not None:
-            base = self.d_fixed[sel][None]
-            d = base if d is None else d + base
-        if d is not None and self.cross is not None:
-            d = d + self.cross[sel][None]
-        damping = new.damping
-        if self.fixed_mod.damping is not None:
-            damping = self.fixed_mod.damping if damping is None else damping * self.fixed_mod.damping
-        dd = None if damping is None else np.log(np.maximum(damping[:, sel], 1e-9))[..., None]
-        if d is not None and d.shape[0] == 1 and np.atleast_2d(theta).shape[0] > 1:
-            d = np.repeat(d, np.atleast_2d(theta).shape[0], axis=0)
-        return d, dd
-
-
-class _OnTop(Candidate):
-    """A candidate fitted on top of effects already accepted, those held at their MAP (the second
-    round): its evidence gain over them is ln Z(new | accepted) - ln L(accepted at their MAP).
-    Holding the accepted effects fixed is the approximation that keeps this as cheap as a first-round
-    fit; they are determined far better than the new, smaller effect."""
-
-    def __init__(self, new: Candidate, fixed: list[tuple[Candidate, np.ndarray]]):
-        super().__init__(new.group, new.context)
-        self.new, self.fixed = new, list(fixed)  # a copy: the caller appends to its list later
-        self.vocabulary = new.vocabulary  # type: ignore[misc]  # the instance speaks for the new effect
-        self.name = new.name  # type: ignore[misc]  # a ClassVar elsewhere: this instance stands for `new`
-        self.explanation = new.explanation  # type: ignore[misc]  # likewise
-
-    @property
-    def label(self) -> str:
-        return self.new.label
-
-    def params(self) -> list[ParamSpec]:
-        return self.new.params()
-
-    def modify(self, theta: np.ndarray):
-        from .candidates.base import Modification
-
-        m = self.new.modify(theta)
-        B = np.atleast_2d(theta).shape[0]
-        groups = {g: np.array(x, dtype=float) for g, x in m.groups.items()}
-        damping = None if m.damping is None else np.array(m.damping, dtype=float)
-        for cand, th in self.fixed:
-            f = cand.modify(th[None])
-            for g, x in f.groups.items():
-                groups[g] = groups[g] * x if g in groups else np.repeat(x, B, axis=0)
-            if f.damping is not None:
-                damping = f.damping.repeat(B, axis=0) if damping is None else damping * f.damping
-        return Modification(groups, damping)
-
-    def form(self, theta: np.ndarray) -> str:
-        return self.new.form(theta)
-
-    def time(self, theta: np.ndarray) -> float | None:
-        return self.new.time(theta)
-
-    def key_parameter(self) -> str:
-        return self.new.key_parameter()
-
-
-def _result(job: _Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch: float,
-            z_all: np.ndarray | None = None) -> CandidateResult:
-    c = job.cand
-    d_all, _ = job.deltas(fr.theta_map)
-    delta = None if d_all is None else d_all[0]
-    fit_after, held_after = scores(r_all, delta, train)
-    res_acts = "frequency" if delta is not None else "damping"
-    if z_all is not None:
-        _, dd = job.deltas(fr.theta_map)
-        fit_after.damping_rmse_pct, held_after.damping_rmse_pct = damping_scores(
-            z_all, None if dd is None else dd[0], train)
-    key = c.key_parameter()
-    res = CandidateResult(
-        name=c.vocabulary, label=c.label, form=c.form(fr.theta_map), where=c.group,
-        parameters=c.describe(fr.theta_map), intervals=fr.intervals,
-        log_evidence_gain=float(fr.evidence.log_z), log_evidence_gain_check=fr.check,
-        log_evidence_gain_err=float(fr.evidence.err), prior_sensitivity=dict(fr.prior_sensitivity),
-        time=_iso(epoch, c.time(fr.theta_map)), explanation=c.explanation, fit_after=fit_after,
-        held_out_after=held_after)
-    if delta is not None:
-        res.extra["delta"] = delta  # (W, K) change of ln f at the MAP: ties (select.decide)
-    res.extra.update({"key_parameter": key, "gain_at_map": fr.gain_map, "acts_on": res_acts, "evaluations": fr.n_eval,
-                      "check_method": fr.check_method, "check_err": fr.check_err})
-    t0 = c.time(fr.theta_map)
-    if t0 is not None:
-        res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, t0))
-    return res
-
 
 # -- ties: the shapes as a second witness ---------------------------------------------------------------
-
-def _shape_terms(fits: list[tuple[CandidateResult, _Job, FitResult]], sur: Surrogate, obs: ModalObservations,
-                 kept: list[int], train: np.ndarray) -> dict[str, float] | None:
-    """Each fit's shape term at its MAP (:func:`.shapes.shape_terms_of`), by label."""
-    return shape_terms_of([(c.label, c.where, job.cand.modify(np.atleast_2d(fr.theta_map))) for c, job, fr in fits],
-                          sur, obs, kept, train)
-
 
 def _shape_tiebreak(tied: list[CandidateResult], jobs, sur: Surrogate, obs: ModalObservations, kept: list[int],
                     train: np.ndarray, tie_nats: float) -> list[CandidateResult]:
     """Candidates tied on frequencies compared again with their shapes (:func:`.shapes.break_tie`)."""
-    ll = _shape_terms([(c, *jobs[c.label]) for c in tied], sur, obs, kept, train) if len(tied) > 1 else None
+    ll = shape_terms([(c, *jobs[c.label]) for c in tied], sur, obs, kept, train) if len(tied) > 1 else None
     return tied if ll is None else break_tie(tied, ll, tie_nats)
 
-
-# -- second round: more effects on top of the accepted ones --------------------------------------------
-
-MAX_EFFECTS = 2  # effects reported together (each more costs a round of fits on top of the others)
-POOL = 4  # candidates refitted on top per round: the most supported ones alone
-
-
-def _more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config,
-                  say, z_all=None, obs: ModalObservations | None = None, kept: list[int] | None = None,
-                  ) -> tuple[list[CandidateResult], FitScores, FitScores, tuple | None, list]:
-    """Greedy forward selection: other candidates are refitted on top of the effects accepted so far
-    (held at their MAP); the best one is accepted when its gain over them clears the same
-    ``threshold``, it improves the held-out windows further and its key parameter excludes the null;
-    repeated up to ``MAX_EFFECTS`` effects, with the ``POOL`` candidates most supported alone. Every
-    refit joins ``tried`` (the report's table of candidates), accepted or not. Candidates tied with an
-    accepted one, or of the same name and group, are not tried again."""
-    best = accepted[0]
-    fixed = [(jobs[best.label][0].cand, jobs[best.label][1].theta_map)]
-    base_gain = float(jobs[best.label][1].gain_map)
-    done = {best.label, *best.tied_with}
-    fit_after = best.fit_after or FitScores(float("nan"))
-    held_after = best.held_out_after or FitScores(float("nan"))
-    out: list[CandidateResult] = []
-    last = None
-    # every candidate tried alone, whatever its gain then: an effect may only show once a larger one
-    # is accounted for; other physics first (variations of the accepted effect, e.g. the same knee on
-    # another group, mostly explain the misfit it already explains and would fill the pool)
-    pool = sorted((c for c in tried if c.label not in done),
-                  key=lambda c: (c.name == best.name, -c.log_evidence_gain))[:POOL]
-    by_label = {p.candidate + "/" + p.group: p for p in proposals}
-    for _ in range(MAX_EFFECTS - 1):
-        results = []
-        for i, c in enumerate(pool):
-            job0 = jobs[c.label][0]
-            say(f"fit {c.label} on top of {len(fixed)} effect(s)", 0.9)
-            job, fr = _fit_on_top(job0.cand, fixed, sur, lik, train, config.seed + 100 + i, config)
-            res = _result(job, fr, r_all, train, epoch, z_all)
-            res.log_evidence_gain = float(fr.evidence.log_z - base_gain)
-            res.extra.update({"on_top_of": [f[0].label for f in fixed], "gain_over_nominal": float(fr.evidence.log_z)})
-            results.append((res, job, fr))
-        if not results:
-            break
-        results.sort(key=lambda t: -t[0].log_evidence_gain)
-        # refits the frequencies cannot tell apart (a loss in either mirror span): the shapes choose
-        level = [t for t in results if results[0][0].log_evidence_gain - t[0].log_evidence_gain <= config.tie_nats]
-        ll = _shape_terms(level, sur, obs, kept, train) if len(level) > 1 and obs is not None and kept else None
-        if ll is not None:
-            top = max(ll.values())
-            for r, _, _ in level:
-                r.extra["shape_log_likelihood"] = ll[r.label] - top
-            results.sort(key=lambda t: -(t[0].log_evidence_gain + t[0].extra.get("shape_log_likelihood", 0.0)))
-        for other, _, _ in results[1:]:
-            other.reasons = [f"not the best on top of {', '.join(other.extra['on_top_of'])}: evidence gain "
-                             f"{other.log_evidence_gain:.1f} nats vs {results[0][0].log_evidence_gain:.1f}"
-                             + (f", shapes {other.extra['shape_log_likelihood']:+.1f} nats against it"
-                                if "shape_log_likelihood" in other.extra else "")]
-            tried.append(other)
-        res, job, fr = results[0]
-        key = job.cand.key_parameter()
-        null = next(sp.null for sp in job.specs if sp.name == key)
-        from .select import held_out_metric, null_excluded
-
-        metric = held_out_metric(res)
-        held = getattr(res.held_out_after, metric) if res.held_out_after else None
-        held = math.inf if held is None else held
-        ref = getattr(held_after, metric)
-        ref = math.inf if ref is None else ref
-        ok = res.log_evidence_gain > threshold and held < ref and null_excluded(res, key, null)
-        res.reasons = [f"{'passed' if res.log_evidence_gain > threshold else 'failed'}: evidence gain "
-                       f"{res.log_evidence_gain:.1f} nats on top of {', '.join(res.extra['on_top_of'])} vs "
-                       f"threshold {threshold:.1f}",
-                       f"{'passed' if held < ref else 'failed'}: held-out {metric} {held:.3f} vs {ref:.3f} "
-                       "without it"]
-        if not ok:
-            tried.append(res)
-            break
-        res.accepted = True
-        if config.nested_check:  # the second estimator, of the gain over nominal, less the same base
-            chk, err, method = evidence_check(job.gain, Box(job.specs), config.n_live, config.seed + 200)
-            res.log_evidence_gain_check = float(chk - (res.extra["gain_over_nominal"] - res.log_evidence_gain))
-            tol = max(0.5, 3.0 * math.hypot(res.log_evidence_gain_err, err))
-            res.extra.update({"check_method": method, "check_err": err,
-                              "check_agrees": bool(abs(res.log_evidence_gain_check - res.log_evidence_gain) <= tol)})
-        res.extra["proposal_reason"] = getattr(by_label.get(res.label.split("/", 1)[1] if "/" in res.label else ""),
-                                               "reason", "")
-        out.append(res)
-        tried.append(res)
-        fixed.append((job.new_cand, fr.theta_map))
-        last = (job, fr.theta_map)
-        base_gain = float(fr.gain_map)
-        fit_after, held_after = res.fit_after or fit_after, res.held_out_after or held_after
-        same = {(c.name, c.where) for c in [best, *out]}
-        pool = [c for c in pool if c.label != res.label and (c.name, c.where) not in same]
-    return out, fit_after, held_after, last, fixed
-
-
-def _fit_on_top(cand: Candidate, fixed: list[tuple[Candidate, np.ndarray]], sur, lik, train, seed: int,
-                config: ExplainConfig):
-    """``cand`` fitted on top of the ``fixed`` effects (held at their values): a first fit, the cross
-    term anchored at its MAP, then the final fit (one fit when nothing is fixed). Returns the job and
-    the final fit."""
-    job = _OnTopJob(_OnTop(cand, fixed), sur, lik, train)
-    fr = fit(job.gain, job.specs, seed=seed, n_is=config.n_importance, sensitivity=False)
-    if fixed:
-        job.anchor(fr.theta_map)
-        fr = fit(job.gain, job.specs, seed=seed, n_is=config.n_importance, sensitivity=False)
-    return job, fr
-
-
-def _time_unhinted(cand: Candidate) -> Candidate:
-    """``cand`` with its change time searched over the whole campaign instead of around locate's
-    hinted window. The hint comes from a change-point search with the other effects only roughly
-    accounted for (a cold spell just after a loss moved it 17-28 windows late on simulated girders);
-    with them fitted and every window in the likelihood, the time's profile peaks by hundreds of nats
-    at the change. Candidates whose change window is not a parameter (it only places their on/off
-    pattern) are returned as they are."""
-    if "change_index" not in cand.context.hints or not any(s.grid and s.unit == "s" for s in cand.params()):
-        return cand
-    hints = {k: v for k, v in cand.context.hints.items() if k != "change_index"}
-    return type(cand)(cand.group, dataclasses.replace(cand.context, hints=hints))
-
-
-def _final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, np.ndarray]],
-                     twins: list[tuple[CandidateResult, Candidate]], sur, lik_all: CandidateLikelihood,
-                     epoch: float, config: ExplainConfig) -> None:
-    """The reported parameters (MAP and 95 % intervals) of the accepted effects, refitted on every
-    window, training and held-out: the held-out windows have done their part (the acceptance) and
-    hold information the parameters need (a change inside a held-out day is placed only by its
-    windows). With several effects, one pass of backfitting: each refitted on top of the others at
-    their latest values, so that the first, fitted alone, gives back what it took of the second's
-    misfit (a step fitted before a knee takes some of the cold spell). A change time is searched over
-    the whole campaign (:func:`_time_unhinted`). Effects tied with the first are refitted on top of
-    the later ones. The evidences, the acceptance and the fit scores stay those of the training
-    windows."""
-    every = np.ones(len(lik_all.freq.r), dtype=bool)
-
-    def report(res: CandidateResult, cand: Candidate, fr: FitResult) -> None:
-        res.parameters, res.intervals, res.form = cand.describe(fr.theta_map), fr.intervals, cand.form(fr.theta_map)
-        t0 = cand.time(fr.theta_map)
-        res.time = _iso(epoch, t0)
-        if t0 is not None:
-            res.extra["change_window"] = int(np.searchsorted(cand.context.times_s, t0))
-        res.extra["estimated_on"] = "all windows"
-
-    for k, res in enumerate(chain):
-        cand = _time_unhinted(fixed[k][0])
-        others = [f for j, f in enumerate(fixed) if j != k]
-        _, fr = _fit_on_top(cand, others, sur, lik_all, every, config.seed + 300 + k, config)
-        fixed[k] = (cand, fr.theta_map)
-        report(res, cand, fr)
-    for k, (res, cand) in enumerate(twins):
-        cand = _time_unhinted(cand)
-        _, fr = _fit_on_top(cand, fixed[1:], sur, lik_all, every, config.seed + 400 + k, config)
-        report(res, cand, fr)
 
 
 # -- entry point -------------------------------------------------------------------------------------
@@ -654,17 +286,20 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     if config.threshold is not None:
         threshold_info = {**threshold_info, "log_bayes_factor": threshold, "provisional": False,
                           "note": "set in the configuration"}
+    threshold_on_top = (config.threshold_on_top if config.threshold_on_top is not None
+                        else float(threshold_info.get("on_top", {}).get("log_bayes_factor", threshold)))
+    threshold_info["on_top_log_bayes_factor"] = threshold_on_top
     tried: list[CandidateResult] = []
     keys: dict[str, tuple[str, float | None]] = {}
-    jobs: dict[str, tuple[_Job, FitResult]] = {}
+    jobs: dict[str, tuple[Job, FitResult]] = {}
     for i, p in enumerate(proposals):
         say(f"fit {p.candidate} on {p.group}", (i + 0.5) / max(len(proposals), 1))
         ctx = Context(context.times_s, context.covariates, context.start_epoch_s, dict(p.hints))
         cand = CANDIDATES.get(p.candidate)(p.group, ctx)
-        job = _Job(cand, sur, lik, train)
+        job = Job(cand, sur, lik, train)
         fr = fit(job.gain, job.specs, seed=config.seed + i, n_is=config.n_importance,
                  sensitivity=config.prior_sensitivity)
-        res = _result(job, fr, r_all, train, epoch, z_all)
+        res = result(job, fr, r_all, train, epoch, z_all)
         res.extra["proposal_reason"] = p.reason
         spec_key = next(s for s in job.specs if s.name == cand.key_parameter())
         keys[res.label] = (spec_key.name, spec_key.null)
@@ -696,12 +331,13 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
         fit_after = accepted[0].fit_after or fit_before
         held_after = accepted[0].held_out_after or held_before
     last = (jobs[accepted[0].label][0], jobs[accepted[0].label][1].theta_map) if accepted else None
+    form_of: tuple[Candidate, np.ndarray] | None = None
     chain = accepted[:1]
     fixed = [(last[0].cand, last[1])] if last else []
     if accepted and config.second_round:
-        more_accepted, fit_after, held_after, more_last, fixed = _more_effects(
-            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config, say, z_all,
-            obs, kept)
+        more_accepted, fit_after, held_after, more_last, fixed = more_effects(
+            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold_on_top, config, say,
+            z_all, obs, kept)
         accepted += more_accepted
         chain += more_accepted
         last = more_last or last
@@ -710,7 +346,9 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
         lik_all = CandidateLikelihood(r_all, J, rd_all, tau=config.effect_form_error, noise_guess=config.noise_guess,
                                       damping_noise_guess=config.damping_noise_guess)
         twins = [(c, jobs[c.label][0].cand) for c in accepted if all(c is not x for x in chain) and c.label in jobs]
-        _final_estimates(chain, [(c, th) for c, th in fixed], twins, sur, lik_all, epoch, config)
+        final = [(c, th) for c, th in fixed]
+        final_estimates(chain, final, twins, sur, lik_all, epoch, config)
+        form_of = final[-1]  # the figure of the fitted form shows the reported estimates
     catch = None
     unexplained = None
     if config.catch_all:
@@ -726,8 +364,8 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
             tt = times_s[train]
             hot = tt[amp >= np.nanquantile(amp, 0.9)] if np.isfinite(amp).any() else tt
             unexplained = {"modes": strong, "log_evidence_gain": catch, "best_named_gain": best_named,
-                           "when": {"from": _iso(epoch, float(hot.min())) if epoch else float(hot.min()),
-                                    "to": _iso(epoch, float(hot.max())) if epoch else float(hot.max())},
+                           "when": {"from": iso_time(epoch, float(hot.min())) if epoch else float(hot.min()),
+                                    "to": iso_time(epoch, float(hot.max())) if epoch else float(hot.max())},
                            "basis": names,
                            "summary": (f"structured misfit in modes {strong} that no candidate explains "
                                        f"(smooth function of covariates and time: {catch:.1f} nats vs best "
@@ -757,13 +395,16 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
                    fit_after=fit_after, held_out_before=held_before, held_out_after=held_after,
                    unexplained=unexplained, scatter=noise,
                    threshold={**threshold_info, "catch_all_gain": catch}, notes=notes,
-                   figures=_series(obs, base, context, train, r_all, z_all, last, epoch))
+                   figures=_series(obs, base, context, train, r_all, z_all, last, epoch, form_of))
 
 
-def _series(obs, base, context, train, r_all, z_all, last, epoch) -> dict:
+def _series(obs, base, context, train, r_all, z_all, last, epoch, form_of) -> dict:
     """The numbers behind the report's figures (explain_series.json): per window the times, the
     covariates and the misfit before and after the accepted effects (each mode's offset taken out on
-    the training windows), the training mask, and the fitted form of the most supported effect."""
+    the training windows), the training mask, and the fitted form of the latest accepted effect.
+    The misfit after is that of the effects fitted on the training windows (``last``), so that the
+    held-out windows' panel stays a test; the form is drawn at the reported estimates (``form_of``,
+    fitted on every window)."""
     d = dd = None
     if last is not None:
         job, theta = last
@@ -782,8 +423,10 @@ def _series(obs, base, context, train, r_all, z_all, last, epoch) -> dict:
         out["log_damping_before"] = lz - np.nanmean(lz[train], axis=0)
         la = lz if dd is None else lz - dd
         out["log_damping_after"] = la - np.nanmean(la[train], axis=0)
-    if last is not None:
-        out["form"] = _form_curve(last[0].cand, last[1], context)
+    if form_of is None and last is not None:
+        form_of = (last[0].cand, last[1])
+    if form_of is not None:
+        out["form"] = _form_curve(form_of[0], form_of[1], context)
     return out
 
 
