@@ -117,7 +117,18 @@ def break_tie(tied: list[CandidateResult], ll: dict[str, float], tie_nats: float
     """The tie again with the shape terms ``ll`` added to the evidence gains: a candidate more than
     ``tie_nats`` behind the best in shapes, and more than ``tie_nats`` behind it in evidence and shapes
     together, leaves the tie (not accepted, with the reason); the rest stay tied with their relative
-    support recomputed. Returns the tie, best first."""
+    support recomputed. Returns the tie, best first.
+
+    Candidates on the same groups share one shape term (the best of theirs): the shapes tell apart
+    where a change acts, not how it follows a covariate, which the frequencies judge far better
+    (a frost knee and a temperature knee of the same bearings, tied to 0.1 nats on frequencies, came
+    44 nats apart on shapes on a simulated girder)."""
+    ll = dict(ll)
+    for where in {c.where for c in tied}:
+        same = [c.label for c in tied if c.where == where]
+        best_here = max(ll[lab] for lab in same)
+        for lab in same:
+            ll[lab] = best_here
     top = max(ll.values())
     total = {c.label: c.log_evidence_gain + ll[c.label] - top for c in tied}
     best = max(tied, key=lambda c: total[c.label])
