@@ -78,6 +78,19 @@ def test_whole_structure_groups_stay_level_among_themselves():
     assert t["step/EI:1"] == 5.0 and t["added_mass/mass:3"] == 50.0
 
 
+def test_candidates_on_one_group_share_its_best_shape_term():
+    """Two forms of a change of the same group (a frost knee and a temperature knee of the bearings)
+    are not told apart by shapes; candidates on other groups keep their own terms."""
+    from shm_ros.core.explain.shapes import shape_terms
+
+    ll = {"support_springs/bearings": -44.0, "temperature_bilinear/bearings": 0.0, "step/EI:2": -3.0,
+          "step/EI:1": -60.0}
+    where = {k: k.split("/")[1] for k in ll}
+    t = shape_terms(ll, where)
+    assert t["support_springs/bearings"] == t["temperature_bilinear/bearings"] == 0.0
+    assert t["step/EI:2"] == -3.0 and t["step/EI:1"] == -60.0
+
+
 def test_explain_names_the_span_not_its_mirror():
     """End to end (test/explain_cases.py, 192 windows): a stiffness loss in span 3 of the girder ties
     with span 1 on frequencies; the verdict names span 3 alone, span 1 out by its shapes."""

@@ -13,9 +13,6 @@ class ExplainConfig:
     block_windows: int = option(0, "windows per block (0: one day of windows, or W / 8 if shorter)")
     threshold: float | None = option(None, "log Bayes factor a candidate must clear (unset: the shipped "
                                      "calibration, threshold.json)")
-    threshold_on_top: float | None = option(None, "log Bayes factor an effect fitted on top of accepted ones "
-                                            "must clear (unset: the shipped calibration's second-round "
-                                            "value, else the first round's threshold)")
     tie_nats: float = option(2.0, "accepted candidates within this many nats of the best are reported together")
     tie_fraction: float = option(0.01, "accepted candidates whose fitted changes move with the best's in every "
                                  "mode (correlation >= 0.95) and whose evidence is within this fraction of "

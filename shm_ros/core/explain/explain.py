@@ -286,9 +286,6 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     if config.threshold is not None:
         threshold_info = {**threshold_info, "log_bayes_factor": threshold, "provisional": False,
                           "note": "set in the configuration"}
-    threshold_on_top = (config.threshold_on_top if config.threshold_on_top is not None
-                        else float(threshold_info.get("on_top", {}).get("log_bayes_factor", threshold)))
-    threshold_info["on_top_log_bayes_factor"] = threshold_on_top
     tried: list[CandidateResult] = []
     keys: dict[str, tuple[str, float | None]] = {}
     jobs: dict[str, tuple[Job, FitResult]] = {}
@@ -336,7 +333,7 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     fixed = [(last[0].cand, last[1])] if last else []
     if accepted and config.second_round:
         more_accepted, fit_after, held_after, more_last, fixed = more_effects(
-            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold_on_top, config, say,
+            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config, say,
             z_all, obs, kept)
         accepted += more_accepted
         chain += more_accepted
