@@ -12,6 +12,7 @@ import copy
 import numpy as np
 import pytest
 
+from shm_ros.core.explain.config import ExplainConfig
 from shm_ros.core.explain.groups import build_groups
 from shm_ros.core.explain.shapes import predicted_shapes, shape_log_likelihood
 from shm_ros.core.explain.surrogate import Surrogate
@@ -19,6 +20,9 @@ from shm_ros.core.simulate.scenario import GIRDER_STRUCTURE
 from shm_ros.core.structure import structure_from_dict
 
 W = 200
+
+# the evidence check, prior sensitivity and surrogate check do not change what is named or fitted
+FAST = ExplainConfig(nested_check=False, prior_sensitivity=False, surrogate_check=False)
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +104,7 @@ def test_explain_names_the_span_not_its_mirror():
 
     case = draw_case(30009, "stiffness_change_at_time", n_windows=192)
     assert case.kind == "girder" and case.truth.where == "EI:3"
-    d = explain(case.obs, structure_from_dict(case.structure)).to_dict()
+    d = explain(case.obs, structure_from_dict(case.structure), FAST).to_dict()
     top = next(m for m in d["missing_physics"] if m["name"] != "unmodelled_modes")
     assert top["name"] == "stiffness_change_at_time" and top["where"] == "EI:3" and not top.get("tied_with"), top
     mirror = [c for c in d["candidates"] if c["label"] == "stiffness_change_at_time/step/EI:1"]
@@ -118,7 +122,7 @@ def test_second_round_takes_the_span_the_shapes_name():
     case = draw_case(9010, "temperature_dependent_stiffness", kind="girder", n_windows=192, form="bilinear",
                      second_step=True)
     assert case.truth.second is not None and case.truth.second.where == "EI:3"
-    d = explain(case.obs, structure_from_dict(case.structure)).to_dict()
+    d = explain(case.obs, structure_from_dict(case.structure), FAST).to_dict()
     step = [m for m in d["missing_physics"] if m["name"] == "stiffness_change_at_time"]
     assert [m["where"] for m in step] == ["EI:3"], d["missing_physics"]
     mirror = [c for c in d["candidates"] if c["label"] == "stiffness_change_at_time/step/EI:1"
