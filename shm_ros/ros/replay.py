@@ -113,9 +113,8 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 node.publisher(topic, msgtype)
             except (ImportError, AttributeError):
                 result.skipped_topics[topic] = f"{msgtype} (type not available)"
-        # /clock before the wait: a node whose clock subscription matches after the replay began
-        # would take the first windows at time 0 (as `ros2 bag play --clock`, time is published
-        # only once the clock's readers are matched)
+        # /clock before the wait, and the wait includes its readers: a node whose clock subscription
+        # matched only after the replay began would log the first windows at time 0
         clock = _Clock(node, clock_hz) if clock_hz > 0 else None
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
