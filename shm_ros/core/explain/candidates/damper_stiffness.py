@@ -5,8 +5,9 @@ time (a damper fails).
 What modal data can identify is the *change* of the braces' stiffness: its constant part is absorbed
 by the calibration of the story stiffnesses (the nominal parameters), so the parameters are changes,
 in units of the braced story's calibrated stiffness (which holds the braces' constant part: a brace
-of k_b on a story of k_s changing by dk_b reads dk_b / (k_s + k_b)): per degC about the campaign's
-mean temperature, or lost at
+of k_b on a story of k_s changing by dk_b reads dk_b / (k_s + k_b)): per degC at the campaign's
+mean temperature with an exponential softening (a viscoelastic material's stiffness falls about
+exponentially with the temperature, k(T) = k0 exp(-b (T - T_mean)), b of 0-0.15 /degC), or lost at
 a window (locate's ``change_index``); without a hint, a constant brace stiffness. The group's factor
 is additive: ``x - 1 = brace stiffness / reference``, the reference being
 :data:`shm_ros.core.explain.groups.DAMPER_REFERENCE` of the story's stiffness.
@@ -35,18 +36,24 @@ class DamperStiffness(Candidate):
     def params(self) -> list[ParamSpec]:
         change = self._change()
         if change == "temperature":
-            return [ParamSpec("brace_change_per_c", -0.05, 0.05, null=0.0, unit="story stiffness / degC")]
+            return [ParamSpec("brace_change_per_c", -0.05, 0.05, null=0.0, unit="story stiffness / degC"),
+                    ParamSpec("softening_rate_per_c", 0.0, 0.15, unit="1/degC")]
         if change == "step":
             return [ParamSpec("brace_lost", -0.5, 1.0, null=0.0, unit="story stiffness")]
         return [ParamSpec("brace_stiffness", 0.0, 1.0, null=0.0, unit="story stiffness")]
 
     def modify(self, theta: np.ndarray) -> Modification:
-        v = np.atleast_2d(np.asarray(theta, float))[:, :1]
+        th = np.atleast_2d(np.asarray(theta, float))
+        v = th[:, :1]
         W = len(self.context.times_s)
         change = self._change()
         if change == "temperature":
             t = covariate(self.context, "temperature_c")
-            dk = v * (t - float(np.mean(t)))[None, :]
+            dt = (t - float(np.mean(t)))[None, :]
+            b = th[:, 1:2]
+            # k(T) = k0 exp(-b dT): slope v = -k0 b at the mean temperature; b -> 0 is the line v dT
+            small = np.abs(b) < 1e-9
+            dk = v * np.where(small, dt, -np.expm1(-b * dt) / np.where(small, 1.0, b))
         elif change == "step":
             on = after_change(self.context)
             dk = -v * on[None, :]
@@ -58,7 +65,9 @@ class DamperStiffness(Candidate):
         v = float(np.ravel(theta)[0])
         change = self._change()
         if change == "temperature":
-            return f"damper braces' stiffness {100 * v:+.2f} % of the story stiffness per degC"
+            b = float(np.ravel(theta)[1])
+            return (f"damper braces' stiffness {100 * v:+.2f} % of the story stiffness per degC at the mean "
+                    f"temperature, softening exp(-{b:.3f} dT)")
         if change == "step":
             return (f"damper braces lose {100 * v:.1f} % of the story stiffness from window "
                     f"{self.context.hints['change_index']}")
