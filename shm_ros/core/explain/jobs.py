@@ -7,7 +7,7 @@ from datetime import datetime, timezone
 
 import numpy as np
 
-from .candidates.base import Candidate, ParamSpec
+from .candidates.base import Candidate, Modification, ParamSpec
 from .config import ExplainConfig
 from .fit import FitResult, fit
 from .likelihood import CandidateLikelihood
@@ -34,8 +34,6 @@ class Job:
         sel = slice(None) if windows is None else windows
         d = None
         if mod.groups:
-            from .candidates.base import Modification
-
             d = self.sur.delta(Modification({g: x[:, sel] for g, x in mod.groups.items()}))
         dd = None if mod.damping is None else np.log(np.maximum(mod.damping[:, sel], 1e-9))[..., None]
         return d, dd
@@ -56,8 +54,6 @@ class OnTopJob(Job):
 
     def __init__(self, cand: OnTop, sur: Surrogate, lik: CandidateLikelihood, train: np.ndarray):
         super().__init__(cand, sur, lik, train)
-        from .candidates.base import Modification
-
         self.new_cand: Candidate = cand.new
         fixed = Modification({}, None)
         for c, th in cand.fixed:
@@ -78,8 +74,6 @@ class OnTopJob(Job):
         self.cross = None if joint is None or parts is None else (joint - parts)[0]
 
     def deltas(self, theta: np.ndarray, windows: np.ndarray | None = None):
-        from .candidates.base import Modification
-
         sel = slice(None) if windows is None else windows
         new = self.new_cand.modify(np.atleast_2d(theta))
         d = None
@@ -120,8 +114,6 @@ class OnTop(Candidate):
         return self.new.params()
 
     def modify(self, theta: np.ndarray):
-        from .candidates.base import Modification
-
         m = self.new.modify(theta)
         B = np.atleast_2d(theta).shape[0]
         groups = {g: np.array(x, dtype=float) for g, x in m.groups.items()}
@@ -171,7 +163,6 @@ def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch:
     if t0 is not None:
         res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, t0))
     return res
-
 
 
 def fit_on_top(cand: Candidate, fixed: list[tuple[Candidate, np.ndarray]], sur, lik, train, seed: int,
