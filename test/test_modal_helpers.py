@@ -132,3 +132,19 @@ def test_sign_aligned_uses_common_components_and_batches():
     assert np.array_equal(sign_aligned(np.array([np.nan, np.nan, 3.0]), ref)[2:], [3.0])  # nothing shared
     batch = np.array([[1.0, 1.0, 0.0], [-2.0, -1.0, 0.0]])
     np.testing.assert_array_equal(sign_aligned(batch, ref), [[1.0, 1.0, 0.0], [2.0, 1.0, -0.0]])
+
+
+def test_temperatures_fill_gaps_from_neighbours_for_every_candidate():
+    """One helper gives every candidate the temperature covariate: a missing window takes the value
+    between its neighbours (a cold night stays cold), the reference is the median of measured ones."""
+    from shm_ros.core.explain.candidates._common import temperatures
+    from shm_ros.core.explain.candidates.base import Context
+
+    t_in = np.array([10.0, np.nan, -6.0, -4.0, np.nan, 20.0])
+    ctx = Context(times_s=np.arange(6.0), covariates={"temperature_c": t_in}, hints={})
+    t, ref = temperatures(ctx)
+    assert np.allclose(t, [10.0, 2.0, -6.0, -4.0, 8.0, 20.0])
+    assert ref == float(np.median([10.0, -6.0, -4.0, 20.0]))
+    none = Context(times_s=np.arange(3.0), covariates={}, hints={})
+    t0, ref0 = temperatures(none)
+    assert ref0 == 0.0 and np.all(t0 == 0.0)

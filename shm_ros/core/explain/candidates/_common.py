@@ -12,6 +12,15 @@ def covariate(context: Context, name: str) -> np.ndarray:
     return fill_missing(context.covariates.get(name, np.zeros(len(context.times_s))))
 
 
+def temperatures(context: Context) -> tuple[np.ndarray, float]:
+    """(W,) air temperatures (``temperature_c``), missing ones interpolated between their neighbours
+    (temperature is smooth in time; a median in their place would put a frosty night's window at the
+    average state), and the reference: the median of the measured ones (0 when none is)."""
+    t = np.asarray(context.covariates.get("temperature_c", np.full(len(context.times_s), np.nan)), dtype=float)
+    ref = float(np.nanmedian(t)) if np.isfinite(t).any() else 0.0
+    return (fill_missing(t) if np.isfinite(t).any() else np.full(t.shape, ref)), ref
+
+
 def fill_missing(x: np.ndarray) -> np.ndarray:
     """Missing values (NaN) by linear interpolation (the nearest value at the ends; zeros if all miss)."""
     x = np.asarray(x, float).copy()

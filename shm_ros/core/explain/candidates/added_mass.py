@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import after_change, change_time, covariate, hour_utc
+from ._common import after_change, change_time, hour_utc, temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -32,7 +32,7 @@ class AddedMass(Candidate):
             a, b = (float(v) for v in h["hours_utc"])
             return (((hour_utc(self.context) - a) % 24.0) < ((b - a) % 24.0)).astype(float)
         if when == "below" and "below_c" in h:
-            return (covariate(self.context, "temperature_c") < float(h["below_c"])).astype(float)
+            return (temperatures(self.context)[0] < float(h["below_c"])).astype(float)
         if when == "after" and "change_index" in h:
             return after_change(self.context)
         return np.ones(W)

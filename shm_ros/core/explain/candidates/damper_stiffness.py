@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..groups import DAMPER_REFERENCE
-from ._common import after_change, change_time, covariate
+from ._common import after_change, change_time, temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -48,7 +48,7 @@ class DamperStiffness(Candidate):
         W = len(self.context.times_s)
         change = self._change()
         if change == "temperature":
-            t = covariate(self.context, "temperature_c")
+            t, _ = temperatures(self.context)
             dt = (t - float(np.mean(t)))[None, :]
             b = th[:, 1:2]
             # k(T) = k0 exp(-b dT): slope v = -k0 b at the mean temperature; b -> 0 is the line v dT

@@ -16,9 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import after_change, change_time
+from ._common import after_change, change_time, temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
-from .temperature_linear import temperatures
 
 
 @CANDIDATES.register("support_springs")

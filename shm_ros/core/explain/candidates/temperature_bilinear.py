@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._common import temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
-from .temperature_linear import X_MIN, temperatures
+from .temperature_linear import X_MIN
 
 
 @CANDIDATES.register("temperature_bilinear")

@@ -1,7 +1,8 @@
 """Stiffness linear in the air temperature: x_w = 1 + alpha (T_w - T_ref).
 
 T_ref is the median measured temperature (the baseline's calibration sees the average state, so
-the candidate moves frequencies about it); a window without a temperature keeps x = 1. The prior
+the candidate moves frequencies about it); a window without a temperature takes one interpolated
+from its neighbours (:func:`._common.temperatures`). The prior
 of alpha (+-3 %/degC of stiffness) covers asphalt and elastomer-bearing effects on girders, whose
 frequencies move by up to about 1 %/degC.
 """
@@ -10,16 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._common import temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 X_MIN = 0.05  # a stiffness factor below this is no longer a temperature effect
-
-
-def temperatures(context) -> tuple[np.ndarray, float]:
-    """Measured temperatures (W,) with missing ones at the reference, and the reference (median)."""
-    t = np.asarray(context.covariates.get("temperature_c", np.full(len(context.times_s), np.nan)), dtype=float)
-    ref = float(np.nanmedian(t)) if np.isfinite(t).any() else 0.0
-    return np.where(np.isfinite(t), t, ref), ref
 
 
 @CANDIDATES.register("temperature_linear")
