@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from .candidates._common import daily_windows, hours_text
 from .candidates.base import Context
 from .types import Baseline, Mismatch, Proposal
 
@@ -158,6 +159,38 @@ def _gain(Z: np.ndarray, ok: np.ndarray, X: np.ndarray, cols: np.ndarray) -> flo
     return total
 
 
+HOURS_STARTS = np.arange(0.0, 24.0, 0.5)
+HOURS_LENGTHS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
+
+
+def _hours(Z: np.ndarray, ok: np.ndarray, X: np.ndarray, hour: np.ndarray, first: list[list[float]],
+           cfg: LocateConfig) -> tuple[_Effect | None, int]:
+    """The window of the day whose indicator (with the ``first`` windows, if any) best explains the
+    misfit, and the number of windows searched. Traffic has two peaks a day: with one window found, a
+    second, disjoint one joins it when the pair gains more than the search's own threshold (one
+    indicator for both: the same jam in the morning and the evening)."""
+    best, n = None, 0
+    have = daily_windows(hour, first) if first else np.zeros(hour.size, bool)
+    for h0 in HOURS_STARTS:
+        for d in HOURS_LENGTHS:
+            n += 1
+            inside = daily_windows(hour, [h0, (h0 + d) % 24.0])
+            if (have & inside).any():
+                continue
+            inside = inside | have
+            if inside.mean() < 0.02 or inside.mean() > 0.5:
+                continue
+            col = inside.astype(float)[:, None]
+            g = _gain(Z, ok, X, col)
+            if best is None or g > best.gain:
+                best = _Effect("hours", col, g, {"hours_utc": [*first, [float(h0), float((h0 + d) % 24.0)]]})
+    if best is not None and not first:
+        second, n2 = _hours(Z, ok, X, hour, best.hints["hours_utc"], cfg)
+        if second is not None and second.gain - best.gain > _threshold(Z.shape[1], n2, cfg):
+            return second, n + n2
+    return best, n
+
+
 def _step_profile(Z: np.ndarray, ok: np.ndarray, X: np.ndarray, lo: int, hi: int) -> tuple[int, float]:
     """Exact single change point of a step added to the linear model ``X``: for every window c the
     summed chi-square drop of the step column H(w >= c), by projections (all c at once)."""
@@ -233,19 +266,8 @@ def _select(Z: np.ndarray, ok: np.ndarray, covs: dict[str, np.ndarray], t: np.nd
             col = (np.arange(W) >= c).astype(float)[:, None]
             options.append((g - _threshold(K, hi - lo, cfg),
                             _Effect("step", col, g, {"change_index": c, "change_time_s": float(t[c])})))
-        if "hours" not in have:  # a window of the day (slow or jammed traffic, crowds)
-            best = None
-            n = 0
-            for h0 in np.arange(0.0, 24.0, 0.5):
-                for d in (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0):
-                    n += 1
-                    inside = ((hour - h0) % 24.0) < d
-                    if inside.mean() < 0.02 or inside.mean() > 0.5:
-                        continue
-                    col = inside.astype(float)[:, None]
-                    g = _gain(Z, ok, X, col)
-                    if best is None or g > best.gain:
-                        best = _Effect("hours", col, g, {"hours_utc": [float(h0), float((h0 + d) % 24.0)]})
+        if "hours" not in have:  # windows of the day (slow or jammed traffic, crowds)
+            best, n = _hours(Z, ok, X, hour, [], cfg)
             if best is not None:
                 options.append((best.gain - _threshold(K, n, cfg), best))
         if not options:
@@ -386,7 +408,7 @@ def _words(e: _Effect) -> str:
     if e.kind == "step":
         return f"the misfit steps at window {h['change_index']}"
     if e.kind == "hours":
-        return f"the misfit differs between {h['hours_utc'][0]:g} and {h['hours_utc'][1]:g} h (UTC) each day"
+        return f"the misfit differs {hours_text(h['hours_utc'])} (UTC) each day"
     if e.kind == "below":
         return f"the misfit differs below {h['below_c']:.1f} degC"
     return e.kind

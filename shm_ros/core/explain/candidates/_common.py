@@ -45,6 +45,19 @@ def hour_utc(context: Context) -> np.ndarray:
     return ((context.start_epoch_s + np.asarray(context.times_s, float)) % 86400.0) / 3600.0
 
 
+def daily_windows(hour: np.ndarray, windows) -> np.ndarray:
+    """(W,) bool: the hour of the day (UTC) inside any of ``windows``, each ``[start, end)`` in hours
+    (wrapping past midnight when end < start). ``windows`` may also be one ``[start, end]`` pair."""
+    w = np.asarray(windows, float).reshape(-1, 2)
+    h = np.asarray(hour, float)[:, None]
+    return np.any(((h - w[:, 0]) % 24.0) < ((w[:, 1] - w[:, 0]) % 24.0), axis=1)
+
+
+def hours_text(windows) -> str:
+    """``windows`` of :func:`daily_windows` in words: "between 7 and 9.5 h and between 17 and 19.5 h"."""
+    return " and ".join(f"between {a:g} and {b:g} h" for a, b in np.asarray(windows, float).reshape(-1, 2))
+
+
 def after_change(context: Context) -> np.ndarray:
     """(W,) 1.0 from locate's hinted change window (``change_index``) on, 0.0 before."""
     return (np.arange(len(context.times_s)) >= int(context.hints["change_index"])).astype(float)

@@ -1,16 +1,17 @@
 """Added mass: a mass on the deck / a floor, always there or only some of the time.
 
-When the mass is there comes from locate's hints: ``when = "hours"`` (a window of the day, e.g.
-jammed traffic at rush hours, ``hours_utc``), ``"below"`` (below a temperature, e.g. snow or ice,
-``below_c``), ``"after"`` (from a window on, e.g. new equipment or ballast, ``change_index``);
-without a hint it is always there. The one parameter is the added fraction of the group's mass.
+When the mass is there comes from locate's hints: ``when = "hours"`` (one or two windows of the
+day, e.g. jammed traffic at the morning and evening rush hours, ``hours_utc``: ``[[start, end], ...]``
+in hours UTC), ``"below"`` (below a temperature, e.g. snow or ice, ``below_c``), ``"after"`` (from a
+window on, e.g. new equipment or ballast, ``change_index``); without a hint it is always there.
+The one parameter is the added fraction of the group's mass.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._common import after_change, change_time, hour_utc, temperatures
+from ._common import after_change, change_time, daily_windows, hour_utc, hours_text, temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -29,8 +30,7 @@ class AddedMass(Candidate):
         h, W = self.context.hints, len(self.context.times_s)
         when = str(h.get("when", "always"))
         if when == "hours" and "hours_utc" in h:
-            a, b = (float(v) for v in h["hours_utc"])
-            return (((hour_utc(self.context) - a) % 24.0) < ((b - a) % 24.0)).astype(float)
+            return daily_windows(hour_utc(self.context), h["hours_utc"]).astype(float)
         if when == "below" and "below_c" in h:
             return (temperatures(self.context)[0] < float(h["below_c"])).astype(float)
         if when == "after" and "change_index" in h:
@@ -43,7 +43,7 @@ class AddedMass(Candidate):
 
     def form(self, theta: np.ndarray) -> str:
         h = self.context.hints
-        when = {"hours": f"between {h.get('hours_utc', ['?', '?'])[0]} and {h.get('hours_utc', ['?', '?'])[1]} h UTC",
+        when = {"hours": f"{hours_text(h.get('hours_utc', []))} UTC",
                 "below": f"below {h.get('below_c', float('nan')):.1f} degC",
                 "after": f"from window {h.get('change_index')}"}.get(str(h.get("when", "")), "always")
         return f"{100 * float(np.ravel(theta)[0]):.1f} % of the {self.group} mass added {when}"
