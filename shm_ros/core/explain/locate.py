@@ -161,21 +161,25 @@ def _gain(Z: np.ndarray, ok: np.ndarray, X: np.ndarray, cols: np.ndarray) -> flo
 
 HOURS_STARTS = np.arange(0.0, 24.0, 0.5)
 HOURS_LENGTHS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
+HOURS_GAP = 3.0  # h between two windows of the day
 
 
 def _hours(Z: np.ndarray, ok: np.ndarray, X: np.ndarray, hour: np.ndarray, first: list[list[float]],
            cfg: LocateConfig) -> tuple[_Effect | None, int]:
     """The window of the day whose indicator (with the ``first`` windows, if any) best explains the
-    misfit, and the number of windows searched. Traffic has two peaks a day: with one window found, a
-    second, disjoint one joins it when the pair gains more than the search's own threshold (one
-    indicator for both: the same jam in the morning and the evening)."""
+    misfit, and the number of windows searched. Traffic has two peaks a day: with one window found,
+    a second one at least ``HOURS_GAP`` away joins it when the pair gains more than the search's own
+    threshold (one indicator for both: the same jam in the morning and the evening)."""
     best, n = None, 0
     have = daily_windows(hour, first) if first else np.zeros(hour.size, bool)
+    # the second peak is apart from the first (morning and evening), not an extension of it
+    near = (daily_windows(hour, [[(a - HOURS_GAP) % 24.0, (b + HOURS_GAP) % 24.0] for a, b in first]) if first
+            else have)
     for h0 in HOURS_STARTS:
         for d in HOURS_LENGTHS:
             n += 1
             inside = daily_windows(hour, [h0, (h0 + d) % 24.0])
-            if (have & inside).any():
+            if (near & inside).any():
                 continue
             inside = inside | have
             if inside.mean() < 0.02 or inside.mean() > 0.5:
