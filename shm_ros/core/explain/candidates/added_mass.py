@@ -46,7 +46,8 @@ class AddedMass(Candidate):
         when = {"hours": f"{hours_text(h.get('hours_utc', []))} UTC",
                 "below": f"below {h.get('below_c', float('nan')):.1f} degC",
                 "after": f"from window {h.get('change_index')}"}.get(str(h.get("when", "")), "always")
-        return f"{100 * float(np.ravel(theta)[0]):.1f} % of the {self.group} mass added {when}"
+        whose = "the whole mass" if self.group == "mass" else f"the mass of {self.group}"
+        return f"{100 * float(np.ravel(theta)[0]):.1f} % of {whose} added {when}"
 
     def time(self, theta: np.ndarray) -> float | None:
         h = self.context.hints
