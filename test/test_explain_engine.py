@@ -96,3 +96,29 @@ def test_time_domain_threshold_is_its_calibration():
     for ext in th.get("extended", []):  # a candidate added later: its gains on the same replicates count
         assert len(ext["gains"]) == g.size and np.all(g >= np.array(ext["gains"]) - 0.01)
     assert set(TD_CANDIDATES) <= set(th["candidates"])  # calibrated on the candidate set explain tries
+
+
+def test_a_second_effect_with_the_first_ones_course_in_time_is_not_a_second_effect():
+    """A knee on the mirror span on top of a knee (the bench's spurious second effect, 146 nats at
+    1,152 windows: correlation 0.97 of the two courses) is one effect moving the modes in other
+    proportions than the model's; a later step or a rush-hour mass (correlation ~0.1) is another."""
+    from shm_ros.core.explain.candidates import CANDIDATES, Context
+    from shm_ros.core.explain.rounds import SAME_COURSE, _same_course, time_course
+
+    rng = np.random.default_rng(5)
+    W = 576
+    times = np.arange(W) * 600.0
+    temp = 5.0 + 8.0 * np.sin(2 * np.pi * times / 86400.0) + np.cumsum(rng.normal(0, 0.2, W))
+    ctx = Context(times_s=times, covariates={"temperature_c": temp}, hints={})
+    knee = CANDIDATES.get("temperature_bilinear")
+    first = [(knee("EI:1", ctx), np.array([-0.055, 2.0, -0.0043]))]
+    mirror = knee("EI:3", ctx)
+    same = _same_course(first, mirror, np.array([-0.0082, 2.9, 0.0011]))
+    assert same is not None and same[0] == first[0][0].label and abs(same[1]) >= SAME_COURSE
+    step = CANDIDATES.get("step")("EI:2", ctx)
+    assert _same_course(first, step, np.array([-0.04, times[400]])) is None
+    hours = Context(times_s=times, covariates={"temperature_c": temp}, hints={"when": "hours",
+                                                                              "hours_utc": [[7, 9.5], [17, 19.5]]})
+    assert _same_course(first, CANDIDATES.get("added_mass")("mass", hours), np.array([0.05])) is None
+    # a constant change (no course in time) is never taken for another's
+    assert time_course(CANDIDATES.get("added_mass")("mass", ctx), np.array([0.05])) is None

@@ -56,6 +56,19 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
             res.log_evidence_gain = float(fr.evidence.log_z - base_gain)
             res.extra.update({"on_top_of": [f[0].label for f in fixed], "gain_over_nominal": float(fr.evidence.log_z)})
             results.append((res, job, fr))
+        # a refit that follows an accepted effect's course in time (a knee on the mirror span of a
+        # knee) cannot be told from that effect moving the modes in other proportions than the model
+        # says (model-form error): noted on the effect, never a second one
+        for t, (lab, corr) in [(t, sc) for t in results if (sc := _same_course(fixed, t[1].new_cand, t[2].theta_map))]:
+            results.remove(t)
+            t[0].reasons = [f"not a second effect: it follows the course in time of {lab} (correlation "
+                            f"{corr:+.2f}); the frequencies cannot tell it from that effect acting on the modes "
+                            f"in other proportions than the model's ({t[0].log_evidence_gain:+.1f} nats on top)"]
+            tried.append(t[0])
+            if t[0].log_evidence_gain > threshold:
+                best.reasons.append(f"note: {t[0].label} on top of it, with the same course in time, gains "
+                                    f"{t[0].log_evidence_gain:.1f} nats: the effect may also act on {t[0].where}, "
+                                    "or move the modes in other proportions than the model's")
         if not results:
             break
         results.sort(key=lambda t: -t[0].log_evidence_gain)
@@ -111,6 +124,35 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
         pool = [c for c in pool if c.label != res.label and (c.name, c.where) not in same]
     return out, fit_after, held_after, last, fixed
 
+
+
+SAME_COURSE = 0.9  # |correlation| of two effects' courses in time above which they are one
+
+
+def time_course(cand: Candidate, theta: np.ndarray) -> np.ndarray | None:
+    """(W,) the candidate's change per window at ``theta`` (its first group's factor, else its
+    damping), or None when it does not change over the windows."""
+    m = cand.modify(np.atleast_2d(theta))
+    for arr in [*m.groups.values(), m.damping, m.added_damping]:
+        if arr is not None:
+            x = np.asarray(arr, float)[0]
+            return x if np.ptp(x) > 0 else None
+    return None
+
+
+def _same_course(fixed: list[tuple[Candidate, np.ndarray]], cand: Candidate, theta: np.ndarray
+                 ) -> tuple[str, float] | None:
+    """(label, correlation) of the first accepted effect whose course in time ``cand`` follows."""
+    x = time_course(cand, theta)
+    if x is None:
+        return None
+    for c, th in fixed:
+        y = time_course(c, th)
+        if y is not None:
+            r = float(np.corrcoef(x, y)[0, 1])
+            if abs(r) >= SAME_COURSE:
+                return c.label, r
+    return None
 
 
 def time_unhinted(cand: Candidate) -> Candidate:
