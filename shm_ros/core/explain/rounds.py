@@ -61,9 +61,10 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
         # says (model-form error): noted on the effect, never a second one
         for t, (lab, corr) in [(t, sc) for t in results if (sc := _same_course(fixed, t[1].new_cand, t[2].theta_map))]:
             results.remove(t)
-            t[0].reasons = [f"not a second effect: it follows the course in time of {lab} (correlation "
-                            f"{corr:+.2f}); the frequencies cannot tell it from that effect acting on the modes "
-                            f"in other proportions than the model's ({t[0].log_evidence_gain:+.1f} nats on top)"]
+            t[0].reasons = [f"not a second effect on top of {', '.join(t[0].extra['on_top_of'])} "
+                            f"({t[0].log_evidence_gain:+.1f} nats): it follows the course in time of {lab} "
+                            f"(correlation {corr:+.2f}), and the frequencies cannot tell it from that effect "
+                            "acting on the modes in other proportions than the model's"]
             tried.append(t[0])
             if t[0].log_evidence_gain > threshold:
                 best.reasons.append(f"note: {t[0].label} on top of it, with the same course in time, gains "
