@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from .candidates._common import daily_windows, hours_text
+from .candidates._common import daily_windows, hour_utc, hours_text
 from .candidates.base import Context
 from .types import Baseline, Mismatch, Proposal
 
@@ -77,7 +77,7 @@ def locate(obs, baseline: Baseline, context: Context, config: LocateConfig | Non
     structured = [baseline.mode_numbers[k] for k in range(K) if white[k] < cfg.whiteness_p]
     Z = np.where(ok, Rc / sigma, 0.0)
     covs = {k: np.asarray(v, float) for k, v in context.covariates.items()}
-    hour = ((context.start_epoch_s + np.asarray(context.times_s, float)) % 86400.0) / 3600.0
+    hour = hour_utc(context)
     effects = _select(Z, ok, covs, np.asarray(context.times_s, float), hour, cfg) if structured else []
     X = np.column_stack([np.ones(W)] + [e.columns for e in effects]) if effects else np.ones((W, 1))
     _patterns(effects, X, Z, ok, sigma)

@@ -56,20 +56,7 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
             res.log_evidence_gain = float(fr.evidence.log_z - base_gain)
             res.extra.update({"on_top_of": [f[0].label for f in fixed], "gain_over_nominal": float(fr.evidence.log_z)})
             results.append((res, job, fr))
-        # a refit that follows an accepted effect's course in time (a knee on the mirror span of a
-        # knee) cannot be told from that effect moving the modes in other proportions than the model
-        # says (model-form error): noted on the effect, never a second one
-        for t, (lab, corr) in [(t, sc) for t in results if (sc := _same_course(fixed, t[1].new_cand, t[2].theta_map))]:
-            results.remove(t)
-            t[0].reasons = [f"not a second effect on top of {', '.join(t[0].extra['on_top_of'])} "
-                            f"({t[0].log_evidence_gain:+.1f} nats): it follows the course in time of {lab} "
-                            f"(correlation {corr:+.2f}), and the frequencies cannot tell it from that effect "
-                            "acting on the modes in other proportions than the model's"]
-            tried.append(t[0])
-            if t[0].log_evidence_gain > threshold:
-                best.reasons.append(f"note: {t[0].label} on top of it, with the same course in time, gains "
-                                    f"{t[0].log_evidence_gain:.1f} nats: the effect may also act on {t[0].where}, "
-                                    "or move the modes in other proportions than the model's")
+        results = _set_aside_same_course(results, fixed, best, tried, threshold)
         if not results:
             break
         results.sort(key=lambda t: -t[0].log_evidence_gain)
@@ -126,7 +113,6 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
     return out, fit_after, held_after, last, fixed
 
 
-
 SAME_COURSE = 0.9  # |correlation| of two effects' courses in time above which they are one
 
 
@@ -154,6 +140,32 @@ def _same_course(fixed: list[tuple[Candidate, np.ndarray]], cand: Candidate, the
             if abs(r) >= SAME_COURSE:
                 return c.label, r
     return None
+
+
+def _set_aside_same_course(results: list, fixed: list[tuple[Candidate, np.ndarray]], best: CandidateResult,
+                           tried: list[CandidateResult], threshold: float) -> list:
+    """``results`` (refits on top: result, job, fit) without those that follow an accepted effect's
+    course in time (a knee on the mirror span of a knee): they cannot be told from that effect moving
+    the modes in other proportions than the model says (model-form error), so they join ``tried``
+    with that reason and, when they clear the threshold, are noted on ``best``, never a second effect."""
+    kept = []
+    for t in results:
+        same = _same_course(fixed, t[1].new_cand, t[2].theta_map)
+        if same is None:
+            kept.append(t)
+            continue
+        lab, corr = same
+        res = t[0]
+        res.reasons = [f"not a second effect on top of {', '.join(res.extra['on_top_of'])} "
+                       f"({res.log_evidence_gain:+.1f} nats): it follows the course in time of {lab} "
+                       f"(correlation {corr:+.2f}), and the frequencies cannot tell it from that effect "
+                       "acting on the modes in other proportions than the model's"]
+        tried.append(res)
+        if res.log_evidence_gain > threshold:
+            best.reasons.append(f"note: {res.label} on top of it, with the same course in time, gains "
+                                f"{res.log_evidence_gain:.1f} nats: the effect may also act on {res.where}, "
+                                "or move the modes in other proportions than the model's")
+    return kept
 
 
 def time_unhinted(cand: Candidate) -> Candidate:
