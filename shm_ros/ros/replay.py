@@ -117,13 +117,22 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         # matched only after the replay began would log the first windows at time 0
         clock = _Clock(node, clock_hz) if clock_hz > 0 else None
         deadline = time.monotonic() + wait_s
+        settled: float | None = None  # with a clock: when its readers last looked complete
         while time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.05)
             # With flow control, wait for a first count from the ingest node: it may have taken
             # other bags before, and credits are counted from where its count stands now.
             if all(p.get_subscription_count() > 0 for p in node.pubs.values()) and (
                     rate > 0 or node.ack_seen) and (clock is None or clock.matched(node)):
-                break
+                if clock is None:
+                    break
+                # this node may discover the graph's participants one at a time: a sim-time node
+                # found a moment later (its /clock reader not yet counted) would miss the clock
+                settled = time.monotonic() if settled is None else settled
+                if time.monotonic() - settled >= CLOCK_SETTLE_S:
+                    break
+            else:
+                settled = None
         flow = rate <= 0 and node.count_publishers(topics.INGEST_RECEIVED) > 0
         if rate <= 0 and not flow:
             node.get_logger().warning("no ingest acknowledgements: replaying without flow control")
@@ -199,6 +208,9 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     finally:
         node.destroy_node()
     return result
+
+
+CLOCK_SETTLE_S = 1.0  # s the /clock readers must stay matched before the replay starts
 
 
 class _Clock:
