@@ -36,7 +36,7 @@ def test_nodes_on_sim_time_see_the_recordings_time(tmp_path):
     ingest = node_process("ingest", {"structure": str(tmp_path / "s.yaml"), "window_s": 10.0, **sim})
     recorder = node_process("recorder", {"output": str(out), "topics": ["/shm/windows", "/diagnostics"], **sim})
     with running(ingest, recorder, subscribers={"/shm/windows": 1}, publishers={"/shm/ingest/received": 1}):
-        rep = replay(tmp_path / "bag", "--clock")
+        rep = replay(tmp_path / "bag", "--clock", "--clock-readers", "2")
     assert rep.returncode == 0, rep.stdout + rep.stderr
 
     end = T0 + int(SPAN_S * 1e9)

@@ -28,6 +28,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clock", type=float, nargs="?", const=40.0, default=0.0, metavar="HZ",
                    help="publish /clock with the recording's time (every 1/HZ s of it, default 40), for "
                         "nodes started with use_sim_time:=true, as `ros2 bag play --clock` does")
+    p.add_argument("--clock-readers", type=int, default=0, metavar="N",
+                   help="with --clock, wait (up to --wait s) until N nodes on sim time read /clock before "
+                        "replaying (default: those found once the graph has been stable for 1 s)")
     p.set_defaults(func=run)
 
 
@@ -41,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = replay_bag(args.bag, rate=args.rate, credit=args.credit, credit_bytes=args.credit_bytes,
                             wait_s=args.wait,
-                            recording_only=not args.all_topics, progress=True, clock_hz=args.clock)
+                            recording_only=not args.all_topics, progress=True, clock_hz=args.clock,
+                            clock_readers=args.clock_readers)
     except BagError as exc:
         print(f"shm-ros replay: {exc}", file=sys.stderr)
         return 2

@@ -86,7 +86,7 @@ def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], I
 def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
                drain_timeout_s: float = 300.0, stall_s: float = 30.0, recording_only: bool = True,
-               progress: bool = False, clock_hz: float = 0.0) -> ReplayResult:
+               progress: bool = False, clock_hz: float = 0.0, clock_readers: int = 0) -> ReplayResult:
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
 
     ``rate``: 1.0 = real time, N = N x real time, 0 = as fast as the graph acknowledges.
@@ -96,6 +96,9 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     ``drain_timeout_s``: after the last message, how long to wait for the last acknowledgements;
     ingest holds them while its windows wait for slow readers (identify on a busy host), so this
     is generous.
+    ``clock_readers``: with a clock, wait (up to ``wait_s``) until this many /clock readers (nodes on
+    sim time) have matched; 0 = those the graph shows once they have stayed matched for
+    ``CLOCK_SETTLE_S`` (a node discovered later than that takes the clock only from then on).
     """
     node = Replayer(credit)
     result = ReplayResult()
@@ -124,8 +127,10 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
             # other bags before, and credits are counted from where its count stands now.
             if all(p.get_subscription_count() > 0 for p in node.pubs.values()) and (
                     rate > 0 or node.ack_seen) and (clock is None or clock.matched(node)):
-                if clock is None:
+                if clock is None or (clock_readers and clock.pub.get_subscription_count() >= clock_readers):
                     break
+                if clock_readers:  # a known number of readers: wait for all of them, not for a settle
+                    continue
                 # this node may discover the graph's participants one at a time: a sim-time node
                 # found a moment later (its /clock reader not yet counted) would miss the clock
                 settled = time.monotonic() if settled is None else settled
@@ -133,6 +138,9 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                     break
             else:
                 settled = None
+        if clock is not None and clock_readers and clock.pub.get_subscription_count() < clock_readers:
+            node.get_logger().warning(f"{clock.pub.get_subscription_count()} of {clock_readers} /clock "
+                                      f"readers after {wait_s:g} s: replaying anyway")
         flow = rate <= 0 and node.count_publishers(topics.INGEST_RECEIVED) > 0
         if rate <= 0 and not flow:
             node.get_logger().warning("no ingest acknowledgements: replaying without flow control")
