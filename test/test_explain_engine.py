@@ -65,6 +65,11 @@ def test_verdict_is_serialisable(bilinear_verdict):
     assert d["missing_physics"][0]["name"] == "temperature_dependent_stiffness"
     assert d["fit"]["held_out"]["after"]["frequency_rmse_pct"] < d["fit"]["held_out"]["before"]["frequency_rmse_pct"]
     assert len(d["candidates"]) == len(v.tried) >= 3
+    # is what remains noise? Before, every mode's misfit follows the temperature (lag-1 about 0.97);
+    # the knee takes most of it (the truth's knee moves the modes in other proportions than the model's)
+    w = d["fit"]["residual_whiteness"]
+    assert min(w["lag1_before"]) > 0.9 and max(w["ljung_box_p_before"]) < 1e-3, w
+    assert all(a < b - 0.3 for a, b in zip(w["lag1_after"], w["lag1_before"], strict=True)), w
 
 
 def test_clean_table_raises_no_alarm():
@@ -74,6 +79,7 @@ def test_clean_table_raises_no_alarm():
     assert physics == [], [(c.label, c.log_evidence_gain) for c in physics]
     assert v.unexplained is None
     assert max((c.log_evidence_gain for c in v.tried), default=-np.inf) < v.threshold["log_bayes_factor"]
+    assert v.whiteness is not None and v.whiteness.still_structured == [] and v.whiteness.note() is None
 
 
 def test_held_out_blocks_and_threshold_file():

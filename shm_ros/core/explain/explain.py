@@ -44,6 +44,7 @@ from .select import decide, shipped_threshold
 from .shapes import break_tie
 from .surrogate import Surrogate
 from .types import Baseline, CandidateResult, Mismatch, Proposal, Verdict
+from .whiteness import residual_whiteness
 
 Progress = Callable[[str, float], None]
 
@@ -387,12 +388,16 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
             explanation="The structure has a mode the model cannot have (e.g. a lateral or torsional mode of "
                         "a plane model): the model class, not its parameters, is incomplete.",
             extra={"unmodelled": u}))
+    figures = _series(obs, base, context, train, r_all, z_all, last, epoch, form_of)
+    whiteness = residual_whiteness(figures["log_residual_before"], figures["log_residual_after"], base.mode_numbers)
+    if chain and (left := whiteness.note()):
+        notes.append(left)
     say("done", 1.0)
     return Verdict(mismatch=mismatch, missing_physics=accepted, tried=tried, fit_before=fit_before,
                    fit_after=fit_after, held_out_before=held_before, held_out_after=held_after,
                    unexplained=unexplained, scatter=noise,
                    threshold={**threshold_info, "catch_all_gain": catch}, notes=notes,
-                   figures=_series(obs, base, context, train, r_all, z_all, last, epoch, form_of))
+                   figures=figures, whiteness=whiteness)
 
 
 def _series(obs, base, context, train, r_all, z_all, last, epoch, form_of) -> dict:

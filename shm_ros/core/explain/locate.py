@@ -36,14 +36,15 @@ from scipy import stats
 from .candidates._common import daily_windows, hour_utc, hours_text
 from .candidates.base import Context
 from .types import Baseline, Mismatch, Proposal
+from .whiteness import LAGS, STRUCTURED_P, ljung_box
 
 STIFFNESS = ("EI", "bearings", "bearings_rot", "foundation", "damper")
 
 
 @dataclass
 class LocateConfig:
-    whiteness_p: float = 1e-3  # Ljung-Box p-value below which a mode's residual is structured
-    ljung_box_lags: int = 12
+    whiteness_p: float = STRUCTURED_P  # Ljung-Box p-value below which a mode's residual is structured
+    ljung_box_lags: int = LAGS
     significance: float = 1e-6  # per regressor family, after the Bonferroni factor of its profile
     max_effects: int = 3  # regressors selected (forward)
     lags_h: tuple[float, ...] = (0.0, 0.5, 1.0, 2.0)  # thermal lag of the structure behind the air
@@ -73,7 +74,7 @@ def locate(obs, baseline: Baseline, context: Context, config: LocateConfig | Non
     ok = np.isfinite(R)
     Rc = R - np.nanmedian(R, axis=0)
     sigma = np.array([_white_level(Rc[:, k]) for k in range(K)])
-    white = [_ljung_box(Rc[:, k], cfg.ljung_box_lags) for k in range(K)]
+    white = [ljung_box(Rc[:, k], cfg.ljung_box_lags) for k in range(K)]
     structured = [baseline.mode_numbers[k] for k in range(K) if white[k] < cfg.whiteness_p]
     Z = np.where(ok, Rc / sigma, 0.0)
     covs = {k: np.asarray(v, float) for k, v in context.covariates.items()}
@@ -121,19 +122,6 @@ def _white_level(r: np.ndarray) -> float:
     if d.size < 3:
         return 1.0
     return max(float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0)), 1e-6)
-
-
-def _ljung_box(r: np.ndarray, lags: int) -> float:
-    """p-value of the Ljung-Box test (missing windows filled with the mean: conservative)."""
-    x = np.where(np.isfinite(r), r, np.nanmean(r))
-    x = x - x.mean()
-    n = x.size
-    den = float(x @ x)
-    if n <= lags + 2 or den <= 0:
-        return 1.0
-    rho = np.array([float(x[h:] @ x[:-h]) / den for h in range(1, lags + 1)])
-    q = n * (n + 2) * float(np.sum(rho ** 2 / (n - np.arange(1, lags + 1))))
-    return float(stats.chi2.sf(q, lags))
 
 
 # -- what it co-varies with ----------------------------------------------------------------------------

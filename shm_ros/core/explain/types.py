@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from .whiteness import Whiteness
+
 
 @dataclass
 class Mismatch:
@@ -88,6 +90,7 @@ class Verdict:
     threshold: dict[str, Any] = field(default_factory=dict)  # the acceptance threshold and its calibration
     notes: list[str] = field(default_factory=list)
     figures: dict[str, Any] = field(default_factory=dict)  # numbers behind the report's figures
+    whiteness: Whiteness | None = None  # per mode: is the misfit before / after noise? (modal tables)
 
     def to_dict(self) -> dict[str, Any]:
         m = self.mismatch
@@ -110,6 +113,8 @@ class Verdict:
             "threshold": dict(self.threshold),
             "notes": list(self.notes),
         }
+        if self.whiteness is not None:
+            out["fit"]["residual_whiteness"] = self.whiteness.to_dict()
         if self.unexplained is not None:
             out["unexplained_structure"] = dict(self.unexplained)
         return out

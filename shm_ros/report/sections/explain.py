@@ -30,6 +30,8 @@ class ExplainSection:
         v, series = x.verdict, x.series
         s = Section(self.key, self.title, _paragraphs(v), notes=list(x.notes))
         s.tables.append(_fit_table(v))
+        if (v.get("fit") or {}).get("residual_whiteness"):
+            s.tables.append(_whiteness_table(v["fit"]["residual_whiteness"]))
         tried = v.get("candidates") or v.get("missing_physics") or []
         if tried:
             s.tables.append(_candidates_table(tried))
@@ -105,6 +107,16 @@ def _fit_table(v: dict[str, Any]) -> Table:
                      d.get("nrms_pct")])
     return Table(["fit", "frequency RMSE %", "mean MAC", "damping RMSE (points)", "NRMS %"], rows,
                  "Fit of the model before and after adding the accepted physics")
+
+
+def _whiteness_table(w: dict[str, Any]) -> Table:
+    rows = [[m, b, a, pb, pa, "yes" if m in w.get("still_structured", []) else ""] for m, b, a, pb, pa in zip(
+        w["mode_numbers"], w["lag1_before"], w["lag1_after"], w["ljung_box_p_before"], w["ljung_box_p_after"],
+        strict=True)]
+    return Table(["mode", "lag-1 autocorrelation before", "after", "Ljung-Box p before", "after",
+                  "structure left"], rows,
+                 "Is what remains noise? The misfit's autocorrelation from window to window, per mode, before and "
+                 "after the accepted physics (white: about 0 and p not small)")
 
 
 def _candidates_table(tried: list[dict[str, Any]]) -> Table:

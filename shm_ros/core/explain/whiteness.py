@@ -1,0 +1,89 @@
+"""Is what remains noise? Per mode, the misfit's autocorrelation over consecutive windows.
+
+An effect that is fully modelled leaves a misfit that is white from window to window (identification
+scatter); an effect that is missing, or only partly modelled, leaves a course in time (lag-1
+autocorrelation near 1 for a slow one). Locate asks this of the nominal model's misfit; the verdict
+asks it again after the accepted effects (:func:`residual_whiteness`), so that a user sees whether
+they took up all of the structure or only part of it. The Ljung-Box statistic is a few lines on the
+autocorrelations; statsmodels' version would add a dependency for them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+LAGS = 12  # windows: two hours of 10-minute windows
+STRUCTURED_P = 1e-3  # Ljung-Box p-value below which a mode's misfit is structured
+
+
+def _filled(r: np.ndarray) -> np.ndarray:
+    """Missing windows filled with the mean (conservative: it shrinks the autocorrelation), centred."""
+    r = np.asarray(r, float)
+    x = np.where(np.isfinite(r), r, np.nanmean(r) if np.isfinite(r).any() else 0.0)
+    return x - x.mean()
+
+
+def autocorrelation(r: np.ndarray, lags: int) -> np.ndarray:
+    """Sample autocorrelation at lags 1..``lags`` (0 where the series is constant)."""
+    x = _filled(r)
+    den = float(x @ x)
+    if den <= 0 or x.size <= lags:
+        return np.zeros(lags)
+    return np.array([float(x[h:] @ x[:-h]) / den for h in range(1, lags + 1)])
+
+
+def ljung_box(r: np.ndarray, lags: int = LAGS) -> float:
+    """p-value of the Ljung-Box test that the series is white up to ``lags``."""
+    n = np.asarray(r).size
+    if n <= lags + 2:
+        return 1.0
+    rho = autocorrelation(r, lags)
+    q = n * (n + 2) * float(np.sum(rho ** 2 / (n - np.arange(1, lags + 1))))
+    return float(stats.chi2.sf(q, lags))
+
+
+@dataclass
+class Whiteness:
+    """Per mode, the misfit before and after the accepted effects (windows in time order)."""
+
+    mode_numbers: list[int]
+    lag1_before: list[float]
+    lag1_after: list[float]
+    p_before: list[float]  # Ljung-Box p-values
+    p_after: list[float]
+
+    @property
+    def still_structured(self) -> list[int]:
+        """Modes whose misfit was structured and still is after the accepted effects."""
+        return [m for m, pb, pa in zip(self.mode_numbers, self.p_before, self.p_after, strict=True)
+                if pb < STRUCTURED_P and pa < STRUCTURED_P]
+
+    def to_dict(self) -> dict[str, list[float] | list[int]]:
+        return {"mode_numbers": list(self.mode_numbers), "lag1_before": self.lag1_before,
+                "lag1_after": self.lag1_after, "ljung_box_p_before": self.p_before,
+                "ljung_box_p_after": self.p_after, "still_structured": self.still_structured}
+
+    def note(self) -> str | None:
+        """Plain words when structure remains after the accepted effects (else None)."""
+        left = self.still_structured
+        if not left:
+            return None
+        rho = [self.lag1_after[self.mode_numbers.index(m)] for m in left]
+        return (f"after the accepted effects the misfit of mode{'s' if len(left) > 1 else ''} "
+                f"{', '.join(map(str, left))} still follows a course in time (lag-1 autocorrelation "
+                f"{', '.join(f'{r:.2f}' for r in rho)}; white misfit: about 0): part of what moves "
+                f"{'them' if len(left) > 1 else 'it'} is not modelled")
+
+
+def residual_whiteness(before: np.ndarray, after: np.ndarray, mode_numbers: list[int],
+                       lags: int = LAGS) -> Whiteness:
+    """:class:`Whiteness` of the misfit (W, K) before and after, windows in time order."""
+    b, a = np.asarray(before, float), np.asarray(after, float)
+    cols = range(b.shape[1])
+    return Whiteness([int(m) for m in mode_numbers],
+                     [float(autocorrelation(b[:, k], 1)[0]) for k in cols],
+                     [float(autocorrelation(a[:, k], 1)[0]) for k in cols],
+                     [ljung_box(b[:, k], lags) for k in cols], [ljung_box(a[:, k], lags) for k in cols])
