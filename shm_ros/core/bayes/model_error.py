@@ -71,14 +71,21 @@ def logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
     return np.log(np.sum(np.exp(a - mx), axis=axis)) + np.squeeze(mx, axis=axis)
 
 
+def autocorrelation(values: np.ndarray, lags: int) -> np.ndarray:
+    """Sample autocorrelation of a series at lags 1..``lags`` (zeros when the series is shorter than
+    ``lags + 1`` values or has no variance)."""
+    d = np.asarray(values, dtype=float)
+    d = d - d.mean() if d.size else d
+    den = float(np.dot(d, d))
+    if den <= 0 or d.size <= lags:
+        return np.zeros(lags)
+    return np.array([float(np.dot(d[h:], d[:-h])) / den for h in range(1, lags + 1)])
+
+
 def lag1_autocorrelation(values: np.ndarray) -> float:
     """Lag-1 autocorrelation of a series (0 for fewer than 3 values or no variance)."""
     v = np.asarray(values, dtype=float)
-    if v.size < 3:
-        return 0.0
-    d = v - v.mean()
-    den = float(np.dot(d, d))
-    return 0.0 if den <= 0 else float(np.dot(d[1:], d[:-1]) / den)
+    return 0.0 if v.size < 3 else float(autocorrelation(v, 1)[0])
 
 
 def effective_count(n: float, rho: float) -> float:

@@ -15,24 +15,21 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from shm_ros.core.bayes.model_error import autocorrelation as series_autocorrelation
+
 LAGS = 12  # windows: two hours of 10-minute windows
 STRUCTURED_P = 1e-3  # Ljung-Box p-value below which a mode's misfit is structured
 
 
 def _filled(r: np.ndarray) -> np.ndarray:
-    """Missing windows filled with the mean (conservative: it shrinks the autocorrelation), centred."""
+    """Missing windows filled with the mean (conservative: it shrinks the autocorrelation)."""
     r = np.asarray(r, float)
-    x = np.where(np.isfinite(r), r, np.nanmean(r) if np.isfinite(r).any() else 0.0)
-    return x - x.mean()
+    return np.where(np.isfinite(r), r, np.nanmean(r) if np.isfinite(r).any() else 0.0)
 
 
 def autocorrelation(r: np.ndarray, lags: int) -> np.ndarray:
-    """Sample autocorrelation at lags 1..``lags`` (0 where the series is constant)."""
-    x = _filled(r)
-    den = float(x @ x)
-    if den <= 0 or x.size <= lags:
-        return np.zeros(lags)
-    return np.array([float(x[h:] @ x[:-h]) / den for h in range(1, lags + 1)])
+    """Autocorrelation at lags 1..``lags`` of a misfit series with missing windows (:func:`_filled`)."""
+    return series_autocorrelation(_filled(r), lags)
 
 
 def ljung_box(r: np.ndarray, lags: int = LAGS) -> float:
