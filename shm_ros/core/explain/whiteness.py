@@ -19,6 +19,10 @@ from shm_ros.core.bayes.model_error import autocorrelation as series_autocorrela
 
 LAGS = 12  # windows: two hours of 10-minute windows
 STRUCTURED_P = 1e-3  # Ljung-Box p-value below which a mode's misfit is structured
+# lag-1 autocorrelation from which structure left after the accepted effects is worth a note: about a
+# third of the misfit's variance then follows a course in time (on hundreds of windows the Ljung-Box
+# test alone flags courses far too small to matter: lag-1 0.1-0.2 after a fully named effect)
+LEFT_LAG1 = 0.3
 
 
 def _filled(r: np.ndarray) -> np.ndarray:
@@ -54,9 +58,10 @@ class Whiteness:
 
     @property
     def still_structured(self) -> list[int]:
-        """Modes whose misfit was structured and still is after the accepted effects."""
-        return [m for m, pb, pa in zip(self.mode_numbers, self.p_before, self.p_after, strict=True)
-                if pb < STRUCTURED_P and pa < STRUCTURED_P]
+        """Modes whose misfit was structured and still is after the accepted effects, to a degree
+        that matters (:data:`LEFT_LAG1`)."""
+        return [m for m, pb, pa, r in zip(self.mode_numbers, self.p_before, self.p_after, self.lag1_after, strict=True)
+                if pb < STRUCTURED_P and pa < STRUCTURED_P and r >= LEFT_LAG1]
 
     def to_dict(self) -> dict[str, list[float] | list[int]]:
         return {"mode_numbers": list(self.mode_numbers), "lag1_before": self.lag1_before,
