@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from shm_ros.cli import main
 from shm_ros.ros.graph_run import replay_through_graph
 
@@ -37,3 +39,8 @@ def test_explain_node_publishes_the_verdict(tmp_path):
     step = doc["missing_physics"][0]
     assert step.get("time", "").startswith("2024-03-01T00:1"), step  # the 13th minute of the campaign
     assert doc["fit"]["after"]["frequency_rmse_pct"] < 0.5 * doc["fit"]["before"]["frequency_rmse_pct"]
+    # is what remains noise? in the message as in verdict.json: the step took the course out of the misfit
+    w = doc["fit"]["residual_whiteness"]
+    assert v["whiteness_modes"] == w["mode_numbers"] and v["still_structured_modes"] == w["still_structured"]
+    assert v["lag1_after"] == pytest.approx(w["lag1_after"])
+    assert max(v["lag1_before"]) > 0.5 and max(v["lag1_after"]) < max(v["lag1_before"]), v

@@ -90,6 +90,11 @@ def verdict_to_msg(v: dict[str, Any]) -> Any:
     msg.held_out_before_nrms_pct = float(f["held_out"]["before"].get("nrms_pct", nan))
     msg.held_out_after_nrms_pct = float(f["held_out"]["after"].get("nrms_pct", nan))
     msg.kind = "events" if "nrms_pct" in f["before"] else "modes"
+    w = f.get("residual_whiteness") or {}
+    msg.whiteness_modes = [int(k) for k in w.get("mode_numbers", [])]
+    msg.lag1_before = [float(x) for x in w.get("lag1_before", [])]
+    msg.lag1_after = [float(x) for x in w.get("lag1_after", [])]
+    msg.still_structured_modes = [int(k) for k in w.get("still_structured", [])]
     return msg
 
 

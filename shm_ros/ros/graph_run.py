@@ -66,7 +66,9 @@ def verdict_record(msg: Any) -> dict[str, Any]:
             "after_frequency_rmse_pct": msg.after_frequency_rmse_pct, "kind": msg.kind,
             "before_nrms_pct": msg.before_nrms_pct, "after_nrms_pct": msg.after_nrms_pct,
             "held_out_before_nrms_pct": msg.held_out_before_nrms_pct,
-            "held_out_after_nrms_pct": msg.held_out_after_nrms_pct}
+            "held_out_after_nrms_pct": msg.held_out_after_nrms_pct,
+            "whiteness_modes": list(msg.whiteness_modes), "lag1_before": list(msg.lag1_before),
+            "lag1_after": list(msg.lag1_after), "still_structured_modes": list(msg.still_structured_modes)}
 
 
 def read_pipeline_bag(path: Path) -> PipelineRecord:
