@@ -12,7 +12,7 @@ offset from the truth taken out as for the frequencies of modal tables and repor
 
 The offset is the calibrated planar model's model-form bias: its first-mode damping sits 0.1-0.4
 points above the truth's with or without the effect, since it takes up the torsional part that
-eccentric masses and off-centre sensors put into the records (docs/explain.md, time-domain limits).
+eccentric masses and off-centre sensors put into the records (docs/explain.md, "The damping RMSE and its offset").
 With the offset in, the RMSE was halved on seeds 1-3 only (seed 0 0.50 -> 0.37, seed 4 0.24 -> 0.19
 points); with it out, 0.28 -> 0.03 and 0.21 -> 0.07 on those two.
 """
