@@ -2,8 +2,8 @@
 
     python examples/explain_example_figures.py OUT [FIG_DIR]     (default FIG_DIR: OUT/explain)
 
-Reads OUT/truth_modes.csv (the table explain read), OUT/truth.json (the hidden effect) and
-OUT/explain/verdict.json; writes explain_example_{data,form,candidates}.png.
+Reads OUT/truth_modes.csv (the table explain read), OUT/truth.json (the hidden effect),
+OUT/explain/verdict.json and explain_series.json (the fitted form); writes explain_example_{data,form,candidates}.png.
 """
 
 from __future__ import annotations
@@ -36,10 +36,11 @@ def main(out: Path, fig_dir: Path) -> None:
 
     # 1. what the data show: the paired modes' frequencies against the measured temperature
     fig, ax = plt.subplots(figsize=(6.0, 3.2))
-    for m in series["modes"]:
+    for m in series["mode_numbers"]:
         f = obs.frequencies_hz[:, obs.mode_numbers.index(m)]
         ax.plot(temp, 100 * (f / np.nanmedian(f) - 1), ".", ms=2.5, label=f"mode {m}")
-    ax.axvline(best["parameters"]["knee_c"], color="k", lw=0.8, ls="--", label="fitted knee")
+    if "knee_c" in best["parameters"]:
+        ax.axvline(best["parameters"]["knee_c"], color="k", lw=0.8, ls="--", label="fitted knee")
     ax.set_xlabel("measured air temperature, degC")
     ax.set_ylabel("frequency - median, %")
     ax.set_title("tracked modes paired with the model: frequency against temperature", fontsize=9)
@@ -51,8 +52,9 @@ def main(out: Path, fig_dir: Path) -> None:
     t = np.linspace(np.nanmin(temp), np.nanmax(temp), 200)
     t_ref = float(np.nanmedian(temp))
     fig, ax = plt.subplots(figsize=(6.0, 3.2))
-    ax.plot(t, bilinear(t, best["parameters"], t_ref) / bilinear(np.array([t_ref]), best["parameters"], t_ref),
-            color="tab:blue", label=f"fitted: {best['form']}")
+    form = series["form"]  # the accepted effect's factor per window against temperature, as fitted
+    x, f = np.asarray(form["x"], float), np.asarray(form["y"], float)
+    ax.plot(x, f / np.interp(t_ref, x, f), color="tab:blue", label=f"fitted: {best['form']}")
     ax.plot(t, bilinear(t, truth, truth["t_ref_c"]) / bilinear(np.array([t_ref]), truth, truth["t_ref_c"]),
             "k--", lw=1, label="hidden truth (simulator)")
     ax.set_xlabel("air temperature, degC")

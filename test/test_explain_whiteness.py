@@ -53,3 +53,19 @@ def test_the_note_names_the_modes_whose_structure_is_left():
     d = w.to_dict()
     assert d["still_structured"] == [2] and len(d["ljung_box_p_after"]) == 3
     assert residual_whiteness(before, 0.2 * rng.standard_normal((n, 3)), [1, 2, 3]).note() is None
+
+
+def test_the_terminal_verdict_says_whether_the_misfit_left_is_noise():
+    from shm_ros.commands.explain import format_verdict
+
+    fit = {"before": {"frequency_rmse_pct": 3.3}, "after": {"frequency_rmse_pct": 0.6},
+           "held_out": {"before": {"frequency_rmse_pct": 2.2}, "after": {"frequency_rmse_pct": 0.5}}}
+    v = {"mismatch": {"summary": "s"}, "fit": fit,
+         "missing_physics": [{"name": "temperature_dependent_stiffness", "form": "bilinear", "log_evidence_gain": 488.8}]}
+    w = {"mode_numbers": [1, 2, 9], "lag1_after": [0.05, 0.37, 0.80], "still_structured": [2, 9]}
+    fit["residual_whiteness"] = w
+    assert "misfit left: a course in time on modes 2, 9 (lag-1 autocorrelation 0.37, 0.80)" in format_verdict(v)
+    w.update(lag1_after=[0.05, 0.12, 0.08], still_structured=[])
+    assert "misfit left: noise on every mode (lag-1 autocorrelation at most 0.12)" in format_verdict(v)
+    v["missing_physics"] = []  # nothing named: nothing to say about what it left
+    assert "misfit left" not in format_verdict(v)

@@ -52,7 +52,7 @@ def _tracked_covariate_figure(obs: Any, v: dict[str, Any], series: dict[str, Any
     mismatch correlates with: what the missing physics was found to follow."""
     corr = (v.get("mismatch") or {}).get("covariates") or {}
     covs = {k: np.asarray(obs.covariates[k], dtype=float) for k in corr if k in getattr(obs, "covariates", {})}
-    modes = [m for m in (series.get("modes") or obs.mode_numbers) if m in obs.mode_numbers]
+    modes = [m for m in (series.get("mode_numbers") or obs.mode_numbers) if m in obs.mode_numbers]
     if not covs or not modes:
         return None
     plt = pyplot()
