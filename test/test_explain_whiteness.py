@@ -61,7 +61,8 @@ def test_the_terminal_verdict_says_whether_the_misfit_left_is_noise():
     fit = {"before": {"frequency_rmse_pct": 3.3}, "after": {"frequency_rmse_pct": 0.6},
            "held_out": {"before": {"frequency_rmse_pct": 2.2}, "after": {"frequency_rmse_pct": 0.5}}}
     v = {"mismatch": {"summary": "s"}, "fit": fit,
-         "missing_physics": [{"name": "temperature_dependent_stiffness", "form": "bilinear", "log_evidence_gain": 488.8}]}
+         "missing_physics": [{"name": "temperature_dependent_stiffness", "form": "bilinear",
+                              "log_evidence_gain": 488.8}]}
     w = {"mode_numbers": [1, 2, 9], "lag1_after": [0.05, 0.37, 0.80], "still_structured": [2, 9]}
     fit["residual_whiteness"] = w
     assert "misfit left: a course in time on modes 2, 9 (lag-1 autocorrelation 0.37, 0.80)" in format_verdict(v)
