@@ -138,12 +138,14 @@ def format_verdict(v: dict) -> str:
                  f"{f['after'].get('frequency_rmse_pct', float('nan')):.2f} %; held out "
                  f"{f['held_out']['before'].get('frequency_rmse_pct', float('nan')):.2f} % -> "
                  f"{f['held_out']['after'].get('frequency_rmse_pct', float('nan')):.2f} %")
+    from shm_ros.core.explain.whiteness import listing
+
     w = f.get("residual_whiteness")
     if w and any(m["name"] != "unmodelled_modes" for m in v["missing_physics"]):
         left = w["still_structured"]
         rho = [w["lag1_after"][w["mode_numbers"].index(m)] for m in left]
-        lines.append(f"misfit left: a course in time on mode{'s' if len(left) > 1 else ''} "
-                     f"{', '.join(map(str, left))} (lag-1 autocorrelation {', '.join(f'{r:.2f}' for r in rho)})"
-                     if left else f"misfit left: noise on every mode (lag-1 autocorrelation at most "
-                                  f"{max(w['lag1_after'], default=0.0):.2f})")
+        modes, values = listing(left, rho)
+        lines.append(f"misfit left: a course in time on {modes} (lag-1 autocorrelation {values})" if left
+                     else f"misfit left: noise on every mode (lag-1 autocorrelation at most "
+                          f"{max(w['lag1_after'], default=0.0):.2f})")
     return "\n".join(lines)

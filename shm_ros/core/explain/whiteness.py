@@ -74,10 +74,15 @@ class Whiteness:
         if not left:
             return None
         rho = [self.lag1_after[self.mode_numbers.index(m)] for m in left]
-        return (f"after the accepted effects the misfit of mode{'s' if len(left) > 1 else ''} "
-                f"{', '.join(map(str, left))} still follows a course in time (lag-1 autocorrelation "
-                f"{', '.join(f'{r:.2f}' for r in rho)}; white misfit: about 0): part of what moves "
+        modes, values = listing(left, rho)
+        return (f"after the accepted effects the misfit of {modes} still follows a course in time (lag-1 "
+                f"autocorrelation {values}; white misfit: about 0): part of what moves "
                 f"{'them' if len(left) > 1 else 'it'} is not modelled")
+
+
+def listing(modes: list[int], lag1: list[float]) -> tuple[str, str]:
+    """(``"modes 2, 9"``, ``"0.37, 0.80"``): the modes with structure left and their lag-1 values."""
+    return f"mode{'s' if len(modes) > 1 else ''} {', '.join(map(str, modes))}", ", ".join(f"{r:.2f}" for r in lag1)
 
 
 def residual_whiteness(before: np.ndarray, after: np.ndarray, mode_numbers: list[int],
