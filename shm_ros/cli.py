@@ -9,6 +9,7 @@ import sys
 
 from shm_ros import __version__
 from shm_ros.commands import COMMANDS
+from shm_ros.errors import ShmError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,9 +29,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. An error the user can act on (:class:`shm_ros.errors.ShmError`) is printed as
+    one line and exits with its code; any other exception is a bug and shows its traceback."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    return int(args.func(args) or 0)
+    try:
+        return int(args.func(args) or 0)
+    except ShmError as exc:
+        print(f"shm-ros {args.command}: error: {exc}", file=sys.stderr)
+        return exc.exit_code
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ import numpy as np
 
 from shm_ros.core.bayes.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS, Prior, PriorError, prior_fields
 from shm_ros.core.models.registry import MODEL_KINDS, ModelKind, kind_names, model_kind
+from shm_ros.errors import InputError
 
 DIRECTIONS = ("vertical", "x", "y")
 DEFAULT_AXIS = {"vertical": "z", "x": "x", "y": "y"}
@@ -32,7 +33,7 @@ DEFAULT_AXIS = {"vertical": "z", "x": "x", "y": "y"}
 Location = tuple[str | int, ...]
 
 
-class StructureError(ValueError):
+class StructureError(InputError):
     """A structure file (or spec) is invalid; the message names the file and the field."""
 
     def __init__(self, message: str, source: str = "<structure>", field_path: str | None = None):

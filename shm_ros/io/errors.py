@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from shm_ros.errors import ShmError
 
-class BagError(RuntimeError):
+
+class BagError(ShmError, RuntimeError):
     """A bag cannot be read or written; the message names the bag and what is wrong."""

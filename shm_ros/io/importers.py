@@ -29,11 +29,12 @@ from typing import Any
 import numpy as np
 
 from shm_ros.core.ingest.units import unit_factor
+from shm_ros.errors import InputError
 
 FORMATS = ("csv", "npy", "v2", "miniseed")
 
 
-class ImportFileError(ValueError):
+class ImportFileError(InputError):
     """An input file cannot be imported; the message names the file and what is wrong."""
 
 

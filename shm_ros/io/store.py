@@ -31,6 +31,7 @@ import numpy as np
 from shm_ros.core.bayes.observations import ModalObservations
 from shm_ros.core.tracking import TrackedRow, Tracker
 from shm_ros.core.types import ModalEstimate, Mode
+from shm_ros.errors import ShmError
 
 SCHEMA_VERSION = 1
 NS_PER_DAY = 86400 * 10**9
@@ -50,7 +51,7 @@ CREATE TABLE IF NOT EXISTS checkpoint (id INTEGER PRIMARY KEY CHECK (id = 1), se
 """
 
 
-class StoreError(RuntimeError):
+class StoreError(ShmError, RuntimeError):
     """The store cannot be opened (another writer, a newer schema); the message names the file."""
 
 

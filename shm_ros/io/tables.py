@@ -21,13 +21,14 @@ from pathlib import Path
 import numpy as np
 
 from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.errors import InputError
 
 _HZ = re.compile(r"^mode(\d+)_hz$")
 _DAMP = re.compile(r"^mode(\d+)_damping$")
 _SHAPE = re.compile(r"^mode(\d+)_shape_(.+)$")
 
 
-class TableError(ValueError):
+class TableError(InputError):
     """A tracked-modes table that cannot be used; the message names the file (and column)."""
 
 

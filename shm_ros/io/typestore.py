@@ -12,6 +12,8 @@ from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from shm_ros.errors import ShmError
+
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
@@ -19,7 +21,7 @@ PACKAGE = "shm_interfaces"
 SOURCE_MSG_DIR = Path(__file__).resolve().parents[2] / "msg_defs" / "msg"
 
 
-class InterfaceError(RuntimeError):
+class InterfaceError(ShmError, RuntimeError):
     """The project's interface definitions cannot be found."""
 
 

@@ -20,12 +20,13 @@ from typing import Any
 
 import numpy as np
 
+from shm_ros.errors import InputError
 from shm_ros.report.inputs import DiagnosticRow, IdentifyInputs, IngestInputs, WindowHealth
 
 __all__ = ["ReportInputError", "load_identify", "load_ingest", "load_json", "load_posterior", "load_tracking"]
 
 
-class ReportInputError(ValueError):
+class ReportInputError(InputError):
     """An input file of the report is missing or unreadable (the message names it)."""
 
 

@@ -26,6 +26,8 @@ from typing import Any
 
 import yaml
 
+from shm_ros.errors import InputError
+
 NODE_KINDS = ("ingest", "identify", "track", "update", "predict", "explain", "recorder")
 
 
@@ -62,7 +64,7 @@ def stop_process(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, st
     return proc.returncode, out or ""
 
 
-class ConfigError(ValueError):
+class ConfigError(InputError):
     """The graph config is invalid; the message names the file and the field."""
 
 

@@ -27,6 +27,8 @@ from typing import Any
 import numpy as np
 from scipy import special
 
+from shm_ros.errors import InputError
+
 # family -> its fields, in the order of the structure file
 PRIOR_FIELDS: dict[str, tuple[str, ...]] = {
     "normal": ("mean", "std"),
@@ -41,7 +43,7 @@ PRIOR_KINDS = tuple(PRIOR_FIELDS)
 PARAMETER_PRIORS = ("normal", "lognormal", "weibull", "uniform")  # families a structure parameter may use
 
 
-class PriorError(ValueError):
+class PriorError(InputError):
     """A prior specification that cannot be used (names the parameter and field)."""
 
 

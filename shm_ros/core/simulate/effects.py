@@ -28,6 +28,7 @@ from datetime import datetime, timezone
 from typing import Any
 
 from shm_ros.core.simulate.truth_kinds import TRUTH_KINDS, truth_class
+from shm_ros.errors import InputError
 
 # key -> (vocabulary name of docs/interfaces.md section 5, one line on what it does). The default
 # parameters per structure kind belong to each kind's truth model (``TruthModel.effect_defaults``).
@@ -53,7 +54,7 @@ BEARING_DEFAULTS: dict[str, dict[str, Any]] = {
 RUSH_HOURS = ((7.0, 9.5), (17.0, 19.5))  # local time, added mass of slow or jammed traffic
 
 
-class EffectError(ValueError):
+class EffectError(InputError):
     """An effect is unknown, not available for the structure kind, or badly parameterised."""
 
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import types
 
+from shm_ros.errors import InputError
+
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
 
@@ -40,7 +42,7 @@ def _zstd_error() -> type[Exception]:
 ZstdError: type[Exception] = _zstd_error()
 
 
-class Lz4Error(ValueError):
+class Lz4Error(InputError):
     """Damaged lz4 data."""
 
 
