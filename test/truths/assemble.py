@@ -17,7 +17,6 @@ from .opensees import eigen_hz, fresh, ops
 from .story_state import Soil, Spring, StoryState
 
 
-
 @dataclass
 class Handles:
     masters: list[int]                            # floor 1..n centres of mass
@@ -64,12 +63,16 @@ def _extra_devices(t: _Tags, b: Building, state: StoryState, s: int) -> list[int
     mats = []
     c = b.damper_c[s] * (1.0 if state.damper_factor is None else state.damper_factor[s])
     if c > 0:
-        mats.append(t.m()); ops.uniaxialMaterial("Viscous", mats[-1], c, 1.0)
+        mats.append(t.m())
+        ops.uniaxialMaterial("Viscous", mats[-1], c, 1.0)
     if state.brace_k is not None and state.brace_k[s] > 0:
-        mats.append(t.m()); ops.uniaxialMaterial("Elastic", mats[-1], float(state.brace_k[s]))
-        mats.append(t.m()); ops.uniaxialMaterial("Viscous", mats[-1], float(state.brace_c[s]), 1.0)  # type: ignore[index]
+        mats.append(t.m())
+        ops.uniaxialMaterial("Elastic", mats[-1], float(state.brace_k[s]))
+        mats.append(t.m())
+        ops.uniaxialMaterial("Viscous", mats[-1], float(state.brace_c[s]), 1.0)  # type: ignore[index]
     if state.quad_c is not None and state.quad_c[s] > 0:
-        mats.append(t.m()); ops.uniaxialMaterial("Viscous", mats[-1], float(state.quad_c[s]), 2.0)
+        mats.append(t.m())
+        ops.uniaxialMaterial("Viscous", mats[-1], float(state.quad_c[s]), 2.0)
     return mats
 
 
@@ -77,7 +80,8 @@ def _footing(t: _Tags, soil: Soil, node: int, share: float) -> int:
     """A footing under one column line: its own fixed anchor and softening soil springs in x and y
     (Hysteretic backbone: k to the knee, 0.35 k to 4 knees, 0.08 k to 20 knees), mass ``share``."""
     anchor = 90000 + node
-    ops.node(anchor, *ops.nodeCoord(node)); ops.fix(anchor, 1, 1, 1, 1, 1, 1)
+    ops.node(anchor, *ops.nodeCoord(node))
+    ops.fix(anchor, 1, 1, 1, 1, 1, 1)
     k, e1 = soil.k_sway * share, soil.yield_sway
     tag = t.m()
     s1, s2 = k * e1, k * e1 + 0.35 * k * 3 * e1
@@ -90,7 +94,8 @@ def _footing(t: _Tags, soil: Soil, node: int, share: float) -> int:
 
 
 def build(b: Building, state: StoryState) -> Handles:
-    """Assemble the model in the global OpenSees domain (wiped first); returns the node/element tags."""
+    """Assemble the model in the global OpenSees domain (wiped first)
+    returns the node/element tags."""
     fresh(3, 6)
     t = _Tags()
     lines = b.lines_xy()
@@ -144,7 +149,8 @@ def _device(t: _Tags, mat: int, ni: int, nj: int, share: float) -> None:
 
 
 def add_rayleigh(b: Building) -> np.ndarray:
-    """Rayleigh damping on the initial stiffness meeting ``b.zeta`` at modes 1 and 4; returns the
+    """Rayleigh damping on the initial stiffness meeting ``b.zeta`` at modes 1 and 4
+    returns the
     first six undamped frequencies (Hz)."""
     n_modes = min(6, 3 * b.n)
     f = eigen_hz(n_modes)

@@ -1,7 +1,8 @@
 """A building with rigid floor diaphragms (x, y, torsion per floor) on story springs per column line.
 
 Every floor is a rigid diaphragm (``ops.rigidDiaphragm``) whose master node sits at the floor's
-centre of mass, offset from the plan centre by 2-6 % of the plan width in x and y; the column lines
+centre of mass, offset from the plan centre by 2-6 % of the plan width in x and y
+the column lines
 are the diaphragm's slaves. Each story has one spring element per column line acting in x and y
 (``zeroLength`` for a fixed base; ``twoNodeLink`` with stiff axial and bending directions on a
 foundation, so that foundation rocking carries the floors rigidly). The lines' shares of the story

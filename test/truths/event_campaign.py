@@ -1,7 +1,8 @@
 """An event campaign: 5-30 earthquakes over months recorded by a ground (free-field) sensor and floor
 accelerometers of a 3-D building, one effect (``event_effects.py``) and realistic nuisance.
 
-Nuisance in every campaign: the building's stiffness varies from event to event by 0.3 % (RMS; the
+Nuisance in every campaign: the building's stiffness varies from event to event by 0.3 % (RMS
+the
 temperature on the day), the sensors have gain, misalignment and noise (``sensors.py``), each
 event has its own synthetic ground motion (``ground_motion.py``) with a y component of 50-90 % of
 x, and PGAs span a factor 12-30 (log-uniform between the extremes).
@@ -53,7 +54,8 @@ def _pgas(rng: np.random.Generator, m: int) -> tuple[np.ndarray, float]:
 
 
 def generate(kind: str, seed: int, size: str, out: Path) -> dict:
-    """Write ``out/structure.yaml``, ``out/events`` (bag) and ``out/truth.json``; returns the truth."""
+    """Write ``out/structure.yaml``, ``out/events`` (bag) and ``out/truth.json``
+    returns the truth."""
     rng = np.random.default_rng(seed)
     sz = SIZES[size]
     effect = EFFECTS[kind]()
@@ -74,7 +76,8 @@ def generate(kind: str, seed: int, size: str, out: Path) -> dict:
             pga[j + 1], pga[j + 2] = pga.min() * rng.uniform(1.5, 3.0), pga.min() * rng.uniform(1.5, 3.0)
     motions = [GroundMotion.draw(rng, float(rng.uniform(*sz.duration_s))) for _ in range(m)]
     y_ratio = rng.uniform(0.5, 0.9, m)
-    ground = [(g.record(rng, rate, p), g.record(rng, rate, p * yr)) for g, p, yr in zip(motions, pga, y_ratio)]
+    ground = [(g.record(rng, rate, p), g.record(rng, rate, p * yr))
+              for g, p, yr in zip(motions, pga, y_ratio, strict=True)]
     linear_strong = run_event(b, StoryState.clean(n), *ground[strong], rate)
     ctx = Context(building=b, times_s=times, pga=pga, strong=strong, linear_strong=linear_strong, rng=rng)
     effect.prepare(ctx)

@@ -85,7 +85,8 @@ class StiffnessLoss(EventEffect):
 
 class Hysteretic(EventEffect):
     """Steel02 story springs: yield at a third to a fifth of the strongest event's linear drift, so weak
-    events stay elastic and strong ones soften; unloading is at the initial stiffness (no lasting loss)."""
+    events stay elastic and strong ones soften
+    unloading is at the initial stiffness (no lasting loss)."""
 
     def __init__(self) -> None:
         super().__init__(name="hysteretic", expected="amplitude_dependent_stiffness",
@@ -130,7 +131,8 @@ class SoilFoundation(EventEffect):
     """The building stands on footings on softening soil springs (sway in x and y, Hysteretic backbone);
     the ground sensor is on the free field. The flexibility is sized from the sway-rocking estimate
     1/w^2 = 1/w_fix^2 + 1/w_sway^2 + 1/w_rock^2 for an 8-20 % drop of the first frequency, with the
-    rocking share carried by the sway springs (no rocking DOF, see README); it softens further when
+    rocking share carried by the sway springs (no rocking DOF, see README)
+    it softens further when
     strong (knee at a half to a quarter of the strongest event's base shear)."""
 
     def __init__(self) -> None:
@@ -166,7 +168,8 @@ class DamperLoss(EventEffect):
         super().prepare(ctx)
         b, rng = ctx.building, ctx.rng
         m = ctx.times_s.size
-        self.stories = sorted(rng.choice(np.arange(b.n), size=min(b.n, int(rng.integers(1, 3))), replace=False).tolist())
+        count = min(b.n, int(rng.integers(1, 3)))
+        self.stories = sorted(rng.choice(np.arange(b.n), size=count, replace=False).tolist())
         self.brace_k = np.zeros(b.n)
         self.brace_c = np.zeros(b.n)
         w1 = 2 * np.pi * ctx.linear_strong.f0_hz[0]
@@ -189,7 +192,8 @@ class DamperLoss(EventEffect):
 class BreathingCrack(EventEffect):
     """A crack in the lowest story closed by gravity pre-compression: it opens beyond a drift of a
     quarter to a half of the strongest event's, and the story is 40-70 % softer while it is open
-    (bilinear elastic, asymmetric: positive drift only; no hysteresis, no lasting change)."""
+    (bilinear elastic, asymmetric: positive drift only
+    no hysteresis, no lasting change)."""
 
     def __init__(self) -> None:
         super().__init__(name="breathing_crack", expected="amplitude_dependent_stiffness")

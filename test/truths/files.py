@@ -52,7 +52,8 @@ def write_truth(doc: dict, path: Path) -> Path:
 
 
 def write_table(path: Path, times_s: np.ndarray, columns: dict[str, np.ndarray], start: datetime = EPOCH) -> Path:
-    """A tracked-modes table: ``time`` then the given columns; NaN cells are written empty."""
+    """A tracked-modes table: ``time`` then the given columns
+    NaN cells are written empty."""
     names = list(columns)
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)

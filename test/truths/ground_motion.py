@@ -1,7 +1,8 @@
 """Synthetic ground motion: Kanai-Tajimi filtered white noise under a Jennings envelope.
 
 The Kanai-Tajimi filter (ground frequency ``fg`` 1.5-5 Hz, ratio ``zg`` 0.3-0.65) shapes the
-spectrum like a soil column; a Clough-Penzien second stage (``ff`` = 0.1-0.25 fg) removes the
+spectrum like a soil column
+a Clough-Penzien second stage (``ff`` = 0.1-0.25 fg) removes the
 long-period content so displacements do not drift. The Jennings et al. (1968) envelope rises as
 (t/t1)^2, holds until t2 and decays as exp(-c (t - t2)). The record is scaled to its peak (PGA).
 """

@@ -16,7 +16,7 @@ def _story_groups(n: int) -> list[tuple[str, list[int]]]:
     if n <= 3:
         return [(f"k_story{s + 1}", [s]) for s in range(n)]
     cuts = np.array_split(np.arange(n), 3)
-    return [(name, c.tolist()) for name, c in zip(("k_low", "k_mid", "k_high"), cuts)]
+    return [(name, c.tolist()) for name, c in zip(("k_low", "k_mid", "k_high"), cuts, strict=True)]
 
 
 def building_document(b: Building, rng: np.random.Generator, name: str,
@@ -26,7 +26,7 @@ def building_document(b: Building, rng: np.random.Generator, name: str,
     masses = b.masses * (1 + 0.02 * rng.standard_normal(b.n))
     k = (b.k_x + k_add) * (1 + 0.05 * rng.standard_normal(b.n))
     floors = [{"mass": float(f"{m:.4g}"), "stiffness": float(f"{kk:.4g}"), "height": float(f"{h:.3g}")}
-              for m, kk, h in zip(masses, k, b.heights)]
+              for m, kk, h in zip(masses, k, b.heights, strict=True)]
     c = b.damper_c + c_add
     dampers = [{"between": [s, s + 1], "c": float(f"{c[s]:.4g}")} for s in range(b.n) if c[s] > 0]
     sensors = [{"id": "g0", "at": {"floor": 0}, "direction": "x"}]

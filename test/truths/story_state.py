@@ -1,6 +1,7 @@
 """What the building is like during one event: the effect-dependent part of the model.
 
-An effect (``event_effects.py``) hands the assembler one :class:`StoryState` per event; the clean
+An effect (``event_effects.py``) hands the assembler one :class:`StoryState` per event
+the clean
 building is ``StoryState.clean(n)``.
 """
 

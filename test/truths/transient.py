@@ -47,10 +47,13 @@ def _parameters(b: Building, h: assemble.Handles, state: StoryState) -> dict[int
 
 
 def _retry(dt: float) -> bool:
-    """Substeps and a Krylov-Newton with a looser energy test for a hard step; back to Newton after."""
-    ops.algorithm("KrylovNewton"); ops.test("EnergyIncr", 1e-12, 100)
+    """Substeps and a Krylov-Newton with a looser energy test for a hard step
+    back to Newton after."""
+    ops.algorithm("KrylovNewton")
+    ops.test("EnergyIncr", 1e-12, 100)
     ok = ops.analyze(20, dt / 20) == 0
-    ops.algorithm("Newton"); ops.test("NormDispIncr", 1e-9, 30)
+    ops.algorithm("Newton")
+    ops.test("NormDispIncr", 1e-9, 30)
     return ok
 
 
@@ -64,12 +67,16 @@ def run_event(b: Building, state: StoryState, ag_x: np.ndarray, ag_y: np.ndarray
     for tag, (d, rec) in enumerate(((1, ag_x), (2, ag_y)), start=1):
         ops.timeSeries("Path", tag, "-dt", dt, "-values", *rec.tolist())
         ops.pattern("UniformExcitation", tag, d, "-accel", tag)
-    ops.constraints("Transformation"); ops.numberer("RCM"); ops.system("BandGeneral")
+    ops.constraints("Transformation")
+    ops.numberer("RCM")
+    ops.system("BandGeneral")
     if linear:
         ops.algorithm("Linear", "-factorOnce")      # constant tangent: one factorisation
     else:
-        ops.test("NormDispIncr", 1e-9, 30); ops.algorithm("Newton")
-    ops.integrator("Newmark", 0.5, 0.25); ops.analysis("Transient")
+        ops.test("NormDispIncr", 1e-9, 30)
+        ops.algorithm("Newton")
+    ops.integrator("Newmark", 0.5, 0.25)
+    ops.analysis("Transient")
     params = _parameters(b, h, state) if softening is not None else {}
     cm = b.cm_xy()
     dx, dy = b.sensor_xy[0] - cm[0], b.sensor_xy[1] - cm[1]
