@@ -46,7 +46,7 @@ def _line_material(t: _Tags, state: StoryState, story: int, k: float) -> int:
         dy = float(state.yield_drift[story])  # type: ignore[index]
         r = state.nonlinear_share
         ops.uniaxialMaterial("Elastic", tag + 1000, k * (1 - r))
-        ops.uniaxialMaterial("Steel02", tag + 2000, r * k * dy, r * k, 0.02, 10.0, 0.925, 0.15)
+        ops.uniaxialMaterial("Steel02", tag + 2000, r * k * dy, r * k, 0.02, 10.0, 0.0, 0.15)  # R fixed
         ops.uniaxialMaterial("Parallel", tag, tag + 1000, tag + 2000)
     elif state.spring is Spring.CRACK and nonlinear:
         d0 = float(state.yield_drift[story])  # type: ignore[index]
