@@ -98,7 +98,7 @@ def dists(tmp_path_factory) -> dict[str, dict[str, bytes]]:
 def test_no_test_data_and_no_gpl_file_inside(dists, kind):
     files = dists[kind]
     assert any(n.endswith("shm_ros/__init__.py") for n in files), sorted(files)[:20]
-    data = [n for n in files if "test/data" in n or n.endswith((".npy", ".V2", ".zip"))]
+    data = [n for n in files if "test/data" in n or "test/truths" in n or n.endswith((".npy", ".V2", ".zip"))]
     assert not data, data
     gpl = [n for n, b in files.items() if GPL_MARK in b]
     assert not gpl, gpl
