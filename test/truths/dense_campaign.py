@@ -54,10 +54,11 @@ def generate(kind: str, seed: int, size: str, out: Path) -> dict:
     else:
         n = 3 if size == "reduced" else int(rng.integers(3, 11))
         structure = BuildingStructure(draw_building(rng, n))
+    rng_fx = np.random.default_rng([seed, 1])   # the effect's own stream (common random numbers)
     if kind in fx.GIRDER_ONLY:
-        truth = fx.GIRDER_ONLY[kind](rng, wx, which, k_v)
+        truth = fx.GIRDER_ONLY[kind](rng_fx, wx, which, k_v)
     else:
-        truth = fx.ANY[kind](rng, wx, which)
+        truth = fx.ANY[kind](rng_fx, wx, which)
     f = np.empty((w, structure.n_modes))
     phi = np.empty((w, len(structure.sensor_ids), structure.n_modes))
     for i in range(w):

@@ -79,7 +79,10 @@ def generate(kind: str, seed: int, size: str, out: Path) -> dict:
     ground = [(g.record(rng, rate, p), g.record(rng, rate, p * yr))
               for g, p, yr in zip(motions, pga, y_ratio, strict=True)]
     linear_strong = run_event(b, StoryState.clean(n), *ground[strong], rate)
-    ctx = Context(building=b, times_s=times, pga=pga, strong=strong, linear_strong=linear_strong, rng=rng)
+    # the effect draws from its own stream: the campaign of another effect (or the clean one) with the
+    # same seed has the same building, ground motions, nuisance and sensor errors (common random numbers)
+    ctx = Context(building=b, times_s=times, pga=pga, strong=strong, linear_strong=linear_strong,
+                  rng=np.random.default_rng([seed, 1]))
     effect.prepare(ctx)
     channels = ["g0", *[f"f{f}" for f in b.instrumented]]
     errors = SensorErrors.draw(rng, len(channels))
