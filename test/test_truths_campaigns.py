@@ -14,6 +14,7 @@ import pytest
 pytest.importorskip("openseespy.opensees", reason="OpenSeesPy (requirements/test.txt) and libblas3/liblapack3")
 
 from truths import KINDS, make_campaign  # noqa: E402
+from truths.apparent import transfer_peak  # noqa: E402
 
 from shm_ros.io.recording import windows_from_bag  # noqa: E402
 from shm_ros.io.structure import load_structure  # noqa: E402
@@ -32,17 +33,9 @@ def ar1_nulls(tmp_path_factory):
 
 
 def _apparent_f1(window, top: str) -> float:
-    """Peak of the ground-to-top transfer function between 1 and 8 Hz, smoothed over 0.3 Hz."""
     names = window.channel_names
-    g, r = window.samples[:, names.index("g0")], window.samples[:, names.index(top)]
-    n, rate = g.size, window.sample_rate_hz
-    freqs = np.fft.rfftfreq(n, 1 / rate)
-    width = max(1, int(0.3 / freqs[1]))
-    k = np.ones(width) / width
-    tf = (np.convolve(np.abs(np.fft.rfft(r * np.hanning(n))) ** 2, k, "same")
-          / np.convolve(np.abs(np.fft.rfft(g * np.hanning(n))) ** 2, k, "same"))
-    sel = (freqs > 1.0) & (freqs < 8.0)
-    return float(freqs[sel][np.argmax(tf[sel])])
+    return transfer_peak(window.samples[:, names.index("g0")], window.samples[:, names.index(top)],
+                         window.sample_rate_hz, (1.0, 8.0), smooth_hz=0.3)
 
 
 def test_event_campaign_loads_with_the_project_readers(stiffness_loss):

@@ -8,6 +8,7 @@ import pytest
 pytest.importorskip("openseespy.opensees", reason="OpenSeesPy (requirements/test.txt) and libblas3/liblapack3")
 
 from truths import assemble  # noqa: E402
+from truths.apparent import transfer_peak  # noqa: E402
 from truths.building import Building, draw_building  # noqa: E402
 from truths.drivers import ar1  # noqa: E402
 from truths.ground_motion import GroundMotion  # noqa: E402
@@ -70,20 +71,6 @@ def test_eccentric_building_has_coupled_torsional_modes():
         assert np.sort(share)[1] > 0.03, (seed, share)  # a translational mode carries visible torsion
 
 
-def _peak_frequency(ground: np.ndarray, roof: np.ndarray, rate: float, band: tuple[float, float]) -> float:
-    """Apparent first frequency: peak of |roof / ground| (spectra smoothed over 0.25 Hz)."""
-    n = ground.size
-    freqs = np.fft.rfftfreq(n, 1 / rate)
-    g, r = np.abs(np.fft.rfft(ground * np.hanning(n))), np.abs(np.fft.rfft(roof * np.hanning(n)))
-    width = max(1, int(0.25 / (freqs[1] - freqs[0])))
-    kernel = np.ones(width) / width
-    tf = np.convolve(r**2, kernel, "same") / np.convolve(g**2, kernel, "same")
-    sel = (freqs > band[0]) & (freqs < band[1])
-    peak = float(freqs[sel][np.argmax(tf[sel])])
-    near = np.abs(freqs - peak) < 0.3               # centroid of the peak: finer than one bin
-    return float(np.sum(freqs[near] * tf[near]) / np.sum(tf[near]))
-
-
 @pytest.mark.parametrize("seed", [11, 12])
 def test_hysteretic_springs_soften_in_a_strong_event_and_recover(seed):
     rng = np.random.default_rng(seed)
@@ -98,7 +85,7 @@ def test_hysteretic_springs_soften_in_a_strong_event_and_recover(seed):
                        nonlinear_share=0.6, nonlinear_stories=[0])
     r = run_event(b, state, ax, ay, rate)         # one continuous record: weak, strong, weak
     n = int(seg * rate)
-    f = [_peak_frequency(ax[i * n:(i + 1) * n], r.ax[i * n:(i + 1) * n, -1], rate, (1.0, 6.0)) for i in range(3)]
+    f = [transfer_peak(ax[i * n:(i + 1) * n], r.ax[i * n:(i + 1) * n, -1], rate, (1.0, 6.0)) for i in range(3)]
     assert f[1] < 0.93 * f[0], f                  # softer while strong
     assert abs(f[2] / f[0] - 1) < 0.04, f         # and back afterwards (no lasting loss; ~2 bins)
     assert np.min(np.abs(f[0] / linear.f0_hz - 1)) < 0.03, (f, linear.f0_hz)  # the x mode

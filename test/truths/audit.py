@@ -3,7 +3,7 @@
 
 For each event kind and seed, the campaign and the clean campaign of the same seed (same building,
 same ground motions) are read back through the project's bag reader; per event, the apparent first
-frequency and damping ratio (lowest mode of an ARX model, ground to top floor, over the
+frequency and damping ratio (lowest mode of an ARX model of order 2 n + 4, ground to top floor, over the
 strong-motion phase) are compared. Scatter: the standard deviation over the clean campaign's events
 of the apparent frequency relative to the truth's small-amplitude frequency (nuisance +
 estimation), and of log damping around its mean. Effect: the largest change from the clean
@@ -19,33 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .apparent import arx_mode, strong_part
 from .event_effects import EFFECTS
 from .registry import make_campaign
-
-
-def arx_mode(ground: np.ndarray, top: np.ndarray, rate: float, order: int) -> tuple[float, float]:
-    """(frequency Hz, damping ratio) of the lowest mode of an ARX model of ``order`` fitted by least
-    squares: y[k] = sum a_i y[k-i] + sum b_i u[k-i] (i = 0..order for u). Measurement noise biases
-    both a little, the same way in the clean and the effect campaign."""
-    n = ground.size
-    rows = np.column_stack([top[order - i - 1: n - i - 1] for i in range(order)]
-                           + [ground[order - i: n - i] for i in range(order + 1)])
-    coef, *_ = np.linalg.lstsq(rows, top[order:], rcond=None)
-    poles = np.roots(np.concatenate([[1.0], -coef[:order]]))
-    s_poles = np.log(poles.astype(complex)) * rate
-    s_poles = s_poles[s_poles.imag > 2 * np.pi * 0.5]
-    i = int(np.argmin(np.abs(s_poles)))
-    wn = float(np.abs(s_poles[i]))
-    return wn / (2 * np.pi), float(-s_poles[i].real / wn)
-
-
-def strong_part(ground: np.ndarray, rate: float, level: float = 0.3) -> slice:
-    """From the first to the last second where the ground's 1 s RMS exceeds ``level`` of its maximum
-    (the strong-motion phase, where amplitude-dependent physics acts)."""
-    n = max(1, int(rate))
-    rms = np.sqrt(np.convolve(ground**2, np.ones(n) / n, "same"))
-    on = np.flatnonzero(rms > level * rms.max())
-    return slice(int(on[0]), int(on[-1]) + 1)
 
 
 def apparent(campaign) -> tuple[np.ndarray, np.ndarray, dict]:
@@ -54,11 +30,12 @@ def apparent(campaign) -> tuple[np.ndarray, np.ndarray, dict]:
     truth = json.loads(campaign.truth.read_text())
     windows, _ = windows_from_bag(campaign.data, campaign.structure)
     top = truth["channels"][-1]
+    order = 2 * truth["building"]["stories"] + 4   # x, y and torsion of each floor show in an x sensor
     fh = []
     for w in windows:
         g, y = w.samples[:, w.channel_names.index("g0")], w.samples[:, w.channel_names.index(top)]
         part = strong_part(g, w.sample_rate_hz)
-        fh.append(arx_mode(g[part], y[part], w.sample_rate_hz, 2 * truth["building"]["stories"]))
+        fh.append(arx_mode(g[part], y[part], w.sample_rate_hz, order))
     fh = np.array(fh)
     return fh[:, 0], fh[:, 1], truth
 
