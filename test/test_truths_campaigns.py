@@ -116,3 +116,20 @@ def test_the_registry_knows_every_kind_of_the_brief():
         "dense_clean"}
     with pytest.raises(ValueError, match="unknown campaign kind"):
         make_campaign("event_nothing", 0)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_amplitude_damping_shows_in_strong_events_only(tmp_path, seed):
+    """Against the clean campaign of the same seed (same building, motions, nuisance, sensors): the
+    apparent damping of the strongest event grows by more than 3 times the clean campaign's
+    event-to-event scatter, that of the weakest by less than a third of it."""
+    from truths.audit import apparent
+
+    _, z_clean, truth = apparent(make_campaign("event_clean", seed, "reduced", tmp_path / "clean"))
+    _, z_fx, _ = apparent(make_campaign("event_amplitude_damping", seed, "reduced", tmp_path / "fx"))
+    pga = np.array([e["pga_x_m_s2"] for e in truth["events"]])
+    change = np.log(z_fx / z_clean)
+    scatter = np.std(np.log(z_clean), ddof=1)
+    strong, weak = int(np.argmax(pga)), int(np.argmin(pga))
+    assert change[strong] > 3 * scatter, (change, scatter)
+    assert abs(change[weak]) < change[strong] / 3, change
