@@ -133,3 +133,51 @@ def test_amplitude_damping_shows_in_strong_events_only(tmp_path, seed):
     strong, weak = int(np.argmax(pga)), int(np.argmin(pga))
     assert change[strong] > 3 * scatter, (change, scatter)
     assert abs(change[weak]) < change[strong] / 3, change
+
+
+@pytest.fixture(scope="module")
+def dense_effects(tmp_path_factory):
+    kinds = ("dense_lagged_temperature", "dense_settlement", "dense_humidity", "dense_stick_slip")
+    return {k: make_campaign(k, 4, "reduced", tmp_path_factory.mktemp(k)) for k in kinds}
+
+
+def test_lagged_temperature_follows_the_structure_not_the_sensor(dense_effects):
+    c = dense_effects["dense_lagged_temperature"]
+    truth = json.loads(c.truth.read_text())
+    obs = read_tracked_modes(c.data)
+    f1 = np.array(truth["true_frequencies_hz"])[:, 0]
+    t_struct = np.array(truth["effect"]["structure_temperature_c"])
+    t_sensor = obs.covariates["temperature_c"]
+    # the frequency is a function of the structure's temperature (monotone: rank correlation ~ -1)
+    # and less so of the air sensor's (lag and gradient)
+    rank = lambda x: np.argsort(np.argsort(x))  # noqa: E731
+    assert np.corrcoef(rank(f1), rank(t_struct))[0, 1] < -0.999
+    assert np.corrcoef(rank(f1), rank(t_sensor))[0, 1] > np.corrcoef(rank(f1), rank(t_struct))[0, 1] + 0.02
+    law = truth["effect"]["law"]
+    cold = t_struct < law["knee_c"] - 2 * law["width_c"]
+    warm = t_struct > law["knee_c"] + 2 * law["width_c"]
+    assert cold.sum() > 10 and warm.sum() > 10          # the campaign crosses freezing
+    slope = lambda m: np.polyfit(t_struct[m], np.log(f1[m]), 1)[0]  # noqa: E731
+    assert slope(cold) < 3 * slope(warm) < 0             # stiffer much faster below the knee
+
+
+def test_settlement_is_a_step_at_the_change_window(dense_effects):
+    c = dense_effects["dense_settlement"]
+    truth = json.loads(c.truth.read_text())
+    f = np.array(truth["true_frequencies_hz"])
+    k = truth["change_window"]
+    flat = lambda x: np.max(np.ptp(x, axis=0) / x.mean(axis=0)) < 1e-6  # noqa: E731 (eigen-solver precision)
+    assert flat(f[:k]) and flat(f[k:])
+    drop = 1 - f[k] / f[k - 1]
+    sd = np.array(truth["identification_errors"]["frequency_sd_relative"])
+    assert np.all(drop >= 0) and np.any(drop > 3 * sd), (drop, sd)
+
+
+def test_humidity_is_not_recorded_and_stick_slip_follows_amplitude(dense_effects):
+    obs = read_tracked_modes(dense_effects["dense_humidity"].data)
+    assert not any("humid" in k or "rh" == k for k in obs.covariates)
+    c = dense_effects["dense_stick_slip"]
+    truth = json.loads(c.truth.read_text())
+    f1 = np.array(truth["true_frequencies_hz"])[:, 0]
+    amp = read_tracked_modes(c.data).covariates["rms_accel_m_s2"]
+    assert np.corrcoef(f1, np.log(amp))[0, 1] < -0.5    # stuck at low amplitude, slipping at high
