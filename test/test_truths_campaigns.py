@@ -10,15 +10,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from truths import KINDS, make_campaign
+from truths.apparent import transfer_peak
 
-pytest.importorskip("openseespy.opensees", reason="OpenSeesPy (requirements/test.txt) and libblas3/liblapack3")
-
-from truths import KINDS, make_campaign  # noqa: E402
-from truths.apparent import transfer_peak  # noqa: E402
-
-from shm_ros.io.recording import windows_from_bag  # noqa: E402
-from shm_ros.io.structure import load_structure  # noqa: E402
-from shm_ros.io.tables import read_tracked_modes  # noqa: E402
+from shm_ros.io.recording import windows_from_bag
+from shm_ros.io.structure import load_structure
+from shm_ros.io.tables import read_tracked_modes
 
 
 @pytest.fixture(scope="module")

@@ -4,17 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-pytest.importorskip("openseespy.opensees", reason="OpenSeesPy (requirements/test.txt) and libblas3/liblapack3")
-
-from truths import assemble  # noqa: E402
-from truths.apparent import transfer_peak  # noqa: E402
-from truths.building import Building, draw_building  # noqa: E402
-from truths.drivers import ar1  # noqa: E402
-from truths.ground_motion import GroundMotion  # noqa: E402
-from truths.opensees import eigen_hz, eigen_shapes, fresh, ops  # noqa: E402
-from truths.story_state import Soil, Spring, StoryState  # noqa: E402
-from truths.transient import run_event  # noqa: E402
+from truths import assemble
+from truths.apparent import transfer_peak
+from truths.building import Building, draw_building
+from truths.drivers import ar1
+from truths.ground_motion import GroundMotion
+from truths.opensees import eigen_hz, eigen_shapes, fresh, ops
+from truths.story_state import Soil, Spring, StoryState
+from truths.transient import run_event
 
 
 def _symmetric(k1: float, k2: float, m1: float, m2: float) -> Building:
