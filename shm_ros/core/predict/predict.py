@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.stats import norm
@@ -29,7 +30,7 @@ from .config import PredictConfig, Unmeasured
 from .draws import PosteriorDraws, nominal_draws
 from .expansion import expansion_matrix
 from .record import EventRecord
-from .signals import baseline_correct, local_mean_square, nrms_pct, pre_event_end, strong_motion
+from .signals import local_mean_square, nrms_pct, prepare, strong_motion
 
 
 @dataclass
@@ -49,6 +50,8 @@ class ChannelPrediction:
     peak_mean: float = float("nan")
     peak_ci: tuple[float, float] = (float("nan"), float("nan"))
     scores: dict[str, float | bool | None] = field(default_factory=dict)
+    # an unmeasured floor that also gets the measured floors' residual of this event (:mod:`.expansion`)
+    expanded: bool = False
 
 
 @dataclass
@@ -64,6 +67,8 @@ class EventPrediction:
     n_draws: int
     source: str
     notes: list[str] = field(default_factory=list)
+    input_pga_m_s2: float = 0.0  # peak of the baseline-corrected input record
+    model_error: dict[str, Any] | None = None  # the cross-validated model error used (JSON), if any
 
     def channel(self, name: str) -> ChannelPrediction:
         for c in self.channels:
@@ -107,9 +112,7 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     cfg = (config or PredictConfig()).validate()
     fs, dt = record.fs, 1.0 / record.fs
     draws = draws if draws is not None else nominal_draws(model, cfg.relative_error)
-    n_pre = pre_event_end(record.inputs[0], fs, cfg.onset_arias, cfg.min_pre_event_s)
-    u = baseline_correct(record.inputs.T, n_pre, cfg.baseline).T
-    y = baseline_correct(record.outputs, n_pre, cfg.baseline)
+    u, y, n_pre = prepare(record, cfg)
     spec = prediction_outputs(model, record.channel_ids)
     outs = [o for o, _ in spec]
     nm = len(record.channel_ids)
@@ -130,8 +133,8 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     accel = np.array([q == "acceleration" for _, q in spec])
     s0[nm:] = np.where(accel[nm:], np.mean(s0[:nm]) if nm else 0.0, 0.0)
     lms = local_mean_square(y_map, fs, cfg.envelope_s)
-    rel2 = np.stack([draws.rel2_for(cid) for cid in record.channel_ids]
-                    + [draws.rel2_mean()] * (len(outs) - nm), axis=1)  # (n_draws, o)
+    pga = float(np.max(np.abs(u[0]))) if N else 0.0
+    rel2 = draws.rel2_event([*record.channel_ids, *[None] * (len(outs) - nm)], pga)  # (n_draws, o)
 
     rng = event_rng(cfg.seed, record.window_id)
     S1 = np.zeros((len(outs), N))
@@ -155,12 +158,15 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
         pk = np.percentile(peaks[:, c], q)
         ch = ChannelPrediction(o.name, kind, c < nm, mean[c], std[c], lo, hi, y_map[c], y_nom[c],
                                peak_mean=float(np.max(np.abs(mean[c]))), peak_ci=(float(pk[0]), float(pk[1])))
+        ch.expanded = bool(c in set(hidden.tolist()))
         if c < nm:
             ch.values = y[:, c]
             ch.scores = channel_scores(y[:, c], mean[c], y_map[c], y_nom[c], lo, hi, pk, strong)
         channels.append(ch)
+    me = draws.model_error
     return EventPrediction(record.window_id, record.start_ns, fs, record.pga_m_s2, record.is_event, channels,
-                           strong, n_pre, draws.n, draws.source, list(record.notes) + list(draws.notes))
+                           strong, n_pre, draws.n, draws.source, list(record.notes) + list(draws.notes), pga,
+                           None if me is None else me.to_json())
 
 
 def _expanded_residual(model: AffineModel, theta: np.ndarray, spec: list[tuple[Output, str]], nm: int,

@@ -90,11 +90,14 @@ def event_json(pred: EventPrediction) -> dict[str, Any]:
     chans = []
     for c in pred.channels:
         d: dict[str, Any] = {"name": c.name, "quantity": c.quantity, "measured": c.measured,
-                             "peak": _num(c.peak_mean), "peak_ci95": [_num(c.peak_ci[0]), _num(c.peak_ci[1])]}
+                             "peak": _num(c.peak_mean), "peak_ci95": [_num(c.peak_ci[0]), _num(c.peak_ci[1])],
+                             "uses_measured_records": c.measured or c.expanded,
+                             "through": "measured" if c.measured else "shape expansion" if c.expanded else "model"}
         d.update({k: _num(v) for k, v in c.scores.items()})
         chans.append(d)
     return {"window_id": pred.window_id, "start_ns": pred.start_ns, "pga_m_s2": _num(pred.pga_m_s2),
             "is_event": pred.is_event, "n_draws": pred.n_draws, "error_model": pred.source,
+            "input_pga_m_s2": _num(pred.input_pga_m_s2), "model_error": pred.model_error,
             "pre_event_s": pred.n_pre / pred.fs,
             "strong_motion_s": [pred.strong.start / pred.fs, pred.strong.stop / pred.fs],
             "channels": chans, "notes": list(pred.notes)}
