@@ -39,13 +39,16 @@ def _measured(x: ReportInputs) -> str | None:
     channels = sorted({c for v in w for c in v.channels})
     rates = sorted({round(v.sample_rate_hz) for v in w if math.isfinite(v.sample_rate_hz)})
     temps = [v.temperature_c for v in w if v.temperature_c is not None]
-    events = sum(v.is_event for v in w)
+    quakes = sum(v.is_event and v.event_kind == "earthquake" for v in w)
+    loud = sum(v.is_event and v.event_kind != "earthquake" for v in w)
     s = (f"Measured: {len(w)} analysis windows over {dur}, {len(channels)} channels at "
          f"{'/'.join(str(r) for r in rates)} Hz")
     if temps:
         s += f", air temperature {min(temps):.1f} to {max(temps):.1f} °C"
-    if events:
-        s += f", {events} earthquake or other strong-motion events"
+    if quakes:
+        s += f", {quakes} earthquake{'s' if quakes > 1 else ''} (at the ground/input sensor)"
+    if loud:
+        s += f", {loud} high-amplitude window{'s' if loud > 1 else ''} (traffic, wind or works; no earthquake)"
     bad = sum(1 for v in w for st in v.status if st != "ok")
     return s + (f"; {bad} channel-windows were flagged (dead, clipped, noisy or dropped)." if bad else ".")
 
