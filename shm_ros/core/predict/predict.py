@@ -6,7 +6,7 @@ window's start after the baseline correction of every record (:mod:`.signals`). 
 posterior-predictive distribution of a channel at a sample is the mixture over draws of
 ``N(y_draw(t), sigma_draw^2(t))`` (error model: :mod:`.draws`); its mean and variance are exact
 and the band is mean +- z std. Peak intervals are quantiles of each draw's peak of
-``y_draw + e_draw`` plus one error draw at its time (see ``_noisy_peaks``). Unmeasured floors and
+``y_draw + e_draw`` plus one error draw at its time (see ``_peaks``). Unmeasured floors and
 interstory drifts are outputs of the same model (every floor is a DOF of the full model); with
 ``unmeasured: expanded`` (default) the unmeasured floors' accelerations also get the measured
 floors' residual expanded on the model's mode shapes (:mod:`.expansion`), the same for every draw.
@@ -52,6 +52,10 @@ class ChannelPrediction:
     scores: dict[str, float | bool | None] = field(default_factory=dict)
     # an unmeasured floor that also gets the measured floors' residual of this event (:mod:`.expansion`)
     expanded: bool = False
+    # per draw: its peak |y| and the error standard deviation at the peak's time (the peak's
+    # predictive distribution is the mixture of |N(top, sigma^2)|; :mod:`.risk`)
+    peak_top: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    peak_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -140,11 +144,15 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     S1 = np.zeros((len(outs), N))
     S2 = np.zeros((len(outs), N))
     peaks = np.empty((draws.n, len(outs)))
+    tops = np.empty((draws.n, len(outs)))
+    sigs = np.empty((draws.n, len(outs)))
     for a, Y in batch_responses(model, draws.theta, u, dt, outs, chunk=cfg.chunk, threads=cfg.threads):
         Y[:, hidden] += corr[None]
         S1 += Y.sum(axis=0)
         S2 += np.einsum("bon,bon->on", Y, Y)
-        peaks[a:a + Y.shape[0]] = _noisy_peaks(Y, s0, rel2[a:a + Y.shape[0]], lms, rng)
+        b = a + Y.shape[0]
+        tops[a:b], sigs[a:b] = _peaks(Y, s0, rel2[a:b], lms)
+        peaks[a:b] = np.abs(tops[a:b] + sigs[a:b] * rng.standard_normal(tops[a:b].shape))
     mean = S1 / draws.n
     var = np.maximum(S2 / draws.n - mean ** 2, 0.0) + s0[:, None] + np.mean(rel2, axis=0)[:, None] * lms
     std = np.sqrt(var)
@@ -157,7 +165,8 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
         lo, hi = mean[c] - z * std[c], mean[c] + z * std[c]
         pk = np.percentile(peaks[:, c], q)
         ch = ChannelPrediction(o.name, kind, c < nm, mean[c], std[c], lo, hi, y_map[c], y_nom[c],
-                               peak_mean=float(np.max(np.abs(mean[c]))), peak_ci=(float(pk[0]), float(pk[1])))
+                               peak_mean=float(np.max(np.abs(mean[c]))), peak_ci=(float(pk[0]), float(pk[1])),
+                               peak_top=tops[:, c], peak_sigma=sigs[:, c])
         ch.expanded = bool(c in set(hidden.tolist()))
         if c < nm:
             ch.values = y[:, c]
@@ -186,19 +195,17 @@ def _expanded_residual(model: AffineModel, theta: np.ndarray, spec: list[tuple[O
     return hidden, T @ (y[:, full].T - y_map[full])
 
 
-def _noisy_peaks(Y: np.ndarray, s0: np.ndarray, rel2: np.ndarray, lms: np.ndarray,
-                 rng: np.random.Generator) -> np.ndarray:
-    """Per draw and output (B, o): the draw's peak |y| plus one error draw at the peak's time,
-    ``N(0, s0 + rel2 lms(t_peak))``. The model error is correlated in time (a slightly wrong
-    frequency shifts the whole peak cycle), so the peak moves by about one error standard
-    deviation; the maximum over independent white-noise samples would move less and give intervals
-    that are too narrow."""
+def _peaks(Y: np.ndarray, s0: np.ndarray, rel2: np.ndarray, lms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per draw and output (B, o): the draw's peak |y| and the error standard deviation at the
+    peak's time, ``sqrt(s0 + rel2 lms(t_peak))``. The peak's predictive draw is the peak plus one
+    error draw there: the model error is correlated in time (a slightly wrong frequency shifts the
+    whole peak cycle), so the peak moves by about one error standard deviation; the maximum over
+    independent white-noise samples would move less and give intervals that are too narrow."""
     absY = np.abs(Y)
     t = np.argmax(absY, axis=2)  # (B, o)
     top = np.take_along_axis(absY, t[:, :, None], 2)[:, :, 0]
     o = np.arange(Y.shape[1])[None, :]
-    sig = np.sqrt(s0[None, :] + rel2 * lms[o, t])
-    return np.abs(top + sig * rng.standard_normal(top.shape))
+    return top, np.sqrt(s0[None, :] + rel2 * lms[o, t])
 
 
 def channel_scores(y: np.ndarray, mean: np.ndarray, y_map: np.ndarray, y_nom: np.ndarray, lo: np.ndarray,
