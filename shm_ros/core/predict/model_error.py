@@ -10,8 +10,9 @@ put the sample inside the band ``+- z sqrt(s0 + r^2 m(t))``:
 
     q(t) = max(0, (r(t)^2 / z^2 - s0) / m(t)).
 
-The model-error term ``r^2`` of a channel is the ``level`` quantile of ``q`` pooled over the folds:
-the band the prediction draws with it would have held ``level`` of the left-out samples. Where the
+Per fold, the ``level`` quantile of ``q`` is the ``r^2`` whose band would have held ``level`` of that
+left-out event's strong-motion samples; the channel's model-error term is their geometric mean over
+the folds (a typical event's band holds ``level``; the events' scatter about it is their own). Where the
 folds show it (three or more events, slope beyond two standard errors), ``r^2`` follows the input's
 PGA as a power law (``amplitude_slope``; an event far stronger than the calibration's is more
 nonlinear), else it is constant. Unmeasured floors and drift ratios take the mean over the channels
@@ -132,11 +133,17 @@ def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0:
             q[cid].append(qc)
             fold["relative_error"][cid] = float(np.sqrt(np.quantile(qc, cfg.level))) if qc.size else None
         folds.append(fold)
-    rel2 = {c: float(np.quantile(np.concatenate(v), cfg.level)) if sum(x.size for x in v) else 0.0
-            for c, v in q.items()}
+    rel2 = {c: _typical([float(np.quantile(x, cfg.level)) for x in v if x.size]) for c, v in q.items()}
     slope = _amplitude_slope(folds, pgas)
     pga_ref = float(np.exp(np.mean(np.log(np.maximum(pgas, 1e-12)))))
     return ModelError(rel2, pga_ref, slope, float(max(pgas)), folds)
+
+
+def _typical(values: list[float]) -> float:
+    """The geometric mean of the folds' ``r^2`` (the band holds ``level`` of a typical event's
+    samples; the folds' scatter is the events' own)."""
+    v = np.asarray([x for x in values if x > 0], float)
+    return float(np.exp(np.mean(np.log(v)))) if v.size else 0.0
 
 
 def _amplitude_slope(folds: list[dict[str, Any]], pgas: list[float]) -> float:
