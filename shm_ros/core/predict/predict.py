@@ -73,6 +73,7 @@ class EventPrediction:
     notes: list[str] = field(default_factory=list)
     input_pga_m_s2: float = 0.0  # peak of the baseline-corrected input record
     model_error: dict[str, Any] | None = None  # the cross-validated model error used (JSON), if any
+    risk: dict[str, Any] | None = None  # drift exceedance and warnings (:func:`.risk.event_risk`)
 
     def channel(self, name: str) -> ChannelPrediction:
         for c in self.channels:

@@ -40,7 +40,8 @@ def event_risk(pred: EventPrediction, limits: DriftLimits | None = None,
     lim = limits or DriftLimits()
     if calibration_pga_m_s2 is None and pred.model_error is not None:
         calibration_pga_m_s2 = pred.model_error.get("calibration_pga_max_m_s2")
-    stories, warnings = [], []
+    stories: list[dict[str, Any]] = []
+    warnings: list[str] = []
     for c in pred.channels:
         if c.quantity != "drift_ratio" or not c.peak_top.size:
             continue
@@ -50,7 +51,8 @@ def event_risk(pred: EventPrediction, limits: DriftLimits | None = None,
                "exceedance": [{"limit": L, "probability": exceedance(c.peak_top, c.peak_sigma, L)}
                               for L in lim.for_story(k)]}
         stories.append(row)
-    beyond = [(r["story"], r["peak_drift_ratio"]) for r in stories if r["peak_drift_ratio"] > lim.elastic]
+    beyond = [(int(r["story"]), float(r["peak_drift_ratio"])) for r in stories
+              if float(r["peak_drift_ratio"]) > lim.elastic]
     if beyond:
         k, peak = max(beyond, key=lambda x: x[1])
         warnings.append(f"predicted peak drift ratio beyond the elastic range the model assumes ({lim.elastic:g}) "

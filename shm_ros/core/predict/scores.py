@@ -100,7 +100,7 @@ def event_json(pred: EventPrediction) -> dict[str, Any]:
             "input_pga_m_s2": _num(pred.input_pga_m_s2), "model_error": pred.model_error,
             "pre_event_s": pred.n_pre / pred.fs,
             "strong_motion_s": [pred.strong.start / pred.fs, pred.strong.stop / pred.fs],
-            "channels": chans, "notes": list(pred.notes)}
+            "channels": chans, "risk": pred.risk, "notes": list(pred.notes)}
 
 
 def summary_json(preds: list[EventPrediction]) -> dict[str, Any]:
@@ -114,4 +114,5 @@ def summary_json(preds: list[EventPrediction]) -> dict[str, Any]:
     hits = [bool(s["peak_inside"]) for s in ms if s.get("peak_inside") is not None]
     return {"nrms_pct_median": med("nrms_pct"), "nrms_pct_nominal_median": med("nrms_pct_nominal"),
             "coverage_95_median": med("coverage_95"), "coverage_95_strong_median": med("coverage_95_strong"),
-            "peaks_inside_fraction": float(np.mean(hits)) if hits else None, "n_events": len(preds)}
+            "peaks_inside_fraction": float(np.mean(hits)) if hits else None, "n_events": len(preds),
+            "events_outside_calibration": [p.window_id for p in preds if p.risk and p.risk["outside_calibration"]]}
