@@ -23,7 +23,7 @@ from predict_truth import Profile, truth_source
 from shm_ros.core.predict.risk import event_risk
 from shm_ros.core.structure import structure_from_dict
 
-PROFILE = Profile(n_calibration=3, n_predicted=2, duration_s=30.0,
+PROFILE = Profile(n_calibration=3, n_predicted=2, duration_s=30.0, fs=25.0,
                   earthquakes=((0.4, 6.0), (0.8, 6.0), (0.6, 6.0), (0.6, 6.0), (3.0, 6.0)))
 
 
@@ -31,7 +31,7 @@ def test_drift_exceedance_and_out_of_calibration_warning():
     pc = truth_source()(11, PROFILE)
     elastic_id, strong_id = (w.window_id for w in pc.predicted)
     assert pc.yields[strong_id] and not pc.yields[elastic_id]
-    model, preds, draws = predict_campaign(pc, 11, n_draws=100, steps=100)
+    model, preds, draws = predict_campaign(pc, 11, n_draws=60, steps=60)
     st = copy.deepcopy(pc.structure)
     st["drift_limits"] = {"limits": [pc.elastic_drift_ratio], "elastic": pc.elastic_drift_ratio}
     limits = structure_from_dict(st).drift_limits
