@@ -20,7 +20,10 @@ import numpy as np
 from predict_bands import predict_campaign
 from predict_truth import Profile, truth_source
 
+from shm_ros.core.predict import event_json, summary_json
 from shm_ros.core.predict.risk import event_risk
+from shm_ros.report.inputs import PredictionInputs, ReportInputs
+from shm_ros.report.summary import _predicted
 from shm_ros.core.structure import structure_from_dict
 
 PROFILE = Profile(n_calibration=3, n_predicted=2, duration_s=30.0, fs=25.0,
@@ -58,3 +61,11 @@ def test_drift_exceedance_and_out_of_calibration_warning():
     print(f"elastic event: P(exceed twice the truth's peak) at most {max(probs):.4f}; warnings {r['warnings']}")
     assert max(probs) <= 0.05
     assert not r["warnings"] and not r["outside_calibration"]
+
+    # prediction.json and the report's summary say so
+    strong.risk, elastic.risk = event_risk(strong, limits), r
+    payload = {"events": [event_json(p) for p in preds], "summary": summary_json(preds)}
+    assert payload["summary"]["events_outside_calibration"] == [strong_id]
+    text = _predicted(ReportInputs(prediction=PredictionInputs(payload)))
+    assert text is not None and "exceeded a limit" in text and strong_id in text
+    assert "1 event(s) lay outside what the calibration saw" in text
