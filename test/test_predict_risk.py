@@ -22,9 +22,9 @@ from predict_truth import Profile, truth_source
 
 from shm_ros.core.predict import event_json, summary_json
 from shm_ros.core.predict.risk import event_risk
+from shm_ros.core.structure import structure_from_dict
 from shm_ros.report.inputs import PredictionInputs, ReportInputs
 from shm_ros.report.summary import _predicted
-from shm_ros.core.structure import structure_from_dict
 
 PROFILE = Profile(n_calibration=3, n_predicted=2, duration_s=30.0, fs=25.0,
                   earthquakes=((0.4, 6.0), (0.8, 6.0), (0.6, 6.0), (0.6, 6.0), (3.0, 6.0)))
