@@ -61,6 +61,22 @@ def test_predict_cli(tmp_path, capsys):
     assert row["drift_top"] is not None and np.isfinite(row["drift_top"])  # floors 7 and 8 measured
     assert (tmp_path / "out" / f"prediction_{q.windows[2].window_id}.png").stat().st_size > 1000
 
+    assert ev["risk"]["limits_from"] == "defaults" and len(ev["risk"]["stories"]) == 8
+    p = ev["risk"]["stories"][7]["exceedance"]
+    assert [x["limit"] for x in p] == [0.005, 0.01, 0.02] and p[0]["probability"] >= p[1]["probability"]
+
+    # the model error learnt out of sample over the calibration events, named in the JSON
+    rc = main(["predict", "--structure", str(s_path), "--posterior", str(tmp_path / "post"), "--windows",
+               str(files[2]), "--calibration-windows", str(files[0]), str(files[1]), "--out",
+               str(tmp_path / "cv"), "--n-draws", "50", "--no-plots"])
+    assert rc == 0
+    cv = json.loads((tmp_path / "cv" / "prediction.json").read_text())["events"][0]
+    assert cv["error_model"] == "cross-validated model error" and len(cv["model_error"]["folds"]) == 2
+    assert cv["risk"]["calibration_pga_max_m_s2"] > 0
+    assert main(["predict", "--structure", str(s_path), "--posterior", str(tmp_path / "post"), "--windows",
+                 str(files[2]), "--calibration-windows", str(files[0]), "--out", str(tmp_path / "x")]) == 2
+    assert "two or more events" in capsys.readouterr().err
+
     rc = main(["predict", "--structure", str(s_path), "--windows", *map(str, files), "--out",
                str(tmp_path / "nom"), "--no-plots"])
     assert rc == 0

@@ -1,7 +1,8 @@
 """`shm-ros predict`: drive the (updated) model with each event's measured input (docs/interfaces.md §7).
 
     shm-ros predict --structure S.yaml [--posterior DIR|posterior.json] (--bag BAG | --windows W.npz ...)
-                    --out DIR [--all-windows] [--n-draws N] [--seed S] [--no-plots]
+                    [--calibration-windows C.npz ...] --out DIR [--all-windows] [--n-draws N] [--seed S]
+                    [--no-plots]
 
 Without ``--posterior`` the nominal model alone is predicted. Events are the windows that ingest
 flags (``is_event``, docs/interfaces.md §1); ``--all-windows`` predicts every window. Writes
@@ -31,6 +32,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--windows", nargs="+", help="window files (.npz, as `shm-ros ingest --windows` writes)")
     p.add_argument("--window", type=float, default=600.0, help="--bag: window length, s (default 600)")
     p.add_argument("--all-windows", action="store_true", help="predict every window, not only events")
+    p.add_argument("--calibration-windows", nargs="+", default=None,
+                   help="window files (.npz) of the events the posterior was calibrated on (two or more): the "
+                        "model error is learnt from them out of sample (leave one event out)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--no-plots", action="store_true", help="skip the figures")
     add_options(p.add_argument_group("prediction (PredictConfig; the predict node's parameters of the same "
@@ -49,20 +53,36 @@ def load_windows(args: argparse.Namespace, spec: Any) -> list:
     return [load_window(p) for p in args.windows]
 
 
-def predict_windows(model: Any, windows: list, posterior: Any, config: Any) -> tuple[list, list[str]]:
-    """Predictions of ``windows`` (the same numbers as the predict node's for the same seed)."""
+def predict_windows(model: Any, windows: list, posterior: Any, config: Any, calibration: list | None = None,
+                    limits: Any = None) -> tuple[list, list[str]]:
+    """Predictions of ``windows`` (the same numbers as the predict node's for the same seed).
+    ``calibration``: the windows the posterior was calibrated on (two or more: the model error is
+    learnt from them by leave-one-event-out cross-validation); ``limits``: the structure's drift
+    limits (each event's drift risk, for models with drift ratios)."""
     import numpy as np
 
     from shm_ros.core.predict import draws_from_posterior, event_from_window, predict_event
+    from shm_ros.core.predict.model_error import cross_validated_error
+    from shm_ros.core.predict.risk import event_risk
 
     draws = None if posterior is None else draws_from_posterior(
         posterior, model, config.n_draws, np.random.default_rng(config.seed), config.relative_error)
+    if calibration:
+        if draws is None:
+            raise ValueError("calibration windows need the posterior they calibrated (--posterior)")
+        events = [event_from_window(w, model) for w in calibration]
+        draws = draws.with_model_error(cross_validated_error(model, events, draws.theta_map, config))
     preds, errors = [], []
     for w in windows:
         try:
-            preds.append(predict_event(model, event_from_window(w, model), draws, config))
+            p = predict_event(model, event_from_window(w, model), draws, config)
         except (ValueError, np.linalg.LinAlgError) as exc:
             errors.append(f"window {w.window_id}: {exc}")
+            continue
+        if any(c.quantity == "drift_ratio" for c in p.channels):
+            p.risk = event_risk(p, limits)
+            p.notes.extend(p.risk["warnings"])
+        preds.append(p)
     return preds, errors
 
 
@@ -87,6 +107,11 @@ def run(args: argparse.Namespace) -> int:
 
             posterior = load_posterior(args.posterior)
         windows = load_windows(args, spec)
+        from shm_ros.io.window_files import load_window
+
+        calibration = [load_window(p) for p in args.calibration_windows or []]
+        if len(calibration) == 1:
+            raise ValueError("--calibration-windows: give two or more events (one is left out at a time)")
     except Exception as exc:  # file, structure and posterior errors name their source
         print(f"shm-ros predict: error: {exc}", file=sys.stderr)
         return 2
@@ -95,7 +120,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"shm-ros predict: no event among {len(windows)} windows (--all-windows predicts every one)",
               file=sys.stderr)
         return 1
-    preds, errors = predict_windows(model, chosen, posterior, config)
+    try:
+        preds, errors = predict_windows(model, chosen, posterior, config, calibration, spec.drift_limits)
+    except ValueError as exc:
+        print(f"shm-ros predict: error: {exc}", file=sys.stderr)
+        return 2
     for e in errors:
         print(f"shm-ros predict: {e}", file=sys.stderr)
     rows = [table3_row(model, p) for p in preds]

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from shm_ros.core.bayes.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS, Prior, PriorError, prior_fields
+from shm_ros.core.drift_limits import DriftLimits, parse_drift_limits
 from shm_ros.core.models.registry import MODEL_KINDS, ModelKind, kind_names, model_kind
 from shm_ros.errors import InputError
 
@@ -161,6 +162,7 @@ class StructureSpec:
     source: str = "<structure>"
     description: str | None = None
     arrays: dict[str, np.ndarray] | None = field(default=None, repr=False)
+    drift_limits: DriftLimits = field(default_factory=DriftLimits)  # shear buildings: per-story limits
 
     def __getattr__(self, name: str) -> Any:
         # only called for names that are not attributes: ``spec.girder`` and the like
@@ -225,6 +227,8 @@ class StructureSpec:
             {"name": p.name, "applies_to": p.applies_to, "prior": {"dist": p.prior.dist, **p.prior.params}}
             for p in self.parameters
         ]
+        if self.drift_limits.given:
+            out["drift_limits"] = self.drift_limits.to_dict()
         return out
 
     def scaled(self, factors: Mapping[str, float]) -> StructureSpec:
@@ -430,7 +434,7 @@ class FieldReader:
                 raise self.err("missing required field", f"{fld}.{k}" if fld else k)
 
 
-_COMMON = ("name", "kind", "description", "damping", "sensors", "input", "inputs", "parameters")
+_COMMON = ("name", "kind", "description", "damping", "sensors", "input", "inputs", "parameters", "drift_limits")
 INPUT_FIELDS = ("sensor", "kind", "at", "gain")
 
 
@@ -474,6 +478,9 @@ def structure_from_dict(
         arrays=None if matrices_arrays is None else dict(matrices_arrays),
     )
     spec.parameters = _parameters(c, data.get("parameters") or [], spec)
+    if data.get("drift_limits") is not None:
+        floors = getattr(section, "floors", None)
+        spec.drift_limits = parse_drift_limits(c, data["drift_limits"], len(floors) if floors is not None else None)
     return spec
 
 

@@ -47,6 +47,9 @@ class Window:
     notes: list[str] = field(default_factory=list)
     # amplitude covariates (docs/interfaces.md §3), e.g. rms_accel_m_s2; identify copies them
     covariates: dict[str, float] = field(default_factory=dict)
+    # what a triggered window is called: "earthquake", "high_amplitude" or "none"
+    # (shm_ros.core.ingest.events.event_kind; "" = not classified)
+    event_kind: str = ""
 
     @property
     def n_samples(self) -> int:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from shm_ros.core.ingest.events import window_event_kind
 from shm_ros.core.types import Window
 
 
@@ -29,6 +30,7 @@ def save_window(path: str | Path, w: Window) -> None:
         input_channel=np.asarray(w.input_channel or ""),
         window_id=np.asarray(w.window_id),
         notes=np.asarray(w.notes, dtype=str),
+        event_kind=np.asarray(w.event_kind or ""),
     )
 
 
@@ -37,7 +39,7 @@ def load_window(path: str | Path) -> Window:
     with np.load(path, allow_pickle=False) as z:
         flags = z["flags"]
         t = float(z["temperature_c"])
-        return Window(
+        w = Window(
             window_id=str(z["window_id"]),
             start_ns=int(z["start_ns"]),
             sample_rate_hz=float(z["sample_rate_hz"]),
@@ -50,4 +52,8 @@ def load_window(path: str | Path) -> Window:
             pga_m_s2=float(z["pga_m_s2"]),
             input_channel=str(z["input_channel"]) or None,
             notes=[str(n) for n in z["notes"]],
+            event_kind=str(z["event_kind"]) if "event_kind" in z.files else "",
         )
+    if not w.event_kind:  # written before windows were named: named with the ingest defaults
+        w.event_kind = window_event_kind(w).value
+    return w

@@ -65,6 +65,7 @@ class WindowHealth:
     is_event: bool = False
     pga_m_s2: float = 0.0
     flagged: dict[str, dict[str, int]] = field(default_factory=dict)  # channel -> flag name -> count
+    event_kind: str = ""  # earthquake | high_amplitude | none ("" = not named: an event counts as high-amplitude)
 
     @classmethod
     def from_window(cls, w: Window) -> WindowHealth:
@@ -80,7 +81,7 @@ class WindowHealth:
         return cls(w.window_id, int(w.start_ns), int(w.end_ns), float(w.sample_rate_hz), w.n_samples,
                    list(w.channel_names), list(w.channel_status or ["ok"] * len(w.channel_names)),
                    [float(x) for x in finite.sum(axis=0) / n], w.temperature_c, bool(w.is_event),
-                   float(w.pga_m_s2), flagged)
+                   float(w.pga_m_s2), flagged, w.event_kind)
 
     @classmethod
     def from_record(cls, r: Mapping[str, Any]) -> WindowHealth:
@@ -97,7 +98,7 @@ class WindowHealth:
         return cls(str(r.get("window_id", "")), int(r["start_ns"]), int(r["end_ns"]),
                    float(r.get("sample_rate_hz", math.nan)), n, channels, status, coverage,
                    None if t is None else float(t), bool(r.get("is_event", False)),
-                   float(r.get("pga_m_s2", 0.0) or 0.0), flagged)
+                   float(r.get("pga_m_s2", 0.0) or 0.0), flagged, str(r.get("event_kind") or ""))
 
 
 @dataclass

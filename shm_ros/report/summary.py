@@ -39,13 +39,16 @@ def _measured(x: ReportInputs) -> str | None:
     channels = sorted({c for v in w for c in v.channels})
     rates = sorted({round(v.sample_rate_hz) for v in w if math.isfinite(v.sample_rate_hz)})
     temps = [v.temperature_c for v in w if v.temperature_c is not None]
-    events = sum(v.is_event for v in w)
+    quakes = sum(v.is_event and v.event_kind == "earthquake" for v in w)
+    loud = sum(v.is_event and v.event_kind != "earthquake" for v in w)
     s = (f"Measured: {len(w)} analysis windows over {dur}, {len(channels)} channels at "
          f"{'/'.join(str(r) for r in rates)} Hz")
     if temps:
         s += f", air temperature {min(temps):.1f} to {max(temps):.1f} °C"
-    if events:
-        s += f", {events} earthquake or other strong-motion events"
+    if quakes:
+        s += f", {quakes} earthquake{'s' if quakes > 1 else ''} (at the ground/input sensor)"
+    if loud:
+        s += f", {loud} high-amplitude window{'s' if loud > 1 else ''} (traffic, wind or works; no earthquake)"
     bad = sum(1 for v in w for st in v.status if st != "ok")
     return s + (f"; {bad} channel-windows were flagged (dead, clipped, noisy or dropped)." if bad else ".")
 
@@ -119,7 +122,23 @@ def _predicted(x: ReportInputs) -> str | None:
          f"reproduces the measured floor accelerations with a median error (NRMS) of {sm['nrms_pct_median']:.1f} %")
     if sm.get("nrms_pct_nominal_median") is not None:
         s += f" (the nominal model: {sm['nrms_pct_nominal_median']:.1f} %)"
-    return s + "."
+    s += "."
+    risky = []
+    for ev in p.payload.get("events", []):
+        for st in (ev.get("risk") or {}).get("stories", []):
+            top = max(st.get("exceedance", []), key=lambda e: e["limit"] if e["probability"] >= 0.5 else -1,
+                      default=None)
+            if top is not None and top["probability"] >= 0.5:
+                risky.append((ev["window_id"], st["story"], top["limit"], top["probability"]))
+    if risky:
+        w, k, lim, prob = max(risky, key=lambda r: (r[2], r[3]))
+        s += (f" In {len({r[0] for r in risky})} event(s) a story's drift ratio more likely than not exceeded a "
+              f"limit (the highest: {lim:g} at story {k} of {w}, probability {prob:.2f}).")
+    outside = sm.get("events_outside_calibration") or []
+    if outside:
+        s += (f" {len(outside)} event(s) lay outside what the calibration saw (stronger shaking or drift beyond "
+              f"the elastic range): their predictions are extrapolations.")
+    return s
 
 
 def _missing(x: ReportInputs) -> str | None:

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from shm_ros.core.ingest.events import window_event_kind
 from shm_ros.core.timeutil import join_ns, split_ns
 from shm_ros.core.types import ModalEstimate, Mode, Window
 
@@ -76,7 +77,7 @@ def window_from_msg(msg: Any) -> Window:
         if flags.size != n * c:
             raise ValueError(f"Window {msg.window_id!r}: flags has {flags.size} values, expected {n * c}")
         flags = flags.reshape(n, c).copy()
-    return Window(
+    w = Window(
         window_id=msg.window_id,
         start_ns=time_to_ns(msg.start),
         sample_rate_hz=float(msg.sample_rate_hz),
@@ -90,6 +91,8 @@ def window_from_msg(msg: Any) -> Window:
         input_channel=msg.input_channel or None,
         notes=list(msg.notes),
     )
+    w.event_kind = window_event_kind(w).value  # the message does not carry it: named with the ingest defaults
+    return w
 
 
 def mode_to_msg(m: Mode) -> Any:

@@ -51,7 +51,8 @@ def run(window: Any, config: PredictConfig, posterior_path: str | None) -> Any:
     from shm_ros.core.predict import table3_row
 
     model = _state["model"]
-    preds, errors = predict_windows(model, [window], _posterior(posterior_path), config)
+    preds, errors = predict_windows(model, [window], _posterior(posterior_path), config,
+                                    limits=_state["spec"].drift_limits)
     if errors:
         raise ValueError(errors[0])
     return preds[0], table3_row(model, preds[0])

@@ -58,6 +58,9 @@ class IngestConfig:
         10.0, "STA/LTA ratio that triggers an event (narrow-band ambient response of a lightly damped "
         "structure reaches 5-9 within 10 min; earthquakes go far above 10)")
     pga_threshold_m_s2: float = option(0.5, "peak |a - median| that triggers an event (pga, either, both)")
+    earthquake_pga_m_s2: float = option(
+        0.05, "a triggered window is an earthquake when its ground/input channel has at least this PGA and its "
+        "own STA/LTA fires; other triggered windows are high-amplitude windows (traffic, wind, works)")
     check_interval_s: float = option(5.0, "streaming: at most this often (stamp time) a burst end is looked for, s",
                                      cli=False)
     rate_tolerance: float = option(0.01, "relative difference of a channel's rate from the grid's that is reported")

@@ -1,10 +1,19 @@
-"""Event (earthquake) detection on a window: classic STA/LTA and peak ground acceleration."""
+"""Event (earthquake) detection on a window: classic STA/LTA and peak ground acceleration.
+
+A triggered window is called by its name (:func:`event_kind`): an **earthquake** when the ground
+or input channel itself has a PGA of at least ``earthquake_pga_m_s2`` (0.05 m/s^2) and its own
+STA/LTA trigger fires; every other triggered window is a **high-amplitude window** (traffic, wind,
+works: the structure shakes, the ground does not).
+"""
 
 from __future__ import annotations
 
+import enum
+
 import numpy as np
 
-from shm_ros.core.ingest.config import EventDetector
+from shm_ros.core.ingest.config import EventDetector, IngestConfig
+from shm_ros.core.types import Window
 
 #: Channel statuses whose samples the detectors look at.
 USABLE = ("ok", "noisy", "clipped")
@@ -56,3 +65,40 @@ def detect_event(vals: np.ndarray, status: list[str], rate: float, detector: Eve
     trigger = {EventDetector.STA_LTA: trig_sl, EventDetector.PGA: trig_pga,
                EventDetector.EITHER: trig_sl or trig_pga, EventDetector.BOTH: trig_sl and trig_pga}
     return trigger.get(detector, False), pga
+
+
+class EventKind(enum.StrEnum):
+    """What a window is called (``Window.event_kind``)."""
+
+    NONE = "none"  # not triggered
+    EARTHQUAKE = "earthquake"  # the ground / input channel shook (PGA and STA/LTA on it)
+    HIGH_AMPLITUDE = "high_amplitude"  # triggered, not on the ground: traffic, wind, works
+
+
+def event_kind(vals: np.ndarray, names: list[str], status: list[str] | None, rate: float, input_channel: str | None,
+               is_event: bool, *, sta_s: float, lta_s: float, sta_lta_on: float,
+               earthquake_pga_m_s2: float) -> tuple[EventKind, float]:
+    """``(kind, input PGA)`` of a window (module doc); the input PGA is 0 without a usable input channel."""
+    if input_channel is None or input_channel not in names:
+        return (EventKind.HIGH_AMPLITUDE if is_event else EventKind.NONE), 0.0
+    c = names.index(input_channel)
+    if status is not None and status[c] not in USABLE:
+        return (EventKind.HIGH_AMPLITUDE if is_event else EventKind.NONE), 0.0
+    x = np.asarray(vals[:, c], dtype=float)
+    x = np.nan_to_num(x - np.nanmedian(x), nan=0.0) if np.isfinite(x).any() else np.zeros_like(x)
+    pga = float(np.abs(x).max()) if x.size else 0.0
+    fired = float(sta_lta(x, rate, sta_s, lta_s).max(initial=0.0)) >= sta_lta_on
+    if pga >= earthquake_pga_m_s2 and fired:
+        return EventKind.EARTHQUAKE, pga
+    return (EventKind.HIGH_AMPLITUDE if is_event else EventKind.NONE), pga
+
+
+def window_event_kind(window: Window, config: IngestConfig | None = None) -> EventKind:
+    """:func:`event_kind` of a window (its ``is_event`` flag, input channel and samples) under
+    ``config`` (default: the ingest defaults); for windows read from files or messages that do not
+    carry the kind."""
+    cfg = config or IngestConfig()
+    kind, _ = event_kind(window.samples, list(window.channel_names), window.channel_status, window.sample_rate_hz,
+                         window.input_channel, bool(window.is_event), sta_s=cfg.sta_s, lta_s=cfg.lta_s,
+                         sta_lta_on=cfg.sta_lta_on, earthquake_pga_m_s2=cfg.earthquake_pga_m_s2)
+    return kind

@@ -50,6 +50,7 @@ def windows_summary(windows: Iterable[Window]) -> list[dict[str, Any]]:
             "channel_status": list(w.channel_status or []),
             "temperature_c": w.temperature_c,
             "is_event": bool(w.is_event),
+            "event_kind": w.event_kind or ("high_amplitude" if w.is_event else "none"),
             "pga_m_s2": float(w.pga_m_s2),
             "input_channel": w.input_channel,
             "covariates": dict(w.covariates),

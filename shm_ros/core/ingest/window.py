@@ -13,7 +13,7 @@ from shm_ros.core.diagnostics import Level
 from shm_ros.core.ingest.config import EventDetector, IngestConfig
 from shm_ros.core.ingest.covariates import rms_accel
 from shm_ros.core.ingest.diagnostics import DiagnosticLog
-from shm_ros.core.ingest.events import detect_event
+from shm_ros.core.ingest.events import EventKind, detect_event, event_kind
 from shm_ros.core.ingest.quality import assess_channel
 from shm_ros.core.ingest.units import units_hint_from_level
 from shm_ros.core.timeutil import ns_to_iso
@@ -94,6 +94,9 @@ def make_window(ctx: WindowContext, start_ns: int, vals: np.ndarray, flags: np.n
     is_event, pga = detect_event(vals, status, nominal_rate, EventDetector(cfg.event_detector), sta_s=cfg.sta_s,
                                  lta_s=cfg.lta_s, sta_lta_on=cfg.sta_lta_on, pga_threshold=cfg.pga_threshold_m_s2)
     in_ch = ctx.input_channel if ctx.input_channel in ctx.names else None
+    kind, input_pga = event_kind(vals, list(ctx.names), status, nominal_rate, in_ch, is_event, sta_s=cfg.sta_s,
+                                 lta_s=cfg.lta_s, sta_lta_on=cfg.sta_lta_on,
+                                 earthquake_pga_m_s2=cfg.earthquake_pga_m_s2)
     rms = rms_accel(vals, ctx.names, status, in_ch)
     w = Window(
         window_id=ns_to_iso(start_ns),
@@ -109,9 +112,15 @@ def make_window(ctx: WindowContext, start_ns: int, vals: np.ndarray, flags: np.n
         input_channel=in_ch,
         notes=notes,
         covariates={} if rms is None else {"rms_accel_m_s2": rms},
+        event_kind=kind.value,
     )
-    if is_event:
-        log.add(Level.OK, "event", "accel", f"event detected in {where}, PGA {pga:.3g} m/s^2", start_ns)
+    if kind == EventKind.EARTHQUAKE:
+        log.add(Level.OK, "event", "accel", f"earthquake in {where}: input {in_ch} PGA {input_pga:.3g} m/s^2 "
+                f"(peak of all channels {pga:.3g} m/s^2)", start_ns)
+    elif is_event:
+        ground = f"input {in_ch} PGA {input_pga:.3g} m/s^2" if in_ch else "no ground/input channel"
+        log.add(Level.OK, "event", "accel", f"high-amplitude window (traffic, wind or works; {ground}) in "
+                f"{where}, peak {pga:.3g} m/s^2", start_ns)
     return w
 
 

@@ -15,11 +15,14 @@ strong part.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from shm_ros.core.models.base import AffineModel
+
+if TYPE_CHECKING:
+    from .model_error import ModelError
 
 
 @dataclass
@@ -33,6 +36,8 @@ class PosteriorDraws:
     rel2_default: float = 0.01
     source: str = "nominal"
     notes: list[str] = field(default_factory=list)
+    # learnt out of sample over the calibration events (:mod:`.model_error`): replaces ``rel2``
+    model_error: ModelError | None = None
 
     @property
     def n(self) -> int:
@@ -41,6 +46,23 @@ class PosteriorDraws:
     def rel2_for(self, channel: str) -> np.ndarray:
         v = self.rel2.get(channel)
         return np.full(self.n, self.rel2_default) if v is None else v
+
+    def rel2_event(self, channels: list[str | None], pga: float) -> np.ndarray:
+        """(n, len(channels)) relative error variances of one event (None: an unmeasured output,
+        which takes the channels' mean) of input PGA ``pga``."""
+        me = self.model_error
+        if me is not None:
+            return np.tile([me.rel2_at(c, pga) for c in channels], (self.n, 1))
+        return np.stack([self.rel2_mean() if c is None else self.rel2_for(c) for c in channels], axis=1)
+
+    def with_model_error(self, model_error: ModelError) -> PosteriorDraws:
+        """These draws with the cross-validated model error (the JSON's ``error_model`` says so)."""
+        from dataclasses import replace
+
+        note = (f"model error learnt by {model_error.method} cross-validation over {len(model_error.folds)} "
+                f"calibration events")
+        return replace(self, model_error=model_error, source="cross-validated model error",
+                       notes=[*self.notes, note])
 
     def rel2_mean(self) -> np.ndarray:
         """Per draw, the mean over the calibrated channels (for unmeasured outputs)."""

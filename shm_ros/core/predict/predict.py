@@ -6,7 +6,7 @@ window's start after the baseline correction of every record (:mod:`.signals`). 
 posterior-predictive distribution of a channel at a sample is the mixture over draws of
 ``N(y_draw(t), sigma_draw^2(t))`` (error model: :mod:`.draws`); its mean and variance are exact
 and the band is mean +- z std. Peak intervals are quantiles of each draw's peak of
-``y_draw + e_draw`` plus one error draw at its time (see ``_noisy_peaks``). Unmeasured floors and
+``y_draw + e_draw`` plus one error draw at its time (see ``_peaks``). Unmeasured floors and
 interstory drifts are outputs of the same model (every floor is a DOF of the full model); with
 ``unmeasured: expanded`` (default) the unmeasured floors' accelerations also get the measured
 floors' residual expanded on the model's mode shapes (:mod:`.expansion`), the same for every draw.
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.stats import norm
@@ -29,7 +30,7 @@ from .config import PredictConfig, Unmeasured
 from .draws import PosteriorDraws, nominal_draws
 from .expansion import expansion_matrix
 from .record import EventRecord
-from .signals import baseline_correct, local_mean_square, nrms_pct, pre_event_end, strong_motion
+from .signals import local_mean_square, nrms_pct, prepare, strong_motion
 
 
 @dataclass
@@ -49,6 +50,12 @@ class ChannelPrediction:
     peak_mean: float = float("nan")
     peak_ci: tuple[float, float] = (float("nan"), float("nan"))
     scores: dict[str, float | bool | None] = field(default_factory=dict)
+    # an unmeasured floor that also gets the measured floors' residual of this event (:mod:`.expansion`)
+    expanded: bool = False
+    # per draw: its peak |y| and the error standard deviation at the peak's time (the peak's
+    # predictive distribution is the mixture of |N(top, sigma^2)|; :mod:`.risk`)
+    peak_top: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    peak_sigma: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass
@@ -64,6 +71,9 @@ class EventPrediction:
     n_draws: int
     source: str
     notes: list[str] = field(default_factory=list)
+    input_pga_m_s2: float = 0.0  # peak of the baseline-corrected input record
+    model_error: dict[str, Any] | None = None  # the cross-validated model error used (JSON), if any
+    risk: dict[str, Any] | None = None  # drift exceedance and warnings (:func:`.risk.event_risk`)
 
     def channel(self, name: str) -> ChannelPrediction:
         for c in self.channels:
@@ -107,9 +117,7 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     cfg = (config or PredictConfig()).validate()
     fs, dt = record.fs, 1.0 / record.fs
     draws = draws if draws is not None else nominal_draws(model, cfg.relative_error)
-    n_pre = pre_event_end(record.inputs[0], fs, cfg.onset_arias, cfg.min_pre_event_s)
-    u = baseline_correct(record.inputs.T, n_pre, cfg.baseline).T
-    y = baseline_correct(record.outputs, n_pre, cfg.baseline)
+    u, y, n_pre = prepare(record, cfg)
     spec = prediction_outputs(model, record.channel_ids)
     outs = [o for o, _ in spec]
     nm = len(record.channel_ids)
@@ -130,18 +138,22 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     accel = np.array([q == "acceleration" for _, q in spec])
     s0[nm:] = np.where(accel[nm:], np.mean(s0[:nm]) if nm else 0.0, 0.0)
     lms = local_mean_square(y_map, fs, cfg.envelope_s)
-    rel2 = np.stack([draws.rel2_for(cid) for cid in record.channel_ids]
-                    + [draws.rel2_mean()] * (len(outs) - nm), axis=1)  # (n_draws, o)
+    pga = float(np.max(np.abs(u[0]))) if N else 0.0
+    rel2 = draws.rel2_event([*record.channel_ids, *[None] * (len(outs) - nm)], pga)  # (n_draws, o)
 
     rng = event_rng(cfg.seed, record.window_id)
     S1 = np.zeros((len(outs), N))
     S2 = np.zeros((len(outs), N))
     peaks = np.empty((draws.n, len(outs)))
+    tops = np.empty((draws.n, len(outs)))
+    sigs = np.empty((draws.n, len(outs)))
     for a, Y in batch_responses(model, draws.theta, u, dt, outs, chunk=cfg.chunk, threads=cfg.threads):
         Y[:, hidden] += corr[None]
         S1 += Y.sum(axis=0)
         S2 += np.einsum("bon,bon->on", Y, Y)
-        peaks[a:a + Y.shape[0]] = _noisy_peaks(Y, s0, rel2[a:a + Y.shape[0]], lms, rng)
+        b = a + Y.shape[0]
+        tops[a:b], sigs[a:b] = _peaks(Y, s0, rel2[a:b], lms)
+        peaks[a:b] = np.abs(tops[a:b] + sigs[a:b] * rng.standard_normal(tops[a:b].shape))
     mean = S1 / draws.n
     var = np.maximum(S2 / draws.n - mean ** 2, 0.0) + s0[:, None] + np.mean(rel2, axis=0)[:, None] * lms
     std = np.sqrt(var)
@@ -154,13 +166,17 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
         lo, hi = mean[c] - z * std[c], mean[c] + z * std[c]
         pk = np.percentile(peaks[:, c], q)
         ch = ChannelPrediction(o.name, kind, c < nm, mean[c], std[c], lo, hi, y_map[c], y_nom[c],
-                               peak_mean=float(np.max(np.abs(mean[c]))), peak_ci=(float(pk[0]), float(pk[1])))
+                               peak_mean=float(np.max(np.abs(mean[c]))), peak_ci=(float(pk[0]), float(pk[1])),
+                               peak_top=tops[:, c], peak_sigma=sigs[:, c])
+        ch.expanded = bool(c in set(hidden.tolist()))
         if c < nm:
             ch.values = y[:, c]
             ch.scores = channel_scores(y[:, c], mean[c], y_map[c], y_nom[c], lo, hi, pk, strong)
         channels.append(ch)
+    me = draws.model_error
     return EventPrediction(record.window_id, record.start_ns, fs, record.pga_m_s2, record.is_event, channels,
-                           strong, n_pre, draws.n, draws.source, list(record.notes) + list(draws.notes))
+                           strong, n_pre, draws.n, draws.source, list(record.notes) + list(draws.notes), pga,
+                           None if me is None else me.to_json())
 
 
 def _expanded_residual(model: AffineModel, theta: np.ndarray, spec: list[tuple[Output, str]], nm: int,
@@ -180,19 +196,17 @@ def _expanded_residual(model: AffineModel, theta: np.ndarray, spec: list[tuple[O
     return hidden, T @ (y[:, full].T - y_map[full])
 
 
-def _noisy_peaks(Y: np.ndarray, s0: np.ndarray, rel2: np.ndarray, lms: np.ndarray,
-                 rng: np.random.Generator) -> np.ndarray:
-    """Per draw and output (B, o): the draw's peak |y| plus one error draw at the peak's time,
-    ``N(0, s0 + rel2 lms(t_peak))``. The model error is correlated in time (a slightly wrong
-    frequency shifts the whole peak cycle), so the peak moves by about one error standard
-    deviation; the maximum over independent white-noise samples would move less and give intervals
-    that are too narrow."""
+def _peaks(Y: np.ndarray, s0: np.ndarray, rel2: np.ndarray, lms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per draw and output (B, o): the draw's peak |y| and the error standard deviation at the
+    peak's time, ``sqrt(s0 + rel2 lms(t_peak))``. The peak's predictive draw is the peak plus one
+    error draw there: the model error is correlated in time (a slightly wrong frequency shifts the
+    whole peak cycle), so the peak moves by about one error standard deviation; the maximum over
+    independent white-noise samples would move less and give intervals that are too narrow."""
     absY = np.abs(Y)
     t = np.argmax(absY, axis=2)  # (B, o)
     top = np.take_along_axis(absY, t[:, :, None], 2)[:, :, 0]
     o = np.arange(Y.shape[1])[None, :]
-    sig = np.sqrt(s0[None, :] + rel2 * lms[o, t])
-    return np.abs(top + sig * rng.standard_normal(top.shape))
+    return top, np.sqrt(s0[None, :] + rel2 * lms[o, t])
 
 
 def channel_scores(y: np.ndarray, mean: np.ndarray, y_map: np.ndarray, y_nom: np.ndarray, lo: np.ndarray,

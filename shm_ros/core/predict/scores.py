@@ -90,14 +90,17 @@ def event_json(pred: EventPrediction) -> dict[str, Any]:
     chans = []
     for c in pred.channels:
         d: dict[str, Any] = {"name": c.name, "quantity": c.quantity, "measured": c.measured,
-                             "peak": _num(c.peak_mean), "peak_ci95": [_num(c.peak_ci[0]), _num(c.peak_ci[1])]}
+                             "peak": _num(c.peak_mean), "peak_ci95": [_num(c.peak_ci[0]), _num(c.peak_ci[1])],
+                             "uses_measured_records": c.measured or c.expanded,
+                             "through": "measured" if c.measured else "shape expansion" if c.expanded else "model"}
         d.update({k: _num(v) for k, v in c.scores.items()})
         chans.append(d)
     return {"window_id": pred.window_id, "start_ns": pred.start_ns, "pga_m_s2": _num(pred.pga_m_s2),
             "is_event": pred.is_event, "n_draws": pred.n_draws, "error_model": pred.source,
+            "input_pga_m_s2": _num(pred.input_pga_m_s2), "model_error": pred.model_error,
             "pre_event_s": pred.n_pre / pred.fs,
             "strong_motion_s": [pred.strong.start / pred.fs, pred.strong.stop / pred.fs],
-            "channels": chans, "notes": list(pred.notes)}
+            "channels": chans, "risk": pred.risk, "notes": list(pred.notes)}
 
 
 def summary_json(preds: list[EventPrediction]) -> dict[str, Any]:
@@ -111,4 +114,5 @@ def summary_json(preds: list[EventPrediction]) -> dict[str, Any]:
     hits = [bool(s["peak_inside"]) for s in ms if s.get("peak_inside") is not None]
     return {"nrms_pct_median": med("nrms_pct"), "nrms_pct_nominal_median": med("nrms_pct_nominal"),
             "coverage_95_median": med("coverage_95"), "coverage_95_strong_median": med("coverage_95_strong"),
-            "peaks_inside_fraction": float(np.mean(hits)) if hits else None, "n_events": len(preds)}
+            "peaks_inside_fraction": float(np.mean(hits)) if hits else None, "n_events": len(preds),
+            "events_outside_calibration": [p.window_id for p in preds if p.risk and p.risk["outside_calibration"]]}

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
-from .config import Baseline
+from .config import Baseline, PredictConfig
+from .record import EventRecord
 
 
 def arias_fractions(a: np.ndarray) -> np.ndarray:
@@ -56,3 +57,11 @@ def nrms_pct(measured: np.ndarray, predicted: np.ndarray) -> float:
     ok = np.isfinite(measured)
     den = float(np.linalg.norm(measured[ok]))
     return float(100.0 * np.linalg.norm(measured[ok] - predicted[ok]) / den) if den > 0 else float("nan")
+
+
+def prepare(record: EventRecord, cfg: PredictConfig) -> tuple[np.ndarray, np.ndarray, int]:
+    """``(u, y, n_pre)``: the inputs (n_inputs, N) and outputs (N, c) of ``record`` baseline-corrected
+    from the pre-event part, and that part's length (samples)."""
+    n_pre = pre_event_end(record.inputs[0], record.fs, cfg.onset_arias, cfg.min_pre_event_s)
+    u = baseline_correct(record.inputs.T, n_pre, cfg.baseline).T
+    return u, baseline_correct(record.outputs, n_pre, cfg.baseline), n_pre

@@ -274,7 +274,9 @@ def simulate_campaign(scenario: Scenario) -> Campaign:
             raise EffectError("scenario: amplitude-dependent effects work with kelvin_voigt dampers only")
     truth = build_truth(sc.structure, effects, rng_for(sc.seed, 0), refine=sc.refine, scatter=sc.property_scatter,
                         misplacement_std_m=sc.misplacement_std_m, damping_range=sc.truth_damping,
-                        n_truth_modes=sc.n_truth_modes, fs=sc.fs, model_form=sc.model_form)
+                        n_truth_modes=sc.n_truth_modes, fs=sc.fs, model_form=sc.model_form,
+                        eccentricity=None if sc.eccentricity is None else (float(sc.eccentricity[0]),
+                                                                            float(sc.eccentricity[1])))
     srng = rng_for(sc.seed, 1)
     sensors = []
     for sid in truth.sensor_ids:

@@ -120,6 +120,9 @@ class Scenario:
     # the truth is richer than any analysis model of its kind (out-of-plane modes, shear deformation,
     # non-classical damping, imperfect sensors; core/simulate/truths/*): off for tests of other things
     model_form: bool = True
+    # building: mass centres this fraction of the plan off the stiffness centre (None: 1-2 %); 0.02-0.06
+    # reaches the codes' 5 % accidental eccentricity (out of a planar model's class)
+    eccentricity: tuple[float, float] | None = None
     # climate and loads
     t_mean_c: float = 5.0
     t_daily_c: float = 6.0

@@ -82,6 +82,9 @@ class TruthOptions:
     n_truth_modes: int = 6  # in-plane modes reported; out-of-plane modes among them come in addition
     fs: float = 100.0
     model_form: bool = True  # richer than the analysis model (see module doc)
+    # building: range of the mass centres' offset from the stiffness centre, fraction of the plan
+    # (None: the plan form's default, 1-2 %)
+    eccentricity: tuple[float, float] | None = None
 
 
 @dataclass
@@ -167,7 +170,8 @@ class TruthModel(ABC):
 def build_truth(structure: dict[str, Any], effects: list[Effect], rng: np.random.Generator, *,
                 refine: int = 4, scatter: float = 0.03, misplacement_std_m: float = 0.15,
                 damping_range: tuple[float, float] = (0.012, 0.025), n_truth_modes: int = 6,
-                fs: float = 100.0, model_form: bool = True) -> TruthModel:
+                fs: float = 100.0, model_form: bool = True,
+                eccentricity: tuple[float, float] | None = None) -> TruthModel:
     """Truth model of the nominal ``structure`` mapping (see module doc); ``rng`` draws the scatter."""
     nominal = structure_from_dict(copy.deepcopy(structure), source="<nominal>")
     try:
@@ -177,5 +181,5 @@ def build_truth(structure: dict[str, Any], effects: list[Effect], rng: np.random
                           f"({' or '.join(simulated_kinds())})") from None
     options = TruthOptions(refine=refine, scatter=scatter, misplacement_std_m=misplacement_std_m,
                            damping_range=damping_range, n_truth_modes=n_truth_modes, fs=fs,
-                           model_form=model_form)
+                           model_form=model_form, eccentricity=eccentricity)
     return cls.build(nominal, structure, effects, rng, options)

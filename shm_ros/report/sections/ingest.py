@@ -48,14 +48,16 @@ class DataHealthSection:
         channels = sorted({c for w in ws for c in w.channels})
         cov = np.concatenate([np.asarray(w.coverage, float) for w in ws]) if ws else np.zeros(0)
         bad = sum(1 for w in ws if any(st != "ok" for st in w.status))
-        events = sum(1 for w in ws if w.is_event)
+        quakes = sum(1 for w in ws if w.is_event and w.event_kind == "earthquake")
+        loud = sum(1 for w in ws if w.is_event) - quakes
         dropped = sum(int(d.get("n_samples") or 0) for d in ing.dropped)
         text = (f"{len(ws)} windows from {iso_ns(ws[0].start_ns)} to {iso_ns(ws[-1].end_ns)}; "
                 f"length {_span([(w.end_ns - w.start_ns) / 1e9 for w in ws], 's')}, "
                 f"sample rate {_span([w.sample_rate_hz for w in ws], 'Hz')}; {len(channels)} channels "
                 f"({', '.join(channels)}). Mean channel coverage {100 * float(np.mean(cov)):.2f} % "
                 f"(lowest {100 * float(np.min(cov)):.2f} %); {bad} windows with a channel not ok; "
-                f"{events} event windows.")
+                f"{quakes} earthquake windows (the ground/input sensor shook) and {loud} high-amplitude windows "
+                f"(traffic, wind or works).")
         if ing.dropped:
             text += f" {len(ing.dropped)} stretches ({dropped} samples) went into no window."
         return text
@@ -69,7 +71,7 @@ class DataHealthSection:
             not_ok = ", ".join(f"{c}: {st}" for c, st in zip(w.channels, w.status, strict=True) if st != "ok")
             rows.append([w.window_id, iso_ns(w.start_ns), (w.end_ns - w.start_ns) / 1e9, w.sample_rate_hz,
                          len(w.channels), 100 * min(w.coverage, default=0.0), not_ok or "–",
-                         w.temperature_c, w.is_event, w.pga_m_s2])
+                         w.temperature_c, _event_name(w), w.pga_m_s2])
         data = write_csv(fig_dir / "windows.csv", cols, rows)
         if all(r[0][:19] == r[1][:19] for r in rows):  # ids are the start times: show them once
             cols, rows = cols[1:], [r[1:] for r in rows]
@@ -127,3 +129,10 @@ class DataHealthSection:
 
 
 BUILDER = DataHealthSection()
+
+
+def _event_name(w: WindowHealth) -> str:
+    """The window's event column: earthquake, high-amplitude or –."""
+    if not w.is_event:
+        return "–"
+    return "earthquake" if w.event_kind == "earthquake" else "high-amplitude"

@@ -148,7 +148,9 @@ class BuildingTruth(TruthModel):
         a0, a1 = rayleigh_coefficients(w[0], w[min(2, nf - 1)], z1, z3)
         a0, a1 = max(a0, 0.0), max(a1, 0.0)
 
-        form = PlanForm() if options.model_form else None
+        form = None
+        if options.model_form:
+            form = PlanForm() if options.eccentricity is None else PlanForm(eccentricity=options.eccentricity)
         dpf = 1 if form is None else 3
         weights = np.ones(nf)
         ecc = np.zeros((nf, 2))
