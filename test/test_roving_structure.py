@@ -72,5 +72,10 @@ def test_building_points_are_floors():
     d = yaml.safe_load((EXAMPLE.parent / "building.yaml").read_text())
     d["sensors"].append({"id": "d1", "roving": True, "frame": "drone/imu", "direction": "x"})
     d["measurement_points"] = [{"id": f"f{k}p", "at": {"floor": k}} for k in (1, 2, 3)]
+    with pytest.raises(StructureError, match=r"measurement_points\[0\].xyz'.*needs xyz"):
+        structure_from_dict(d)
+    for k, p in enumerate(d["measurement_points"]):
+        p["xyz"] = [1.0, 2.0, [3.2, 6.4, 9.6][k]]
     spec = structure_from_dict(d)
-    assert [p.position for p in spec.measurement_points] == [(0, 0, 1.0), (0, 0, 2.0), (0, 0, 3.0)]
+    assert [p.position for p in spec.measurement_points] == [(1.0, 2.0, 3.2), (1.0, 2.0, 6.4), (1.0, 2.0, 9.6)]
+    assert spec.measurement_points[0].axes == (True, True, True)

@@ -166,19 +166,26 @@ class RovingSensorSpec:
 
 @dataclass
 class MeasurementPoint:
-    """Where roving sensors are meant to stop; ``at`` as a fixed sensor's, ``position`` the point in
-    the structure's frame (girder: (x, 0, 0); building: (0, 0, floor))."""
+    """Where roving sensors are meant to stop: ``at`` as a fixed sensor's, and optionally ``xyz``, the
+    point in the structure's frame (m). A girder point without ``xyz`` is (x, 0, 0) and only its x
+    counts (a sensor on the deck is above the axis); a point given by floor needs ``xyz``."""
 
     id: str
     at: dict[str, Any]
+    xyz: tuple[float, float, float] | None = None
 
     @property
-    def position(self) -> tuple[float, float, float]:
+    def position(self) -> tuple[float, float, float] | None:
+        if self.xyz is not None:
+            return self.xyz
         if "x" in self.at:
             return (float(self.at["x"]), 0.0, 0.0)
-        if "floor" in self.at:
-            return (0.0, 0.0, float(self.at["floor"]))
-        return (0.0, 0.0, 0.0)
+        return None
+
+    @property
+    def axes(self) -> tuple[bool, bool, bool]:
+        """The coordinates that count in the distance to this point."""
+        return (True, True, True) if self.xyz is not None else (True, False, False)
 
 
 DEFAULT_FRAME = "structure"
@@ -267,7 +274,8 @@ class StructureSpec:
         if self.frame != DEFAULT_FRAME or self.roving:
             out["frame"] = self.frame
         if self.measurement_points:
-            out["measurement_points"] = [{"id": p.id, "at": dict(p.at)} for p in self.measurement_points]
+            out["measurement_points"] = [{"id": p.id, "at": dict(p.at), **({} if p.xyz is None else
+                                          {"xyz": list(p.xyz)})} for p in self.measurement_points]
         if len(self.inputs) == 1 and _is_plain_input(self, self.inputs[0]):
             out["input"] = {"sensor": self.inputs[0].sensor}
         elif self.inputs:
@@ -646,13 +654,23 @@ def _measurement_points(c: FieldReader, v: Any, roving: list[tuple[int, RovingSe
     for k, p in enumerate(c.seq(v, "measurement_points")):
         fld = f"measurement_points[{k}]"
         p = c.mapping(p, fld)
-        c.keys(p, ("id", "at"), ("id", "at"), fld)
+        c.keys(p, ("id", "at", "xyz"), ("id", "at"), fld)
+        xyz = None
+        if "xyz" in p:
+            vals = c.seq(p["xyz"], f"{fld}.xyz")
+            if len(vals) != 3:
+                raise c.err(f"needs 3 numbers (x, y, z in the structure's frame), got {len(vals)}", f"{fld}.xyz")
+            x, y, z = (c.number(v, f"{fld}.xyz[{k}]") for k, v in enumerate(vals))
+            xyz = (x, y, z)
         pid = c.string(str(p["id"]) if isinstance(p["id"], (int, str)) else p["id"], f"{fld}.id")
         if pid in taken:
             raise c.err(f"id {pid!r} is taken by {taken[pid]} (global shapes are keyed by these ids)", f"{fld}.id")
         taken[pid] = "another measurement point"
-        out.append(MeasurementPoint(pid, mk.sensor_location(c, section, c.mapping(p["at"], f"{fld}.at"),
-                                                              direction, fld)))
+        at = mk.sensor_location(c, section, c.mapping(p["at"], f"{fld}.at"), direction, fld)
+        if xyz is None and "x" not in at:
+            raise c.err("a point not given by x along a girder needs xyz: where it is in the structure's "
+                        "frame (m), to compare with the tf positions", f"{fld}.xyz")
+        out.append(MeasurementPoint(pid, at, xyz))
     if not out:
         raise c.err("needs at least one point", "measurement_points")
     return out

@@ -12,6 +12,8 @@ import enum
 from collections.abc import Sequence
 from dataclasses import replace
 
+import numpy as np
+
 from shm_ros.core.identify import IdentifyConfig, identify_array
 from shm_ros.core.preprocess import PreprocessConfig, preprocess
 from shm_ros.core.roving.merge_post import GlobalMode, merge_post

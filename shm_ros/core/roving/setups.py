@@ -121,11 +121,14 @@ def cut_setups(tracks: Sequence[SensorTrack], points: Sequence[MeasurementPoint]
     if not tracks:
         raise ValueError("cut_setups needs the track of at least one roving sensor")
     times = tracks[0].times_ns
-    pts = np.array([p.position for p in points])
+    if any(p.position is None for p in points):
+        raise ValueError("every measurement point needs a position in the structure's frame (xyz)")
+    pts = np.array([p.position for p in points], dtype=float)
+    axes = np.array([p.axes for p in points], dtype=float)
     idx = np.empty((times.size, len(tracks)), dtype=int)
     for j, tr in enumerate(tracks):
         pos = _filtered(tr.position, tr.valid, times, filter_s)
-        d = np.linalg.norm(pos[:, None, :] - pts[None, :, :], axis=2)
+        d = np.sqrt(np.sum(((pos[:, None, :] - pts[None, :, :]) * axes[None]) ** 2, axis=2))
         near = np.argmin(np.where(np.isfinite(d), d, np.inf), axis=1)
         ok = np.take_along_axis(d, near[:, None], axis=1)[:, 0] <= tolerance_m
         idx[:, j] = np.where(~tr.valid, -2, np.where(ok, near, -1))
@@ -156,7 +159,7 @@ def cut_setups(tracks: Sequence[SensorTrack], points: Sequence[MeasurementPoint]
             continue
         setups.append(Setup(len(setups) + 1, {tr.sensor: points[key[a][j]].id for j, tr in enumerate(tracks)},
                             [(a, b)], int(times[a]), int(times[b - 1])))
-    kept = []
+    kept: list[Setup] = []
     for s in setups:
         if s.samples >= min_n:
             s.id = len(kept) + 1
