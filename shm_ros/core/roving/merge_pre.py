@@ -29,9 +29,14 @@ from shm_ros.errors import InputError
 __all__ = ["merged_hankel", "merge_pre"]
 
 
+REL_RANK = 1e-2  # singular values of the references' Hankel matrix below this x the largest are noise
+
+
 def _truncated_pinv(h: np.ndarray, rank: int) -> np.ndarray:
+    """Pseudo-inverse of ``h`` on its leading singular values: at most ``rank`` and none below
+    ``REL_RANK`` x the largest (inverting the noise floor would amplify it into every setup)."""
     u, s, vt = sla.svd(h, full_matrices=False, check_finite=False)
-    n = min(rank, int(np.sum(s > s[0] * 1e-12)))
+    n = max(1, min(rank, int(np.sum(s > s[0] * REL_RANK))))
     return (vt[:n].T / s[:n]) @ u[:, :n].T
 
 
