@@ -24,6 +24,7 @@ import scipy.ndimage as ndi
 
 from shm_ros.core.roving.transforms import Gap, TransformBuffer, TransformError
 from shm_ros.core.structure import MeasurementPoint, RovingSensorSpec
+from shm_ros.core.timeutil import ns_to_iso
 
 __all__ = ["SensorTrack", "Setup", "SetupCut", "sensor_track", "cut_setups", "DEFAULT_TOLERANCE_M",
            "DEFAULT_MIN_DWELL_S", "DEFAULT_FILTER_S"]
@@ -78,7 +79,8 @@ class Setup:
         return int(sum(b - a for a, b in self.segments))
 
     def to_dict(self, references: Sequence[str]) -> dict:
-        return {"id": self.id, "start_ns": self.start_ns, "end_ns": self.end_ns, "points": dict(self.points),
+        return {"id": self.id, "start": ns_to_iso(self.start_ns), "end": ns_to_iso(self.end_ns),
+                "start_ns": self.start_ns, "end_ns": self.end_ns, "points": dict(self.points),
                 "references": list(references), "samples": self.samples,
                 "segments": [list(s) for s in self.segments]}
 
