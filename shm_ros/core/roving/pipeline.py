@@ -24,6 +24,7 @@ from shm_ros.core.roving.clock import estimate_clock_offset, shift
 from shm_ros.core.roving.merge_post import GlobalMode, merge_post
 from shm_ros.core.roving.merge_pre import merge_pre
 from shm_ros.core.roving.offline import MergeMethod
+from shm_ros.core.roving.second_look import second_look
 from shm_ros.core.roving.setups import (
     DEFAULT_FILTER_S,
     DEFAULT_MIN_DWELL_S,
@@ -49,6 +50,7 @@ class RovingConfig:
     filter_s: float = DEFAULT_FILTER_S
     merge: str = MergeMethod.POST.value
     correct_clock: bool = True
+    second_look: bool = True  # search a setup's diagram for merged modes it missed (second_look.py)
     identify: IdentifyConfig = field(default_factory=lambda: IdentifyConfig(method="ssi-cov", uncertainty=False))
 
 
@@ -106,6 +108,9 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
     results = [identify_prepared(p, icfg) for p in preps]
     if MergeMethod(cfg.merge) == MergeMethod.POST:
         modes = merge_post([r.estimate for r in results], refs)
+        if cfg.second_look and second_look(results, modes, refs):
+            modes = merge_post([r.estimate for r in results], refs)
+            notes.append("a second look at the setups' diagrams found modes the automatic picking had missed")
     else:
         band = results[0].band
         assert band is not None
