@@ -10,6 +10,8 @@ import synthetic_oma as so
 from shm_ros.core.roving.pipeline import RovingConfig, roving_modes
 from shm_ros.core.simulate.roving import RovingOptions, simulate_roving
 from shm_ros.io.roving_bag import read_roving_bag, write_roving_bag
+from shm_ros.report.inputs import ReportInputs
+from shm_ros.report.sections.roving import RovingSection
 
 
 def test_bag_round_trip_gives_the_same_global_modes(tmp_path):
@@ -25,3 +27,10 @@ def test_bag_round_trip_gives_the_same_global_modes(tmp_path):
     assert [s.points for s in b.cut.setups] == [{"r1": p} for k, _, _, p in rec.phases if k == "dwell"]
     assert b.to_dict() == a.to_dict()
     assert b.to_dict()["setups"][0]["start"].startswith("1970-01-01T00:00:00")
+    # the report's section: setups, global modes and the glued shapes' figure
+    doc = b.to_dict()
+    doc["roving"]["positions"] = {p.id: list(p.position) for p in ra.SPEC.measurement_points} | {
+        s.id: [s.at["x"], 0.0, 0.0] for s in ra.SPEC.sensors}
+    sec = RovingSection().build(ReportInputs(roving=doc), tmp_path / "fig")
+    assert sec is not None and len(sec.tables[0].rows) == 3 and len(sec.tables[1].rows) == len(b.global_modes)
+    assert sec.figures[0].png.exists() and "s_ref1" in sec.figures[0].data.read_text()

@@ -67,7 +67,11 @@ def identify(args: argparse.Namespace, spec, cfg) -> int:
         return exc.exit_code
     for e in res.cut.errors():
         print(f"shm-ros identify: {args.bag}: {e}", file=sys.stderr)
-    dump({"windows": [], **res.to_dict()}, args.out)
+    doc = {"windows": [], **res.to_dict()}
+    doc["roving"]["positions"] = {**{s.id: [float(s.at["x"]), 0.0, 0.0] for s in spec.sensors if "x" in s.at},
+                                  **{p.id: list(p.position) for p in spec.measurement_points
+                                     if p.position is not None}}
+    dump(doc, args.out)
     print(f"{len(res.cut.setups)} setups, {len(res.global_modes)} global modes, clock offset "
           f"{1e3 * res.clock_offset_s:.1f} ms; {res.cut.moving_samples} samples while moving left out -> {args.out}")
     return 0
