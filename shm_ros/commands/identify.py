@@ -98,6 +98,10 @@ def run(args: argparse.Namespace) -> int:
     except Exception as exc:  # StructureError / ValueError name the file and field
         print(f"shm-ros identify: {exc}", file=sys.stderr)
         return 2
+    if spec.roving:  # a robot's roving sensors: setups from tf, merged (docs/interfaces.md section 8)
+        from shm_ros.commands.roving import identify as identify_roving
+
+        return identify_roving(args, spec, cfg)
     if cfg.method == "ssi-io" and getattr(spec, "input_sensor", None) is None:
         print(f"shm-ros identify: {args.structure}: --method ssi-io needs `input: {{sensor: ...}}` "
               "in the structure file", file=sys.stderr)

@@ -63,6 +63,11 @@ def run(args: argparse.Namespace) -> int:
                 w = Path(args.windows)
                 wdir = w.parent if w.is_file() else w
             inputs.identify = load_identify(args.modes, wdir, args.diagrams)
+            from shm_ros.report.load import load_json
+
+            doc = load_json(args.modes)
+            if doc.get("global_modes") is not None:  # a roving campaign (docs/interfaces.md section 8)
+                inputs.roving = doc
             inputs.facts["modes"] = args.modes
         if args.tracking:
             inputs.tracking = load_tracking(args.tracking)

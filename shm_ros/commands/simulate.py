@@ -17,7 +17,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="simulate a monitoring campaign with known truth",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", default=None,
-                   help="girder | building | building-earthquake (default: girder, or the scenario file's)")
+                   help="girder | building | building-earthquake | girder-roving (a robot with a roving sensor, "
+                        "docs/roving.md) (default: girder, or the scenario file's)")
     p.add_argument("--out", required=True, help="output directory (bag/, structure.yaml, truth.json, truth_modes.csv)")
     p.add_argument("--scenario-file",
                    help="YAML scenario: {scenario: NAME, <option>: value, effects: [...], faults: [...]}")
@@ -102,6 +103,10 @@ def run(args: argparse.Namespace) -> int:
     from shm_ros.io.bags import BagError
     from shm_ros.io.campaign import print_progress, write_campaign
 
+    if args.scenario == "girder-roving":
+        from shm_ros.commands.roving import simulate as simulate_roving
+
+        return simulate_roving(args)
     try:
         sc = build_scenario(args)
         campaign = simulate_campaign(sc)

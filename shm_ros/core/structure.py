@@ -22,6 +22,7 @@ from enum import StrEnum
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from shm_ros.core.bayes.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS, Prior, PriorError, prior_fields
 from shm_ros.core.drift_limits import DriftLimits, parse_drift_limits
@@ -142,6 +143,56 @@ class ParameterSpec:
 
 
 @dataclass
+class MountSpec:
+    """Where a roving sensor sits on its carrier: the transform ``parent -> frame`` (the sensor's tf
+    frame), for bags without ``/tf_static``. ``rotation`` is a unit quaternion (x, y, z, w)."""
+
+    parent: str
+    translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+
+
+@dataclass
+class RovingSensorSpec:
+    """A sensor carried by a robot (docs/interfaces.md section 8): no fixed ``at``; its position in
+    the structure's frame at a sample's time is the tf chain from the structure's ``frame`` to
+    ``frame``. ``mount``: the last link of that chain when the bag has no ``/tf_static``."""
+
+    id: str
+    frame: str
+    direction: str
+    source: SourceSpec
+    mount: MountSpec | None = None
+
+
+@dataclass
+class MeasurementPoint:
+    """Where roving sensors are meant to stop: ``at`` as a fixed sensor's, and optionally ``xyz``, the
+    point in the structure's frame (m). A girder point without ``xyz`` is (x, 0, 0) and only its x
+    counts (a sensor on the deck is above the axis); a point given by floor needs ``xyz``."""
+
+    id: str
+    at: dict[str, Any]
+    xyz: tuple[float, float, float] | None = None
+
+    @property
+    def position(self) -> tuple[float, float, float] | None:
+        if self.xyz is not None:
+            return self.xyz
+        if "x" in self.at:
+            return (float(self.at["x"]), 0.0, 0.0)
+        return None
+
+    @property
+    def axes(self) -> tuple[bool, bool, bool]:
+        """The coordinates that count in the distance to this point."""
+        return (True, True, True) if self.xyz is not None else (True, False, False)
+
+
+DEFAULT_FRAME = "structure"
+
+
+@dataclass
 class StructureSpec:
     """A validated structure file. ``raw`` is the mapping as read; ``source`` names the file.
 
@@ -163,6 +214,9 @@ class StructureSpec:
     description: str | None = None
     arrays: dict[str, np.ndarray] | None = field(default=None, repr=False)
     drift_limits: DriftLimits = field(default_factory=DriftLimits)  # shear buildings: per-story limits
+    frame: str = DEFAULT_FRAME
+    roving: list[RovingSensorSpec] = field(default_factory=list)
+    measurement_points: list[MeasurementPoint] = field(default_factory=list)
 
     def __getattr__(self, name: str) -> Any:
         # only called for names that are not attributes: ``spec.girder`` and the like
@@ -218,7 +272,12 @@ class StructureSpec:
             out["description"] = self.description
         out[self.kind] = self.model_kind.section_to_dict(self.section)
         out["damping"] = {"kind": self.damping.kind, "ratios": [float(r) for r in self.damping.ratios]}
-        out["sensors"] = [_sensor_dict(s) for s in self.sensors]
+        out["sensors"] = [_sensor_dict(s) for s in self.sensors] + [_roving_dict(r) for r in self.roving]
+        if self.frame != DEFAULT_FRAME or self.roving:
+            out["frame"] = self.frame
+        if self.measurement_points:
+            out["measurement_points"] = [{"id": p.id, "at": dict(p.at), **({} if p.xyz is None else
+                                          {"xyz": list(p.xyz)})} for p in self.measurement_points]
         if len(self.inputs) == 1 and _is_plain_input(self, self.inputs[0]):
             out["input"] = {"sensor": self.inputs[0].sensor}
         elif self.inputs:
@@ -270,6 +329,15 @@ def _sensor_dict(s: SensorSpec) -> dict[str, Any]:
     src["axis"] = s.source.axis
     src["sign"] = float(s.source.sign)
     return {"id": s.id, "at": dict(s.at), "direction": s.direction, "source": src}
+
+
+def _roving_dict(r: RovingSensorSpec) -> dict[str, Any]:
+    out: dict[str, Any] = {"id": r.id, "roving": True, "frame": r.frame, "direction": r.direction,
+                           "source": _sensor_dict(SensorSpec(r.id, {}, r.direction, r.source))["source"]}
+    if r.mount is not None:
+        out["mount"] = {"parent": r.mount.parent, "translation": [float(v) for v in r.mount.translation],
+                        "rotation": [float(v) for v in r.mount.rotation]}
+    return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -434,7 +502,8 @@ class FieldReader:
                 raise self.err("missing required field", f"{fld}.{k}" if fld else k)
 
 
-_COMMON = ("name", "kind", "description", "damping", "sensors", "input", "inputs", "parameters", "drift_limits")
+_COMMON = ("name", "kind", "description", "damping", "sensors", "input", "inputs", "parameters", "drift_limits",
+           "frame", "measurement_points")
 INPUT_FIELDS = ("sensor", "kind", "at", "gain")
 
 
@@ -460,7 +529,13 @@ def structure_from_dict(
     section = mk.parse_section(c, data[kind], matrices_arrays)
 
     damping = _damping(c, data.get("damping", {"kind": "rayleigh", "ratios": [0.02, 0.02]}))
-    sensors = _sensors(c, data["sensors"], mk, section)
+    fixed_entries, roving = _roving_sensors(c, data["sensors"])
+    if roving and not fixed_entries:
+        raise c.err("roving sensors need at least one fixed sensor: the references that glue the setups "
+                    "together", "sensors")
+    sensors = _sensors(c, fixed_entries, mk, section)
+    frame = c.string(data.get("frame", DEFAULT_FRAME), "frame")
+    points = _measurement_points(c, data.get("measurement_points"), roving, sensors, mk, section)
     inputs = _inputs(c, data, sensors, mk, section)
 
     description = data.get("description")
@@ -476,6 +551,9 @@ def structure_from_dict(
         source=source,
         description=None if description is None else str(description),
         arrays=None if matrices_arrays is None else dict(matrices_arrays),
+        frame=frame,
+        roving=[r for _, r in roving],
+        measurement_points=points,
     )
     spec.parameters = _parameters(c, data.get("parameters") or [], spec)
     if data.get("drift_limits") is not None:
@@ -500,10 +578,115 @@ def _damping(c: FieldReader, v: Any) -> DampingSpec:
     return DampingSpec(kind=kind, ratios=ratios)
 
 
-def _sensors(c: FieldReader, v: Any, mk: ModelKind, section: Any) -> list[SensorSpec]:
+ROVING_FIELDS = ("id", "roving", "frame", "direction", "source", "mount")
+
+
+def _roving_sensors(c: FieldReader, v: Any) -> tuple[list[tuple[int, Any]], list[tuple[int, RovingSensorSpec]]]:
+    """Split ``sensors`` into fixed entries (position, raw entry) and parsed roving sensors."""
+    fixed: list[tuple[int, Any]] = []
+    roving: list[tuple[int, RovingSensorSpec]] = []
+    for i, s in enumerate(c.seq(v, "sensors")):
+        fld = f"sensors[{i}]"
+        s = c.mapping(s, fld)
+        flag = s.get("roving", False)
+        if not isinstance(flag, bool):
+            raise c.err(f"must be true or false, got {flag!r}", f"{fld}.roving")
+        if not flag:
+            if "frame" in s or "mount" in s:
+                key = "frame" if "frame" in s else "mount"
+                raise c.err("only a roving sensor (roving: true) has a tf frame or a mount; a fixed "
+                            "sensor's position is its 'at'", f"{fld}.{key}")
+            fixed.append((i, {k: val for k, val in s.items() if k != "roving"}))
+            continue
+        if "at" in s:
+            raise c.err("a roving sensor's position comes from tf (its 'frame'): it takes no 'at'", f"{fld}.at")
+        c.keys(s, ROVING_FIELDS, ("id", "frame", "direction"), fld)
+        sid = c.string(str(s["id"]) if isinstance(s["id"], (int, str)) else s["id"], f"{fld}.id")
+        direction = s["direction"]
+        if direction not in DIRECTIONS:
+            raise c.err(f"unknown direction {direction!r} (expected one of: {', '.join(DIRECTIONS)})",
+                        f"{fld}.direction")
+        mount = None if s.get("mount") is None else _mount(c, s["mount"], f"{fld}.mount")
+        roving.append((i, RovingSensorSpec(id=sid, frame=c.string(s["frame"], f"{fld}.frame"),
+                                           direction=direction, source=_source(c, s.get("source"), sid,
+                                                                               direction, fld),
+                                           mount=mount)))
+    return fixed, roving
+
+
+def _mount(c: FieldReader, v: Any, fld: str) -> MountSpec:
+    """``{parent: FRAME, translation: [x, y, z], rotation: [x, y, z, w] | rpy_deg: [roll, pitch, yaw]}``."""
+    m = c.mapping(v, fld)
+    c.keys(m, ("parent", "translation", "rotation", "rpy_deg"), ("parent",), fld)
+    if "rotation" in m and "rpy_deg" in m:
+        raise c.err("give either 'rotation' (quaternion x, y, z, w) or 'rpy_deg', not both", fld)
+
+    def vector(key: str, n: int, default: list[float]) -> list[float]:
+        vals = c.seq(m.get(key, default), f"{fld}.{key}")
+        if len(vals) != n:
+            raise c.err(f"needs {n} numbers, got {len(vals)}", f"{fld}.{key}")
+        return [c.number(x, f"{fld}.{key}[{k}]") for k, x in enumerate(vals)]
+
+    t = vector("translation", 3, [0.0, 0.0, 0.0])
+    if "rpy_deg" in m:
+        # fixed-axis roll, pitch, yaw (REP-103): extrinsic x-y-z; scipy's quaternion is (x, y, z, w) as in ROS
+        q = [float(v) for v in Rotation.from_euler("xyz", vector("rpy_deg", 3, [0.0, 0.0, 0.0]),
+                                                     degrees=True).as_quat()]
+    else:
+        q = vector("rotation", 4, [0.0, 0.0, 0.0, 1.0])
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > 1e-3:
+        raise c.err(f"a rotation quaternion (x, y, z, w) must have unit length, got |q| = {norm:.6g}",
+                    f"{fld}.rotation")
+    return MountSpec(parent=c.string(m["parent"], f"{fld}.parent"), translation=(t[0], t[1], t[2]),
+                     rotation=(q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm))
+
+
+def _measurement_points(c: FieldReader, v: Any, roving: list[tuple[int, RovingSensorSpec]],
+                        sensors: list[SensorSpec], mk: ModelKind, section: Any) -> list[MeasurementPoint]:
+    if v is None:
+        if roving:
+            raise c.err("roving sensors need measurement_points: the places where they stop", "measurement_points")
+        return []
+    if not roving:
+        raise c.err("measurement points are where roving sensors stop, but no sensor is roving: true",
+                    "measurement_points")
+    direction = roving[0][1].direction
+    taken = {s.id: "a fixed sensor" for s in sensors}
+    for i, r in roving:
+        if r.id in taken:
+            raise c.err(f"duplicate sensor id {r.id!r}", f"sensors[{i}].id")
+        taken[r.id] = "a roving sensor"
+    out: list[MeasurementPoint] = []
+    for k, p in enumerate(c.seq(v, "measurement_points")):
+        fld = f"measurement_points[{k}]"
+        p = c.mapping(p, fld)
+        c.keys(p, ("id", "at", "xyz"), ("id", "at"), fld)
+        xyz = None
+        if "xyz" in p:
+            vals = c.seq(p["xyz"], f"{fld}.xyz")
+            if len(vals) != 3:
+                raise c.err(f"needs 3 numbers (x, y, z in the structure's frame), got {len(vals)}", f"{fld}.xyz")
+            x, y, z = (c.number(v, f"{fld}.xyz[{k}]") for k, v in enumerate(vals))
+            xyz = (x, y, z)
+        pid = c.string(str(p["id"]) if isinstance(p["id"], (int, str)) else p["id"], f"{fld}.id")
+        if pid in taken:
+            raise c.err(f"id {pid!r} is taken by {taken[pid]} (global shapes are keyed by these ids)", f"{fld}.id")
+        taken[pid] = "another measurement point"
+        at = mk.sensor_location(c, section, c.mapping(p["at"], f"{fld}.at"), direction, fld)
+        if xyz is None and "x" not in at:
+            raise c.err("a point not given by x along a girder needs xyz: where it is in the structure's "
+                        "frame (m), to compare with the tf positions", f"{fld}.xyz")
+        out.append(MeasurementPoint(pid, at, xyz))
+    if not out:
+        raise c.err("needs at least one point", "measurement_points")
+    return out
+
+
+def _sensors(c: FieldReader, v: list[tuple[int, Any]], mk: ModelKind, section: Any) -> list[SensorSpec]:
     out: list[SensorSpec] = []
     seen: set[str] = set()
-    for i, s in enumerate(c.seq(v, "sensors")):
+    for i, s in v:
         fld = f"sensors[{i}]"
         s = c.mapping(s, fld)
         c.keys(s, ("id", "at", "direction", "source"), ("id", "at", "direction"), fld)

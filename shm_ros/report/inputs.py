@@ -171,6 +171,9 @@ class ReportInputs:
     posterior: Posterior | None = None
     prediction: PredictionInputs | None = None
     explain: ExplainInputs | None = None
+    # a roving campaign's setups and global modes (modes.json of a structure with roving sensors,
+    # docs/interfaces.md section 8)
+    roving: dict[str, Any] | None = None
     # the papers' tables that apply: {"table1": study.json's content (``shm-ros update --study``)};
     # Table 3 comes with ``prediction``
     papers: dict[str, Any] | None = None

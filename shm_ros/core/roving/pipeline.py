@@ -1,0 +1,121 @@
+"""The offline roving pipeline: tf tracks -> setups -> clock offset -> identification -> global modes.
+
+Input: the sample times, the fixed references' accelerations, each roving sensor's three axes in its
+own frame and a filled :class:`~shm_ros.core.roving.transforms.TransformBuffer`. Each roving sensor's
+acceleration is rotated into the structure's frame and the component along its ``direction`` kept;
+setups are cut where every roving sensor dwells (:func:`~shm_ros.core.roving.setups.cut_setups`); in
+each setup the roving sensors' clock offset against the references is estimated
+(:func:`~shm_ros.core.roving.clock.estimate_clock_offset`) and corrected; each setup is identified
+(band of interest and block rows from the nominal model, SSI-cov with the references as reference
+channels) and the setups merged (``post``, the default, or ``pre``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from shm_ros.core.band import nominal_frequencies
+from shm_ros.core.identify import IdentifyConfig, identify_prepared
+from shm_ros.core.preprocess import PreprocessConfig, decimate, preprocess
+from shm_ros.core.roving.clock import estimate_clock_offset, shift
+from shm_ros.core.roving.merge_post import GlobalMode, merge_post
+from shm_ros.core.roving.merge_pre import merge_pre
+from shm_ros.core.roving.offline import MergeMethod
+from shm_ros.core.roving.second_look import second_look
+from shm_ros.core.roving.setups import (
+    DEFAULT_FILTER_S,
+    DEFAULT_MIN_DWELL_S,
+    DEFAULT_TOLERANCE_M,
+    SetupCut,
+    cut_setups,
+    sensor_track,
+    setup_channels,
+)
+from shm_ros.core.roving.transforms import TransformBuffer
+from shm_ros.core.structure import StructureSpec
+from shm_ros.errors import NoWindowsError
+
+__all__ = ["RovingConfig", "RovingResult", "roving_modes"]
+
+AXIS = {"vertical": 2, "x": 0, "y": 1}
+
+
+@dataclass
+class RovingConfig:
+    tolerance_m: float = DEFAULT_TOLERANCE_M
+    min_dwell_s: float = DEFAULT_MIN_DWELL_S
+    filter_s: float = DEFAULT_FILTER_S
+    merge: str = MergeMethod.POST.value
+    correct_clock: bool = True
+    second_look: bool = True  # search a setup's diagram for merged modes it missed (second_look.py)
+    identify: IdentifyConfig = field(default_factory=lambda: IdentifyConfig(method="ssi-cov", uncertainty=False))
+
+
+@dataclass
+class RovingResult:
+    cut: SetupCut
+    global_modes: list[GlobalMode]
+    clock_offsets_s: list[float]  # per setup (first roving sensor)
+    references: list[str]
+    notes: list[str]
+
+    @property
+    def clock_offset_s(self) -> float:
+        return float(np.median(self.clock_offsets_s)) if self.clock_offsets_s else float("nan")
+
+    def to_dict(self) -> dict:
+        """The ``setups`` and ``global_modes`` of modes.json (docs/interfaces.md section 8)."""
+        setups = [s.to_dict(self.references) for s in self.cut.setups]
+        for s, off in zip(setups, self.clock_offsets_s, strict=False):
+            s["clock_offset_s"] = off
+        return {"setups": setups, "global_modes": [g.to_dict() for g in self.global_modes],
+                "roving": {"moving_samples": self.cut.moving_samples, "missing_samples": self.cut.missing_samples,
+                           "short_samples": self.cut.short_samples, "errors": self.cut.errors(),
+                           "clock_offset_s": self.clock_offset_s, "notes": list(self.notes)}}
+
+
+def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, references: Mapping[str, np.ndarray],
+                 roving: Mapping[str, np.ndarray], buffer: TransformBuffer, config: RovingConfig | None = None
+                 ) -> RovingResult:
+    cfg = config or RovingConfig()
+    tracks, along = [], {}
+    for s in spec.roving:
+        tr = sensor_track(buffer, spec.frame, s, times_ns, roving[s.id])
+        assert tr.acceleration is not None
+        tracks.append(tr)
+        along[s.id] = tr.acceleration[:, AXIS[s.direction]] * s.source.sign
+    cut = cut_setups(tracks, spec.measurement_points, cfg.tolerance_m, cfg.min_dwell_s, cfg.filter_s)
+    if not cut.setups:
+        raise NoWindowsError(f"no setup: no stretch of >= {cfg.min_dwell_s} s where every roving sensor stays within "
+                             f"{cfg.tolerance_m} m of a measurement point")
+    refs = list(references)
+    icfg = replace(cfg.identify, reference_channels=refs,
+                   nominal_frequencies_hz=cfg.identify.nominal_frequencies_hz or nominal_frequencies(spec, 6))
+    offsets, preps = [], []
+    for setup in cut.setups:
+        y, names = setup_channels(setup, references, along)
+        n_ref = len(refs)
+        off = estimate_clock_offset(y[:, n_ref], y[:, :n_ref], fs).offset_s
+        offsets.append(off)
+        if cfg.correct_clock:
+            y[:, n_ref:] = shift(y[:, n_ref:], fs, off)
+        preps.append(preprocess(y, fs, names, PreprocessConfig()))
+    notes = [f"{len(cut.setups)} setups; clock offset of the roving sensors {1e3 * float(np.median(offsets)):.1f} ms "
+             f"({'corrected' if cfg.correct_clock else 'not corrected'})"]
+    results = [identify_prepared(p, icfg) for p in preps]
+    if MergeMethod(cfg.merge) == MergeMethod.POST:
+        modes = merge_post([r.estimate for r in results], refs)
+        if cfg.second_look and second_look(results, modes, refs):
+            modes = merge_post([r.estimate for r in results], refs)
+            notes.append("a second look at the setups' diagrams found modes the automatic picking had missed")
+    else:
+        band = results[0].band
+        assert band is not None
+        dec = [decimate(p, band.decimation, "band of interest") for p in preps]
+        modes, more = merge_pre([d.data for d in dec], [d.channel_names for d in dec], refs, dec[0].sample_rate_hz,
+                                replace(icfg, block_rows=band.block_rows))
+        notes += more
+    return RovingResult(cut, modes, offsets, refs, notes)

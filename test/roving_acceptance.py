@@ -1,0 +1,55 @@
+"""The girder-roving acceptance run, shared by test/test_roving_acceptance.py (reduced size) and the
+full-size command (``SHM_FULL=1``): simulate, cut, merge, compare with the truth without the robot."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from shm_ros.core.modal import mac
+from shm_ros.core.roving.pipeline import RovingConfig, RovingResult, roving_modes
+from shm_ros.core.roving.transforms import TransformBuffer
+from shm_ros.core.simulate.roving import RovingOptions, RovingRecording, simulate_roving
+from shm_ros.io.structure import load_structure
+
+SPEC = load_structure(Path(__file__).resolve().parents[1] / "examples" / "girder_roving.yaml")
+
+
+@dataclass
+class Outcome:
+    rec: RovingRecording
+    res: RovingResult
+    freq_err_pct: list[float]  # vertical modes 1-3
+    macs: list[float]
+    coverage: list[float]  # fraction of the visited points and references each mode covers
+
+
+def buffer_of(rec: RovingRecording) -> TransformBuffer:
+    buf = TransformBuffer(cache_s=None)
+    for s in rec.tf + rec.tf_static:
+        buf.set_transform(s.parent, s.child, s.stamp_ns, s.translation, s.rotation, static=s in rec.tf_static)
+    return buf
+
+
+def run(seed: int, dwell_s: float, n_points: int, merge: str = "post", fs: float = 100.0) -> Outcome:
+    rec = simulate_roving(SPEC, RovingOptions(seed=seed, dwell_s=dwell_s, n_points=n_points, fs=fs))
+    res = roving_modes(SPEC, rec.times_ns, fs, rec.references, rec.roving, buffer_of(rec), RovingConfig(merge=merge))
+    visited = list(rec.references) + [p for kind, _, _, p in rec.phases if kind == "dwell"]
+    keys = rec.truth.sensor_ids
+    vertical = [j for j, f in enumerate(rec.truth.families) if f == "vertical"][:3]
+    f = np.array([g.frequency_hz for g in res.global_modes])
+    errs, macs, cover = [], [], []
+    for j in vertical:
+        ft = rec.truth.frequencies_hz[j]
+        k = int(np.argmin(np.abs(f - ft))) if f.size else -1
+        if k < 0:
+            errs.append(np.inf), macs.append(0.0), cover.append(0.0)
+            continue
+        g = res.global_modes[k]
+        have = [p for p in visited if p in g.shape and np.isfinite(g.shape[p])]
+        errs.append(float(100 * (f[k] / ft - 1)))
+        macs.append(float(mac(g.vector(have), rec.truth.shapes[[keys.index(p) for p in have], j])))
+        cover.append(len(have) / len(visited))
+    return Outcome(rec, res, errs, macs, cover)
