@@ -9,7 +9,7 @@ from scipy import integrate
 
 from shm_ros.core.bayes.forward import FullModalPredictor, ReducedModalPredictor, build_predictor
 from shm_ros.core.bayes.likelihoods import FitnessLikelihood, GaussianModalLikelihood, InverseGamma, ig_marginal_loglik
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.bayes.pairing import pair_modes, pair_modes_optimal
 from shm_ros.core.modal import mac
 

@@ -118,7 +118,7 @@ def _acceleration_record(args, inputs, windows, observed):
 
 
 def run(args: argparse.Namespace) -> int:
-    from shm_ros.core.bayes.priors import PriorError
+    from shm_ros.core.priors import PriorError
     from shm_ros.core.models import build_model
     from shm_ros.core.structure import StructureError
     from shm_ros.io.posterior_files import write_posterior
@@ -171,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_study(args, spec, model, obs, config, out: Path) -> int:
     from shm_ros.commands.options import given
-    from shm_ros.core.bayes.priors import priors_from_specs
+    from shm_ros.core.priors import priors_from_specs
     from shm_ros.core.bayes.study import bridge_study, format_table
     from shm_ros.core.provenance import stamp_output
     from shm_ros.io import jsonio

@@ -21,7 +21,7 @@ import numpy as np
 from shm_ros.core.modal import mac
 
 from .forward import ModalPredictor
-from .observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from .pairing import pair_modes_optimal
 
 

@@ -32,9 +32,9 @@ import numpy as np
 from scipy.special import gammaln
 
 from .forward import ModalPredictor
-from .observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from .pairing import pair_modes_optimal
-from .priors import Prior
+from shm_ros.core.priors import Prior
 
 
 @dataclass(frozen=True)

@@ -57,7 +57,7 @@ from .likelihoods import (
     log_variance_logprior,
     paired_predictions,
 )
-from .observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 
 FREQ_SCALE_RANGE = (1e-4, 0.2)  # model-error scale s of the frequencies (relative), log-uniform
 SHAPE_SCALE_RANGE = (1e-3, 0.3)  # model-error scale t of a unit shape's components, log-uniform

@@ -27,9 +27,9 @@ from .fit import modal_fit
 from .forward import build_predictor
 from .likelihoods import FitnessJ, FitnessLikelihood, GaussianModalLikelihood, InverseGamma, set_pairing
 from .model_error import ModelErrorLikelihood
-from .observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from .pairing import DEFAULT_MAC_GATE, ModePairing, PairingGate, UnmodelledMode, pair_with_model, select_modes
-from .priors import JointPrior, Prior, PriorError, priors_from_specs
+from shm_ros.core.priors import JointPrior, Prior, PriorError, priors_from_specs
 from .records import JointTimeDomainLikelihood
 from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance, run_sampler
 from .timedomain import TimeDomainLikelihood

@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.modal import sign_aligned
 
 from .candidates.base import Modification
