@@ -279,7 +279,7 @@ def observations_for_model(model, estimates, sensor_ids: list[str] | None = None
     nominal model; updating passes the prior mean and its gate,
     :func:`shm_ros.core.bayes.update.pairing_reference`).
     """
-    observed = [s for s in (sensor_ids or list(model.sensor_rows)) if s in model.sensor_rows]
+    observed = model.observed_sensors(sensor_ids)
     sensors = [s for s in observed if any(s in e.sensor_ids for e in estimates)]
     if not sensors:
         raise ValueError("no identified window covers a sensor of the model")
