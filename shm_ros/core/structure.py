@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from shm_ros.core.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS, Prior, PriorError, prior_fields
 from shm_ros.core.models.registry import MODEL_KINDS, ModelKind, kind_names, model_kind
+from shm_ros.core.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS, Prior, PriorError, prior_fields
 from shm_ros.errors import InputError
 
 DIRECTIONS = ("vertical", "x", "y")

@@ -110,6 +110,13 @@ class JointTimeDomainLikelihood:
                 ss[a:a + Y.shape[0]] += part.innovation_ss_batch(Y)
         return ss
 
+    def prepare_at_map(self, theta: np.ndarray) -> bool:
+        """Every record's residual AR model, estimated once at the white-noise MAP."""
+        if not self.ar_order or self.ar_coef is not None:
+            return False
+        self.fix_ar(theta)
+        return True
+
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
         return log_variance_logprior(self.priors, extra, self.variance == "sampled")
 

@@ -11,6 +11,7 @@ uncertainty, at measured and unmeasured floors (docs/predict.md, docs/interfaces
 """
 
 from shm_ros.core.response.batch import batch_responses
+
 from .config import Baseline, PredictConfig, Unmeasured
 from .draws import PosteriorDraws, draws_from_posterior, nominal_draws
 from .predict import ChannelPrediction, EventPrediction, predict_event, prediction_outputs
