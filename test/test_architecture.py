@@ -15,6 +15,7 @@ run, and annotations are how two layers may name each other's types without depe
 from __future__ import annotations
 
 import ast
+import functools
 import textwrap
 from pathlib import Path
 
@@ -80,6 +81,12 @@ def _imported_names(module: str, is_pkg: bool, tree: ast.AST) -> list[str]:
 
 
 def _graph() -> dict[str, set[str]]:
+    """The package's import graph (parsed once per test process; callers get their own copy)."""
+    return {m: set(t) for m, t in _parsed_graph().items()}
+
+
+@functools.cache
+def _parsed_graph() -> dict[str, set[str]]:
     mods = _modules()
     edges: dict[str, set[str]] = {}
     for m, (path, is_pkg) in mods.items():

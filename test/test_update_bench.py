@@ -14,7 +14,7 @@ import pytest
 from bayes_synth import building_dict, spec_and_model, synth_modal
 from threadpoolctl import threadpool_limits
 
-from shm_ros.core.bayes.likelihood_kinds.base import LIKELIHOODS, LikelihoodKind
+from shm_ros.core.bayes.likelihood_kinds.base import LIKELIHOODS, LikelihoodKind, NoNuisance
 from shm_ros.core.bayes.update import Posterior, UpdateConfig, build_likelihood, update
 
 TRUTH = np.array([0.93, 1.06, 0.97])
@@ -79,26 +79,11 @@ def test_full_emcee_posterior_converges():
     assert not _far_from_truth(post), _far_from_truth(post)
 
 
-class _Zeros:
+class _Zeros(NoNuisance):
     """A planted fault: a likelihood that ignores the data."""
-
-    extra_names: list[str] = []
-    n_extra = 0
 
     def __call__(self, x):
         return np.zeros(np.atleast_2d(x).shape[0])
-
-    def extra_logprior(self, extra):
-        return np.zeros(extra.shape[0])
-
-    def extra_initial(self, rng, n):
-        return np.zeros((n, 0))
-
-    def variance_estimates(self, theta):
-        return {}
-
-    def prepare_at_map(self, theta):
-        return False
 
 
 @pytest.fixture

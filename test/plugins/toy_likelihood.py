@@ -2,13 +2,10 @@
 
 import numpy as np
 
-from shm_ros.core.bayes.likelihood_kinds.base import LIKELIHOODS, LikelihoodKind
+from shm_ros.core.bayes.likelihood_kinds.base import LIKELIHOODS, LikelihoodKind, NoNuisance
 
 
-class _Frequencies:
-    extra_names: list = []
-    n_extra = 0
-
+class _Frequencies(NoNuisance):
     def __init__(self, predictor, frequencies_hz, pairing, n_theta):
         self.predictor, self.f, self.pairing, self.n_theta = predictor, frequencies_hz, pairing, n_theta
         self.std = np.nanstd(frequencies_hz, axis=0, ddof=1)
@@ -17,18 +14,6 @@ class _Frequencies:
         f_model, _ = self.predictor(np.atleast_2d(x)[:, :self.n_theta])
         r = (self.f[None] - f_model[:, None, self.pairing]) / self.std  # (B, windows, modes)
         return -0.5 * np.nansum(r**2, axis=(1, 2))
-
-    def extra_logprior(self, extra):
-        return np.zeros(extra.shape[0])
-
-    def extra_initial(self, rng, n):
-        return np.zeros((n, 0))
-
-    def variance_estimates(self, theta):
-        return {}
-
-    def prepare_at_map(self, theta):
-        return False
 
 
 @LIKELIHOODS.register("toy-frequencies")

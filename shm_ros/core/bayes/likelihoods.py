@@ -27,6 +27,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import Any, TypedDict
 
 import numpy as np
 from scipy.special import gammaln
@@ -35,6 +36,7 @@ from shm_ros.core.observations import ModalObservations
 from shm_ros.core.priors import Prior
 
 from .forward import ModalPredictor
+from .likelihood_kinds.base import NoNuisance
 from .pairing import pair_modes_optimal
 
 
@@ -49,6 +51,18 @@ class InverseGamma:
     def weak(typical_std: float, shape: float = 1.0) -> InverseGamma:
         """A weak prior whose mode is ``typical_std**2``."""
         return InverseGamma(shape, (shape + 1.0) * typical_std**2)
+
+
+class ErrorPriors(TypedDict):
+    freq_prior: InverseGamma
+    shape_prior: InverseGamma
+
+
+def weak_error_priors(config: Any) -> ErrorPriors:
+    """The weak inverse-gamma priors of the frequency and shape error variances an
+    :class:`~shm_ros.core.bayes.update.UpdateConfig` asks for (keyword arguments of the likelihoods)."""
+    return ErrorPriors(freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
+                       shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape))
 
 
 def ig_marginal_loglik(ss: np.ndarray, n: np.ndarray | float, prior: InverseGamma) -> np.ndarray:
@@ -225,7 +239,7 @@ def predicted_damping(predictor: ModalPredictor, theta: np.ndarray, frequencies_
     return z[:, model_index]
 
 
-class _ModalLikelihoodBase:
+class _ModalLikelihoodBase(NoNuisance):
     """Common part: a predictor, the statistics, and how many extra (nuisance) columns are sampled."""
 
     extra_names: list[str] = []
@@ -244,21 +258,6 @@ class _ModalLikelihoodBase:
             set_pairing(self, pairing)
         self.n_theta = n_theta  # structural parameters (0: every column of x is one)
 
-    @property
-    def n_extra(self) -> int:
-        return len(self.extra_names)
-
-    def prepare_at_map(self, theta: np.ndarray) -> bool:
-        return False
-
-    def variance_estimates(self, theta: np.ndarray) -> dict[str, float]:
-        return {}
-
-    def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
-        return np.zeros(extra.shape[0])
-
-    def extra_initial(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return np.zeros((n, 0))
 
     def _residuals(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """Sums of squares (B, m) of the relative frequency, shape and (when the statistics hold

@@ -61,6 +61,29 @@ class Likelihood(Protocol):
         searched again), e.g. a residual model estimated there."""
 
 
+class NoNuisance:
+    """Defaults for a likelihood with no nuisance columns, no error variances to report and nothing
+    to prepare at the MAP (a new likelihood overrides what it has)."""
+
+    extra_names: list[str] = []
+
+    @property
+    def n_extra(self) -> int:
+        return len(self.extra_names)
+
+    def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
+        return np.zeros(extra.shape[0])
+
+    def extra_initial(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        return np.zeros((n, 0))
+
+    def variance_estimates(self, theta: np.ndarray) -> dict[str, float]:
+        return {}
+
+    def prepare_at_map(self, theta: np.ndarray) -> bool:
+        return False
+
+
 @dataclass
 class LikelihoodInputs:
     """What a likelihood is built from. Modal kinds get ``predictor`` (the model's modes at the

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from shm_ros.core.bayes.likelihoods import GaussianModalLikelihood, InverseGamma
+from shm_ros.core.bayes.likelihoods import GaussianModalLikelihood, InverseGamma, weak_error_priors
 
 from .base import LIKELIHOODS, Likelihood, LikelihoodInputs, LikelihoodKind, LikelihoodName
 
@@ -15,7 +15,6 @@ class Gaussian(LikelihoodKind):
         c, data = inputs.config, inputs.data
         return GaussianModalLikelihood(
             inputs.predictor, data, use_shapes=bool(inputs.predictor.sensor_ids) and data.has_shapes,
-            variance=c.variance, freq_prior=InverseGamma.weak(c.frequency_error_guess, c.ig_shape),
-            shape_prior=InverseGamma.weak(c.shape_error_guess, c.ig_shape), use_damping=c.use_damping,
+            variance=c.variance, **weak_error_priors(c), use_damping=c.use_damping,
             damping_prior=InverseGamma.weak(c.damping_error_guess, c.ig_shape), pairing=inputs.pairing,
             n_theta=inputs.model.n_parameters)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from shm_ros.core.bayes.likelihoods import InverseGamma
+from shm_ros.core.bayes.likelihoods import weak_error_priors
 from shm_ros.core.bayes.model_error import ModelErrorLikelihood
 
 from .base import LIKELIHOODS, Likelihood, LikelihoodInputs, LikelihoodKind, LikelihoodName
@@ -14,6 +14,5 @@ class ModelError(LikelihoodKind):
         c, data = inputs.config, inputs.data
         return ModelErrorLikelihood(
             inputs.predictor, data, use_shapes=bool(inputs.predictor.sensor_ids) and data.has_shapes,
-            variance=c.variance, freq_prior=InverseGamma.weak(c.frequency_error_guess, c.ig_shape),
-            shape_prior=InverseGamma.weak(c.shape_error_guess, c.ig_shape), pairing=inputs.pairing,
+            variance=c.variance, **weak_error_priors(c), pairing=inputs.pairing,
             n_theta=inputs.model.n_parameters)
