@@ -88,11 +88,15 @@ class KindRegistry(Generic[T]):
         """Import the built-in package's modules and the external kind modules (once)."""
         if self._discovered:
             return
-        self._discovered = True
-        pkg = importlib.import_module(self.package)
-        for info in pkgutil.iter_modules(pkg.__path__, prefix=self.package + "."):
-            importlib.import_module(info.name)
-        load_external_kinds()
+        self._discovered = True  # first: a module being imported may look a name up
+        try:
+            pkg = importlib.import_module(self.package)
+            for info in pkgutil.iter_modules(pkg.__path__, prefix=self.package + "."):
+                importlib.import_module(info.name)
+            load_external_kinds()
+        except BaseException:
+            self._discovered = False  # a module that failed to import is tried again, not left out
+            raise
 
 
 def _where(cls: type) -> str:
