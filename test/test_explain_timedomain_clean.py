@@ -27,20 +27,15 @@ def test_clean_has_no_amplitude_entry(seed):
     assert not [c for c in v.missing_physics if c.name in (STIFF, DAMP)]
 
 
-def test_verdict_json_backward_compatible():
+def test_verdict_json_keys_and_values():
+    """The keys (backward compatible) and the values: the JSON equals the verdict it was written from,
+    accepted means every check passed, the evidence gains and fit scores are finite, and the fit is no
+    worse than the nominal model's. One test, so the series is explained once per process."""
     _, v = run_series(None, 0)
-    d = v.to_dict()
+    d = json.loads(json.dumps(v.to_dict()))
     assert set(d) >= {"mismatch", "missing_physics", "fit", "candidates", "threshold", "notes"}
     assert "nrms_pct" in d["fit"]["before"] and "frequency_rmse_pct" not in d["fit"]["before"]
     assert {c["label"].endswith("/within_event") for c in d["candidates"]} == {True, False}
-
-
-def test_verdict_json_values_are_consistent():
-    """The values, not only the keys: the JSON equals the verdict it was written from, accepted means
-    every check passed, the evidence gains and fit scores are finite, and nothing accepted leaves the
-    fit no worse than the nominal model's."""
-    _, v = run_series(None, 0)
-    d = json.loads(json.dumps(v.to_dict()))
     before, after = d["fit"]["before"]["nrms_pct"], d["fit"]["after"]["nrms_pct"]
     assert before == pytest.approx(v.fit_before.nrms_pct) and after == pytest.approx(v.fit_after.nrms_pct)
     assert 0 < after <= before * 1.001 < 100, (before, after)
