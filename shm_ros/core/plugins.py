@@ -72,6 +72,15 @@ class KindRegistry(Generic[T]):
         except KeyError:
             raise KeyError(f"unknown {self.what} {name!r} (known: {', '.join(self.names())})") from None
 
+    def instance(self, name: str) -> T:
+        """An instance of the class registered as ``name``; ValueError listing the known names otherwise
+        (for settings that name a plug-in)."""
+        try:
+            cls = self.get(str(name))
+        except KeyError as exc:
+            raise ValueError(exc.args[0]) from None
+        return cls()
+
     def __contains__(self, name: object) -> bool:
         self.discover()
         return name in self._classes

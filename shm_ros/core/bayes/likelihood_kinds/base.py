@@ -113,7 +113,4 @@ LIKELIHOODS: KindRegistry[LikelihoodKind] = KindRegistry("likelihood", "shm_ros.
 
 def likelihood_kind(name: str) -> LikelihoodKind:
     """An instance of the likelihood registered as ``name`` (ValueError listing the known ones)."""
-    try:
-        return LIKELIHOODS.get(str(name))()
-    except KeyError as e:
-        raise ValueError(str(e).strip("'\"")) from None
+    return LIKELIHOODS.instance(name)

@@ -45,7 +45,4 @@ SAMPLERS: KindRegistry[SamplerKind] = KindRegistry("sampler", "shm_ros.core.baye
 
 def sampler_kind(name: str) -> SamplerKind:
     """An instance of the sampler registered as ``name`` (ValueError listing the known ones)."""
-    try:
-        return SAMPLERS.get(str(name))()
-    except KeyError as e:
-        raise ValueError(str(e).strip("'\"")) from None
+    return SAMPLERS.instance(name)
