@@ -35,7 +35,7 @@ setup(
     description="Structural health monitoring on ROS 2: recordings to a calibrated, uncertainty-aware "
     "structural model that says what physics it is missing.",
     license="Apache-2.0",
-    extras_require={"test": ["pytest"]},
+    extras_require={"test": ["pytest"], "opensees": ["openseespy<3.8"]},
     entry_points={
         "console_scripts": ["shm-ros = shm_ros.cli:main"]
         + [f"shm-ros-{n} = shm_ros.ros.{n}_node:main" for n in NODES],

@@ -12,8 +12,8 @@ import os
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
 from shm_ros.core.models import build_model
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.structure import structure_from_dict
 
 FULL = os.environ.get("SHM_FULL", "") not in ("", "0")

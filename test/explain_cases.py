@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.simulate import named_scenario, simulate_campaign
 from shm_ros.core.simulate.excitation import traffic_profile
 from shm_ros.core.simulate.scenario import EffectRequest

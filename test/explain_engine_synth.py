@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.simulate.campaign import simulate_campaign
 from shm_ros.core.simulate.scenario import EffectRequest, named_scenario
 from shm_ros.core.structure import structure_from_dict

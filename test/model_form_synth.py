@@ -15,8 +15,8 @@ import copy
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
 from shm_ros.core.models import build_model
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.simulate.campaign import simulate_campaign
 from shm_ros.core.simulate.scenario import GIRDER_STRUCTURE, EffectRequest, named_scenario
 from shm_ros.core.structure import structure_from_dict

@@ -15,6 +15,7 @@ run, and annotations are how two layers may name each other's types without depe
 from __future__ import annotations
 
 import ast
+import functools
 import textwrap
 from pathlib import Path
 
@@ -80,6 +81,12 @@ def _imported_names(module: str, is_pkg: bool, tree: ast.AST) -> list[str]:
 
 
 def _graph() -> dict[str, set[str]]:
+    """The package's import graph (parsed once per test process; callers get their own copy)."""
+    return {m: set(t) for m, t in _parsed_graph().items()}
+
+
+@functools.cache
+def _parsed_graph() -> dict[str, set[str]]:
     mods = _modules()
     edges: dict[str, set[str]] = {}
     for m, (path, is_pkg) in mods.items():
@@ -323,3 +330,106 @@ def test_a_kind_file_named_in_the_environment_is_found(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "'dummy'" in out.stdout and "two-mass spring chain" in out.stdout
+
+
+# ------------------------------------------------------------------------------------------------
+# Stage order (docs/architecture.md): imports only go down a partial order of layers
+# ------------------------------------------------------------------------------------------------
+
+# module (or package) prefix -> layer; the longest matching prefix decides
+LAYER_OF = {
+    "shm_ros": "foundation", "shm_ros.errors": "foundation", "shm_ros.core": "foundation",
+    "shm_ros.core.types": "foundation", "shm_ros.core.structure": "foundation",
+    "shm_ros.core.config": "foundation", "shm_ros.core.plugins": "foundation",
+    "shm_ros.core.modal": "foundation", "shm_ros.core.timeutil": "foundation",
+    "shm_ros.core.progress": "foundation", "shm_ros.core.provenance": "foundation",
+    "shm_ros.core.diagnostics": "foundation", "shm_ros.core.priors": "foundation",
+    "shm_ros.core.observations": "foundation", "shm_ros.core.mode_pairing": "foundation",
+    # the kind registry is what the structure loader dispatches on; the kinds themselves are models
+    "shm_ros.core.models.registry": "foundation",
+    "shm_ros.core.models": "models",
+    "shm_ros.core.ingest": "ingest",
+    "shm_ros.core.identify": "identify", "shm_ros.core.ssi": "identify", "shm_ros.core.eigen": "identify",
+    "shm_ros.core.stabilization": "identify", "shm_ros.core.band": "identify",
+    "shm_ros.core.preprocess": "identify", "shm_ros.core.event_analysis": "identify",
+    "shm_ros.core.tracking": "tracking",
+    "shm_ros.core.response": "response",
+    "shm_ros.core.simulate": "simulate",
+    "shm_ros.core.bayes": "bayes",
+    "shm_ros.core.predict": "predict",
+    "shm_ros.core.explain": "explain",
+    "shm_ros.io": "io", "shm_ros.report": "report", "shm_ros.batch": "batch",
+    "shm_ros.commands": "commands", "shm_ros.ros": "ros", "shm_ros.cli": "cli",
+}
+# layer -> the layers directly below it (what it may import, with what those may import)
+DIRECTLY_BELOW = {
+    "foundation": set(),
+    "models": {"foundation"},
+    "ingest": {"models"}, "tracking": {"models"}, "response": {"models"}, "simulate": {"models"},
+    "identify": {"ingest"},
+    "bayes": {"tracking", "response"},
+    "predict": {"bayes"},
+    "explain": {"predict"},
+    "io": {"explain", "identify", "simulate"},
+    "report": {"io"}, "batch": {"io"},
+    # the command line and the nodes are the two faces of the same top layer: they may use each other
+    "commands": {"report", "batch", "ros"}, "ros": {"report", "batch", "commands"},
+    "cli": {"commands"},
+}
+
+
+def _below(layer: str) -> set[str]:
+    """Every layer ``layer`` may import (itself included): the closure of DIRECTLY_BELOW."""
+    seen, todo = {layer}, [layer]
+    while todo:
+        for lower in DIRECTLY_BELOW[todo.pop()]:
+            if lower not in seen:
+                seen.add(lower)
+                todo.append(lower)
+    return seen
+
+
+def _layer(module: str) -> str:
+    name = module
+    while name not in LAYER_OF:
+        name = name.rpartition(".")[0]
+        assert name, f"module {module} has no layer in LAYER_OF"
+    return LAYER_OF[name]
+
+
+def _order_violations(edges: dict[str, set[str]]) -> list[str]:
+    bad = []
+    for a, targets in edges.items():
+        allowed = _below(_layer(a))
+        bad += [f"{a} ({_layer(a)}) imports {b} ({_layer(b)})" for b in sorted(targets)
+                if b.startswith("shm_ros") and _layer(b) not in allowed]
+    return sorted(bad)
+
+
+def test_every_module_has_a_layer_and_the_order_is_acyclic():
+    assert all(_layer(m) in DIRECTLY_BELOW for m in _modules())
+    for layer in DIRECTLY_BELOW:  # a layer is never below a layer it may import, except peers named so
+        for lower in _below(layer) - {layer}:
+            assert layer not in _below(lower) or {layer, lower} == {"commands", "ros"}, (layer, lower)
+
+
+def test_imports_follow_the_stage_order():
+    bad = _order_violations(_graph())
+    assert not bad, "imports against the stage order (docs/architecture.md):\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("planted", [
+    "from shm_ros.core.bayes.update import update\n",  # module level
+    "def f():\n    from shm_ros.core.predict import batch\n",  # function level, a stage two layers up
+])
+def test_a_planted_import_against_the_order_is_caught(planted):
+    edges = _graph()
+    mods = _modules()
+    extra = set()
+    for name in _imported_names("shm_ros.core.tracking.batch", False, ast.parse(planted)):
+        while name not in mods:
+            name = name.rpartition(".")[0]
+        extra.add(name)
+    edges["shm_ros.core.tracking.batch"] = edges["shm_ros.core.tracking.batch"] | extra
+    bad = _order_violations(edges)
+    assert bad and all(b.startswith("shm_ros.core.tracking.batch (tracking) imports") for b in bad), bad

@@ -6,7 +6,7 @@ import numpy as np
 from scipy import stats
 
 from shm_ros.core.bayes.evidence import nested_evidence
-from shm_ros.core.bayes.priors import JointPrior, Prior
+from shm_ros.core.priors import JointPrior, Prior
 
 
 def linear_gaussian(seed: int, design: np.ndarray, mu0, sd0, noise: float, theta_true=None):
@@ -77,8 +77,9 @@ def test_structural_model_classes_through_update():
     Data from a uniformly stiffer building: both classes fit, and the simpler one must win (the
     Occam factor of the two extra parameters)."""
     from bayes_synth import building_dict, spec_and_model, synth_modal
-    from shm_ros.core.bayes.observations import ModalObservations
+
     from shm_ros.core.bayes.update import UpdateConfig, update
+    from shm_ros.core.observations import ModalObservations
 
     grouped = building_dict()
     single = dict(grouped, parameters=[{"name": "k_all", "applies_to": "shear_building.floors.stiffness",

@@ -9,9 +9,9 @@ from scipy import integrate
 
 from shm_ros.core.bayes.forward import FullModalPredictor, ReducedModalPredictor, build_predictor
 from shm_ros.core.bayes.likelihoods import FitnessLikelihood, GaussianModalLikelihood, InverseGamma, ig_marginal_loglik
-from shm_ros.core.bayes.observations import ModalObservations
 from shm_ros.core.bayes.pairing import pair_modes, pair_modes_optimal
 from shm_ros.core.modal import mac
+from shm_ros.core.observations import ModalObservations
 
 TRUTH = np.array([0.93, 1.06, 0.97])
 SENSORS = ["f2", "f4", "f6", "f8"]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from shm_ros.core.bayes.priors import JointPrior, Prior, PriorError, priors_from_specs, weibull_matching
+from shm_ros.core.priors import JointPrior, Prior, PriorError, priors_from_specs, weibull_matching
 
 SPECS = [
     ("normal", {"mean": 1.0, "std": 0.1}, stats.norm(1.0, 0.1)),

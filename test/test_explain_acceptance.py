@@ -25,7 +25,9 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 
 import pytest
 from explain_cases import draw_case
@@ -57,6 +59,28 @@ def _check_evidence(d):
         assert gap <= max(0.5, 3 * se), (c["label"], c["log_evidence_gain"], c["log_evidence_gain_check"], se)
 
 
+DOC_TALLIES = {  # where docs/explain.md quotes the full-size tallies (whitespace normalised)
+    "top": r"\| right top name, 40 cases \(5 per vocabulary name\) \| (\d+/\d+) ",
+    "alarms": r"\| clean tables, 50 seeds \| (\d+) false alarms",
+    "every_check": r"full-size rates \((\d+/\d+) right with every check; ",
+    "alarm_rate": r"right with every check; (\d+/\d+), the calibrated threshold's 1 %\)",
+}
+
+
+def documented_tallies() -> dict[str, str]:
+    """The full-size tallies as docs/explain.md quotes them (``SHM_FULL=1`` checks them against its run)."""
+    text = " ".join((Path(__file__).resolve().parents[1] / "docs" / "explain.md").read_text().split())
+    found = {k: re.search(p, text) for k, p in DOC_TALLIES.items()}
+    missing = [k for k, m in found.items() if m is None]
+    assert not missing, f"docs/explain.md no longer quotes {missing} where DOC_TALLIES looks"
+    return {k: m.group(1) for k, m in found.items() if m is not None}
+
+
+def test_documented_tallies_are_found():
+    doc = documented_tallies()
+    assert all(doc.values()), doc
+
+
 def test_named_effects_found_and_fitted():
     results = []
     for i, name in enumerate(NAMES):
@@ -75,7 +99,10 @@ def test_named_effects_found_and_fitted():
                                    f"{sum(k in s.checks for s in right)}"
                                    for k in sorted({k for s in right for k in s.checks})))
     print(report)
-    if FULL:
+    if FULL:  # the tallies docs/explain.md quotes are this run's
+        doc = documented_tallies()
+        assert (doc["top"], doc["every_check"]) == (f"{len(right)}/{len(results)}",
+                                                    f"{sum(s.ok for s in results)}/{len(results)}"), (doc, report)
         assert sum(s.top_ok for s in results) >= 0.9 * len(results), report
         for name in NAMES:
             mine = [s for s in results if s.name == name]
@@ -101,6 +128,9 @@ def test_clean_recordings_raise_no_false_alarm():
         if any(m["name"] == "unmodelled_modes" for m in d["missing_physics"]):
             listed_wrong.append(seed)
     print(f"false alarms {len(alarms)}/{CLEAN_SEEDS}: {alarms}; unmodelled listed on a clean table {listed_wrong}")
+    if FULL:  # the tallies docs/explain.md quotes are this run's
+        doc = documented_tallies()
+        assert (doc["alarms"], doc["alarm_rate"]) == (str(len(alarms)), f"{len(alarms)}/{CLEAN_SEEDS}"), doc
     assert len(alarms) <= (0.05 * CLEAN_SEEDS if FULL else 1), alarms
     assert len(listed_wrong) <= (0.05 * CLEAN_SEEDS if FULL else 1), listed_wrong
 

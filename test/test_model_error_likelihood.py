@@ -103,7 +103,7 @@ class _FixedPredictor:
 
 
 def _one_mode(n: int, seed: int = 0):
-    from shm_ros.core.bayes.observations import ModalObservations
+    from shm_ros.core.observations import ModalObservations
 
     rng = np.random.default_rng(seed)
     f = 2.0 * (1.0 + 0.01 + 0.004 * rng.standard_normal(n))

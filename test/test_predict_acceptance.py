@@ -124,6 +124,36 @@ def _one_seed(seed: int) -> dict:
     return out
 
 
+DOC_CI = (r"Seed 0 \(CI\): median updated NRMS at floors 4 and 8 ([\d.]+) % \(updated/nominal at most ([\d.]+)\), "
+          r"strong-motion coverage of the 95 % band ([\d.]+), measured peaks inside their 95 % interval (\d+) "
+          r"of (\d+), against the simulator's truth at most ([\d.]+) % NRMS for the floor-5 acceleration and "
+          r"([\d.]+) % for the top-story drift")
+DOC_FULL = (r"`SHM_FULL=1`, 10 seeds pooled: median NRMS ([\d.]+) %, updated/nominal at most ([\d.]+) on every event, "
+            r"strong-motion coverage ([\d.]+), peaks inside ([\d.]+), floor 5 / drift at most ([\d.]+) % NRMS")
+
+
+def documented_figures(full: bool) -> list[str]:
+    """The figures docs/predict.md quotes for the CI run (seed 0) or the full-size run, as written."""
+    import re
+    from pathlib import Path
+
+    text = " ".join((Path(__file__).resolve().parents[1] / "docs" / "predict.md").read_text().split())
+    m = re.search(DOC_FULL if full else DOC_CI, text)
+    assert m, "docs/predict.md no longer has its sentence of figures (DOC_FULL / DOC_CI in this test)"
+    return list(m.groups())
+
+
+def _same(documented: str, measured: float) -> bool:
+    """``measured`` rounds to ``documented`` at the documented precision."""
+    decimals = len(documented.partition(".")[2])
+    return f"{measured:.{decimals}f}" == documented
+
+
+def test_documented_figures_are_read_and_compared():
+    assert len(documented_figures(False)) == 7 and len(documented_figures(True)) == 5
+    assert _same("0.856", 0.8563) and not _same("12.1", 12.2) and _same("10", 10)
+
+
 @pytest.mark.parametrize("seeds", [SEEDS])
 def test_calibrated_prediction_of_other_events(seeds):
     res = [_one_seed(s) for s in seeds]
@@ -140,3 +170,10 @@ def test_calibrated_prediction_of_other_events(seeds):
     assert 0.80 <= coverage <= 0.99
     assert peaks >= (0.80 if FULL else 7 / 12)
     assert np.all(hidden < 20.0)
+    # the figures docs/predict.md quotes for this run (seed 0 in CI, the 10 pooled seeds at full size)
+    n_in = int(np.sum(np.concatenate([r["peaks"] for r in res])))
+    n_peaks = sum(len(r["peaks"]) for r in res)
+    measured = ([np.median(nrms), ratio.max(), coverage, peaks, hidden.max()] if FULL else
+                [np.median(nrms), ratio.max(), coverage, n_in, n_peaks, hidden[0::2].max(), hidden[1::2].max()])
+    stale = [(d, m) for d, m in zip(documented_figures(FULL), measured, strict=True) if not _same(d, m)]
+    assert not stale, f"docs/predict.md quotes figures this run does not give (documented, measured): {stale}"

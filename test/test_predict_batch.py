@@ -1,4 +1,4 @@
-"""The batched solver of the prediction (``core.predict.batch``) equals the exact time-domain
+"""The batched solver of the prediction (``core.response.batch``) equals the exact time-domain
 solver draw by draw: :func:`shm_ros.core.response.simulate` on the matrix-exponential step of
 :func:`shm_ros.core.response.discretize_foh`, an independent route (expm and a per-system
 recursion, against a batched eigen-decomposition of A and closed-form modal steps)."""
@@ -12,7 +12,7 @@ import pytest
 from predict_synth import simulate_quakes
 from scipy.integrate import quad
 
-import shm_ros.core.predict.batch as batch
+import shm_ros.core.response.batch as batch
 from shm_ros.core.models import build_model
 from shm_ros.core.predict import event_from_window, prediction_outputs
 from shm_ros.core.response import build_state_space, discretize_foh, simulate

@@ -13,8 +13,8 @@ from explain_td_cases import event_series
 from shm_ros.core.explain.td_model import FactorModel, event_data
 from shm_ros.core.explain.td_varying import interpolation_error, node_steps, varying_responses
 from shm_ros.core.models import build_model
-from shm_ros.core.predict.batch import batch_responses
 from shm_ros.core.response import sensor_outputs
+from shm_ros.core.response.batch import batch_responses
 from shm_ros.core.structure import structure_from_dict
 from shm_ros.io.structure import load_structure
 

@@ -23,9 +23,9 @@ from scipy.stats import norm
 from shm_ros.cli import main
 from shm_ros.core.bayes.forward import FullModalPredictor
 from shm_ros.core.bayes.likelihoods import GaussianModalLikelihood, paired_predictions
-from shm_ros.core.bayes.observations import ModalObservations
 from shm_ros.core.bayes.pairing import PairingGate, automatic_frequency_gate, gated_pairing, observations_from_estimates
 from shm_ros.core.bayes.update import UpdateConfig, update
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.types import ModalEstimate, Mode
 from shm_ros.io.tables import write_tracked_modes
 

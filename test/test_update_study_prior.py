@@ -20,9 +20,9 @@ from __future__ import annotations
 import numpy as np
 from bayes_synth import FULL, girder_dict, spec_and_model, synth_modal
 
-from shm_ros.core.bayes.priors import priors_from_specs
 from shm_ros.core.bayes.study import bridge_study
 from shm_ros.core.bayes.update import UpdateConfig
+from shm_ros.core.priors import priors_from_specs
 
 N_SEEDS = 10 if FULL else 4
 N_WINDOWS = 1152 if FULL else 50

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.io.tables import TableError, read_tracked_modes, write_tracked_modes
 
 

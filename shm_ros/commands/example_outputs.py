@@ -99,10 +99,10 @@ def study_job(obs: Any, structure: str, sampler: dict[str, Any], out_dir: str) -
     from dataclasses import fields
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from shm_ros.core.bayes.priors import priors_from_specs
     from shm_ros.core.bayes.study import bridge_study, format_table
     from shm_ros.core.bayes.update import UpdateConfig
     from shm_ros.core.models import build_model
+    from shm_ros.core.priors import priors_from_specs
     from shm_ros.core.provenance import stamp_output
     from shm_ros.io import jsonio
     from shm_ros.io.structure import load_structure

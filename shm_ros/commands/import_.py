@@ -6,12 +6,18 @@ Formats (from the file name unless --format): CSV (.csv/.txt/.tsv; a header row 
 CSMIP/COSMOS V2 strong-motion records (.V2, or a .zip of them; cm/s^2 converted to m/s^2; channel n
 is named chan<n> unless --v2-names maps it), MiniSEED (.mseed; --scale for counts). Written as
 AccelBlock messages (default) or per-sample sensor_msgs/Imu (--layout imu).
+
+`shm-ros import opensees SCRIPT --parameters NAME=TAG,... --sensors ID=NODE:DOF,... --out S.yaml`:
+runs the user's OpenSeesPy script once and writes a `kind: matrices` structure file (S.yaml and
+S.npz: mass, stiffness and one stiffness part per OpenSees parameter the script declares), checked
+against OpenSees's own eigenvalues (docs/structure_files.md). Needs the optional OpenSeesPy.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -34,10 +40,33 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     p.add_argument("--no-compress", action="store_true", help="do not zstd-compress MCAP chunks")
     p.add_argument("--block-s", type=float, default=1.0, help="seconds per AccelBlock message (default 1)")
+    o = p.add_argument_group("import opensees SCRIPT (a structure file from an OpenSeesPy model)")
+    o.add_argument("--parameters", help="NAME=TAG,...: the OpenSees parameters (declared by the script) to update")
+    o.add_argument("--sensors", help="ID=NODE:DOF,...: sensors at OpenSees nodes and 1-based DOFs")
+    o.add_argument("--direction", default="vertical", choices=("vertical", "x", "y"), help="the sensors' direction")
+    o.add_argument("--prior-std", type=float, default=0.1, help="std of the lognormal prior of each factor (mean 1)")
+    o.add_argument("--name", help="structure name (default: the script's name)")
+    o.add_argument("--modes", type=int, default=5, help="modes checked against OpenSees's eigen (default 5)")
     p.set_defaults(func=run)
 
 
+def run_opensees(args: argparse.Namespace) -> int:
+    from shm_ros.io.opensees import OpenSeesImportError, import_opensees, parse_parameters, parse_sensors
+
+    if len(args.files) != 2 or not args.parameters or not args.sensors:
+        raise OpenSeesImportError("usage: shm-ros import opensees SCRIPT --parameters NAME=TAG,... "
+                                  "--sensors ID=NODE:DOF,... --out S.yaml")
+    mats = import_opensees(args.files[1], parse_parameters(args.parameters), parse_sensors(args.sensors), args.out,
+                           name=args.name, direction=args.direction, prior_std=args.prior_std, n_modes=args.modes)
+    freqs = ", ".join(f"{f:.4g}" for f in mats.matrices_hz)
+    print(f"{args.out}: kind matrices, {len(mats.dof_labels)} DOFs, parameters {', '.join(mats.terms)}; "
+          f"modes {freqs} Hz (OpenSees eigen agrees to {abs(mats.matrices_hz / mats.opensees_hz - 1).max():.1e})")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.files[0] == "opensees" and not Path(args.files[0]).exists():
+        return run_opensees(args)
     from shm_ros.core.timeutil import ns_to_iso as iso_utc
     from shm_ros.io.importers import ImportFileError, read_any, write_bag
 

@@ -72,7 +72,7 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
     window with the strongest input as an input/output acceleration record."""
     from shm_ros.io.recording import windows_from_bag
 
-    observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
+    observed = model.observed_sensors(spec.sensor_ids)
     if args.likelihood == "time":
         windows, _ = windows_from_bag(args.bag, spec, args.window or 600.0)
         if not windows:
@@ -118,8 +118,8 @@ def _acceleration_record(args, inputs, windows, observed):
 
 
 def run(args: argparse.Namespace) -> int:
-    from shm_ros.core.bayes.priors import PriorError
     from shm_ros.core.models import build_model
+    from shm_ros.core.priors import PriorError
     from shm_ros.core.structure import StructureError
     from shm_ros.io.posterior_files import write_posterior
     from shm_ros.io.structure import load_structure
@@ -171,8 +171,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_study(args, spec, model, obs, config, out: Path) -> int:
     from shm_ros.commands.options import given
-    from shm_ros.core.bayes.priors import priors_from_specs
     from shm_ros.core.bayes.study import bridge_study, format_table
+    from shm_ros.core.priors import priors_from_specs
     from shm_ros.core.provenance import stamp_output
     from shm_ros.io import jsonio
 

@@ -72,6 +72,15 @@ class KindRegistry(Generic[T]):
         except KeyError:
             raise KeyError(f"unknown {self.what} {name!r} (known: {', '.join(self.names())})") from None
 
+    def instance(self, name: str) -> T:
+        """An instance of the class registered as ``name``; ValueError listing the known names otherwise
+        (for settings that name a plug-in)."""
+        try:
+            cls = self.get(str(name))
+        except KeyError as exc:
+            raise ValueError(exc.args[0]) from None
+        return cls()
+
     def __contains__(self, name: object) -> bool:
         self.discover()
         return name in self._classes
@@ -88,11 +97,15 @@ class KindRegistry(Generic[T]):
         """Import the built-in package's modules and the external kind modules (once)."""
         if self._discovered:
             return
-        self._discovered = True
-        pkg = importlib.import_module(self.package)
-        for info in pkgutil.iter_modules(pkg.__path__, prefix=self.package + "."):
-            importlib.import_module(info.name)
-        load_external_kinds()
+        self._discovered = True  # first: a module being imported may look a name up
+        try:
+            pkg = importlib.import_module(self.package)
+            for info in pkgutil.iter_modules(pkg.__path__, prefix=self.package + "."):
+                importlib.import_module(info.name)
+            load_external_kinds()
+        except BaseException:
+            self._discovered = False  # a module that failed to import is tried again, not left out
+            raise
 
 
 def _where(cls: type) -> str:

@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from shm_ros.core.bayes.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS, Prior, PriorError, prior_fields
 from shm_ros.core.drift_limits import DriftLimits, parse_drift_limits
 from shm_ros.core.models.registry import MODEL_KINDS, ModelKind, kind_names, model_kind
+from shm_ros.core.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS, Prior, PriorError, prior_fields
 from shm_ros.errors import InputError
 
 DIRECTIONS = ("vertical", "x", "y")
@@ -128,7 +128,7 @@ class PriorSpec:
     params: dict[str, float]
 
     def frozen(self):
-        """The prior as a frozen ``scipy.stats`` distribution (:class:`shm_ros.core.bayes.priors.Prior`)."""
+        """The prior as a frozen ``scipy.stats`` distribution (:class:`shm_ros.core.priors.Prior`)."""
         return Prior.make(self.dist, self.params).dist
 
 

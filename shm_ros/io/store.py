@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.tracking import TrackedRow, Tracker
 from shm_ros.core.types import ModalEstimate, Mode
 from shm_ros.errors import ShmError

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.errors import InputError
 
 _HZ = re.compile(r"^mode(\d+)_hz$")

@@ -19,7 +19,7 @@ def _stderr(prog: str) -> Callable[[str], None]:
 
 def tracked_observations_from_bag(bag: str, spec: Any, observed: list[str], window_s: float | None = None,
                                   note: Callable[[str], None] | None = None) -> Any:
-    """:class:`~shm_ros.core.bayes.observations.ModalObservations` of ``bag`` with shapes at
+    """:class:`~shm_ros.core.observations.ModalObservations` of ``bag`` with shapes at
     ``observed`` (the model's sensors). Windows that cannot be identified are noted and skipped."""
     from threadpoolctl import threadpool_limits
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .priors import JointPrior
+from shm_ros.core.priors import JointPrior
 
 
 @dataclass

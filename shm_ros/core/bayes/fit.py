@@ -19,9 +19,9 @@ from typing import Any
 import numpy as np
 
 from shm_ros.core.modal import mac
+from shm_ros.core.observations import ModalObservations
 
 from .forward import ModalPredictor
-from .observations import ModalObservations
 from .pairing import pair_modes_optimal
 
 

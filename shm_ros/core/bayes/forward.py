@@ -50,16 +50,6 @@ def _stack_terms(terms: list[np.ndarray | None], n: int) -> tuple[np.ndarray, np
     return arr, acts
 
 
-def batch_matrices(model: AffineModel, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """K(theta) and M(theta) for a batch (B, d) -> (B, n, n) each."""
-    theta = np.atleast_2d(theta)
-    Kt, _ = _stack_terms(model.K_terms, model.n_dof)
-    Mt, _ = _stack_terms(model.M_terms, model.n_dof)
-    K = model.K0[None] + np.tensordot(theta, Kt, axes=(1, 0))
-    M = model.M0[None] + np.tensordot(theta, Mt, axes=(1, 0))
-    return K, M
-
-
 def _frequencies(w2: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(w2, 0.0, None)) / (2.0 * np.pi)
 

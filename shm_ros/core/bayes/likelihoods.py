@@ -27,14 +27,17 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import Any, TypedDict
 
 import numpy as np
 from scipy.special import gammaln
 
+from shm_ros.core.observations import ModalObservations
+from shm_ros.core.priors import Prior
+
 from .forward import ModalPredictor
-from .observations import ModalObservations
+from .likelihood_kinds.base import NoNuisance
 from .pairing import pair_modes_optimal
-from .priors import Prior
 
 
 @dataclass(frozen=True)
@@ -48,6 +51,18 @@ class InverseGamma:
     def weak(typical_std: float, shape: float = 1.0) -> InverseGamma:
         """A weak prior whose mode is ``typical_std**2``."""
         return InverseGamma(shape, (shape + 1.0) * typical_std**2)
+
+
+class ErrorPriors(TypedDict):
+    freq_prior: InverseGamma
+    shape_prior: InverseGamma
+
+
+def weak_error_priors(config: Any) -> ErrorPriors:
+    """The weak inverse-gamma priors of the frequency and shape error variances an
+    :class:`~shm_ros.core.bayes.update.UpdateConfig` asks for (keyword arguments of the likelihoods)."""
+    return ErrorPriors(freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
+                       shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape))
 
 
 def ig_marginal_loglik(ss: np.ndarray, n: np.ndarray | float, prior: InverseGamma) -> np.ndarray:
@@ -224,13 +239,13 @@ def predicted_damping(predictor: ModalPredictor, theta: np.ndarray, frequencies_
     return z[:, model_index]
 
 
-class _ModalLikelihoodBase:
+class _ModalLikelihoodBase(NoNuisance):
     """Common part: a predictor, the statistics, and how many extra (nuisance) columns are sampled."""
 
     extra_names: list[str] = []
 
     def __init__(self, predictor: ModalPredictor, obs: ModalObservations, use_shapes: bool = True,
-                 pairing: np.ndarray | None = None):
+                 pairing: np.ndarray | None = None, n_theta: int = 0):
         if use_shapes and obs.has_shapes and list(predictor.sensor_ids) != list(obs.sensor_ids):
             raise ValueError("predictor sensors must be the data's sensors in the same order: "
                              f"{predictor.sensor_ids} vs {obs.sensor_ids}")
@@ -241,21 +256,8 @@ class _ModalLikelihoodBase:
                              f"{len(self.stats.f_ref)}")
         if pairing is not None:
             set_pairing(self, pairing)
-        self.n_theta = 0  # set by the caller (number of structural parameters)
+        self.n_theta = n_theta  # structural parameters (0: every column of x is one)
 
-    @property
-    def n_extra(self) -> int:
-        return len(self.extra_names)
-
-    def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
-        return np.zeros(extra.shape[0])
-
-    def extra_initial(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        return np.zeros((n, 0))
-
-    def _residual_ss(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        ss_f, ss_s, _ = self._residuals(theta)
-        return ss_f, ss_s
 
     def _residuals(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """Sums of squares (B, m) of the relative frequency, shape and (when the statistics hold
@@ -301,8 +303,9 @@ class GaussianModalLikelihood(_ModalLikelihoodBase):
     def __init__(self, predictor: ModalPredictor, obs: ModalObservations, *, use_shapes: bool = True,
                  variance: str = "marginal", freq_prior: InverseGamma | None = None,
                  shape_prior: InverseGamma | None = None, use_damping: bool = False,
-                 damping_prior: InverseGamma | None = None, pairing: np.ndarray | None = None):
-        super().__init__(predictor, obs, use_shapes, pairing)
+                 damping_prior: InverseGamma | None = None, pairing: np.ndarray | None = None,
+                 n_theta: int = 0):
+        super().__init__(predictor, obs, use_shapes, pairing, n_theta)
         if variance not in ("marginal", "sampled"):
             raise ValueError(f"variance must be 'marginal' or 'sampled', got {variance!r}")
         self.variance = variance
@@ -394,7 +397,7 @@ class FitnessLikelihood(_ModalLikelihoodBase):
 
     def __init__(self, predictor: ModalPredictor, obs: ModalObservations, *, alpha: float = 0.5,
                  beta: float = 0.5, k: float = 0.05, j: str = FitnessJ.SUMMED.value,
-                 pairing: np.ndarray | None = None):
+                 pairing: np.ndarray | None = None, n_theta: int = 0):
         if alpha < 0 or beta < 0 or alpha + beta <= 0:
             raise ValueError(f"fitness weights need alpha, beta >= 0 and alpha + beta > 0, got "
                              f"({alpha}, {beta})")
@@ -402,7 +405,7 @@ class FitnessLikelihood(_ModalLikelihoodBase):
             raise ValueError(f"fitness tolerance k must be > 0, got {k}")
         if j not in tuple(FitnessJ):
             raise ValueError(f"fitness J must be one of {[m.value for m in FitnessJ]}, got {j!r}")
-        super().__init__(predictor, obs, beta > 0, pairing)
+        super().__init__(predictor, obs, beta > 0, pairing, n_theta)
         self.alpha, self.beta, self.k = float(alpha), float(beta), float(k)
         self.j = FitnessJ(j)
         self.extra_names = []

@@ -47,6 +47,8 @@ import math
 import numpy as np
 from scipy.special import roots_genlaguerre, roots_hermitenorm
 
+from shm_ros.core.observations import ModalObservations
+
 from .forward import ModalPredictor
 from .likelihoods import (
     InverseGamma,
@@ -56,8 +58,8 @@ from .likelihoods import (
     log_variance_initial,
     log_variance_logprior,
     paired_predictions,
+    set_pairing,
 )
-from .observations import ModalObservations
 
 FREQ_SCALE_RANGE = (1e-4, 0.2)  # model-error scale s of the frequencies (relative), log-uniform
 SHAPE_SCALE_RANGE = (1e-3, 0.3)  # model-error scale t of a unit shape's components, log-uniform
@@ -126,7 +128,7 @@ class ModelErrorLikelihood:
                  shape_prior: InverseGamma | None = None, time_correlation: bool = True,
                  freq_scale_range: tuple[float, float] = FREQ_SCALE_RANGE,
                  shape_scale_range: tuple[float, float] = SHAPE_SCALE_RANGE,
-                 n_grid: int = 32, n_quad: int = 6):
+                 n_grid: int = 32, n_quad: int = 6, pairing: np.ndarray | None = None, n_theta: int = 0):
         if variance not in ("marginal", "sampled"):
             raise ValueError(f"variance must be 'marginal' or 'sampled', got {variance!r}")
         if use_shapes and obs.has_shapes and list(predictor.sensor_ids) != list(obs.sensor_ids):
@@ -139,13 +141,24 @@ class ModelErrorLikelihood:
         self.stats = st = ModalStatistics.from_observations(obs, use_shapes=use_shapes)
         if predictor.n_modes < len(st.f_ref):
             raise ValueError(f"the model offers {predictor.n_modes} modes but the data track {len(st.f_ref)}")
-        self.n_theta = 0  # set by the caller (number of structural parameters)
+        if pairing is not None:
+            set_pairing(self, pairing)
+        self.n_theta = n_theta  # structural parameters (0: every column of x is one)
         self.variance = variance
         self.freq_prior = freq_prior or InverseGamma.weak(0.01)
         self.shape_prior = shape_prior or InverseGamma.weak(0.05)
         self.mode_numbers = list(obs.mode_numbers)
-        m = len(self.mode_numbers)
+        self._init_frequencies(obs, time_correlation, freq_scale_range, n_grid, n_quad)
+        self._init_shapes(shape_scale_range, n_grid, n_quad)
+        names = [f"sigma2_f_mode{k}" for k in self.mode_numbers]
+        if self.uses_shapes:
+            names += [f"sigma2_shape_mode{k}" for k in self.mode_numbers]
+        self.variance_names = names
+        self.extra_names = [f"log_{n}" for n in names] if variance == "sampled" else []
 
+    def _init_frequencies(self, obs: ModalObservations, time_correlation: bool,
+                          freq_scale_range: tuple[float, float], n_grid: int, n_quad: int) -> None:
+        st, m = self.stats, len(self.mode_numbers)
         # frequencies: within-mode scatter (theta-independent) and the effective count of the mean
         self.xbar = st.s1 / st.n_freq
         self.w_f = np.maximum(st.s2 - st.s1**2 / st.n_freq, 0.0)
@@ -169,6 +182,8 @@ class ModelErrorLikelihood:
         self.log_jacobian = -float(np.sum(st.n_freq * np.log(st.f_ref))) - 0.5 * float(np.sum(np.log(st.n_freq)))
         self.s_grid, self._s_logprior = _scale_grid(*freq_scale_range, n_grid)
 
+    def _init_shapes(self, shape_scale_range: tuple[float, float], n_grid: int, n_quad: int) -> None:
+        st = self.stats
         # shapes: scatter matrices and their squares (the amplitude-weighted mean residual)
         self.uses_shapes = st.uses_shapes
         self.n_sensors = st.n_sensors
@@ -182,16 +197,13 @@ class ModelErrorLikelihood:
         self._inv_gs = inv_gs
         self.t_grid, self._t_logprior = _scale_grid(*shape_scale_range, n_grid)
 
-        names = [f"sigma2_f_mode{k}" for k in self.mode_numbers]
-        if self.uses_shapes:
-            names += [f"sigma2_shape_mode{k}" for k in self.mode_numbers]
-        self.variance_names = names
-        self.extra_names = [f"log_{n}" for n in names] if variance == "sampled" else []
-
     # -- the sampler's protocol ------------------------------------------------------------------
     @property
     def n_extra(self) -> int:
         return len(self.extra_names)
+
+    def prepare_at_map(self, theta: np.ndarray) -> bool:
+        return False
 
     def _variance_priors(self) -> list[InverseGamma]:
         m = len(self.mode_numbers)

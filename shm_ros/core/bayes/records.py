@@ -6,7 +6,7 @@ model: an AR(p) per channel whose coefficients each record fixes once at the whi
 ``fix_ar``). The records share the prediction-error variance of each channel, so their innovation
 sums of squares and counts add up before the variance is marginalised or sampled (as in
 :mod:`.timedomain`). The responses of a batch of parameter sets (an ensemble sampler's walkers)
-are computed together (:func:`shm_ros.core.predict.batch.batch_responses`: one discretisation per
+are computed together (:func:`shm_ros.core.response.batch.batch_responses`: one discretisation per
 set) and handed to each record's likelihood.
 """
 
@@ -97,7 +97,7 @@ class JointTimeDomainLikelihood:
             p.fix_ar(theta)
 
     def _responses(self, thetas: np.ndarray, record: AccelerationRecord):
-        from shm_ros.core.predict.batch import batch_responses
+        from shm_ros.core.response.batch import batch_responses
 
         return batch_responses(self.model, thetas, record.inputs, record.dt, self.outputs, chunk=self.chunk)
 
@@ -109,6 +109,13 @@ class JointTimeDomainLikelihood:
             for a, Y in self._responses(thetas, part.record):
                 ss[a:a + Y.shape[0]] += part.innovation_ss_batch(Y)
         return ss
+
+    def prepare_at_map(self, theta: np.ndarray) -> bool:
+        """Every record's residual AR model, estimated once at the white-noise MAP."""
+        if not self.ar_order or self.ar_coef is not None:
+            return False
+        self.fix_ar(theta)
+        return True
 
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
         return log_variance_logprior(self.priors, extra, self.variance == "sampled")
@@ -139,7 +146,7 @@ class JointTimeDomainLikelihood:
 
     def fit(self, theta: np.ndarray) -> dict:
         """NRMS per channel over all records (the building paper's eq. 28), and each channel's RMS."""
-        from shm_ros.core.predict.signals import strong_motion
+        from shm_ros.core.response.signals import strong_motion
 
         th = np.atleast_2d(np.asarray(theta, dtype=float))
         ss, ss_s, y2_s = (np.zeros(len(self.outputs)) for _ in range(3))

@@ -31,7 +31,7 @@ MH_ACCEPTANCE_BAND = (0.15, 0.40)
 
 @dataclass
 class SamplerSettings:
-    sampler: str = "emcee"  # "emcee" | "mh"
+    sampler: str = "emcee"  # a name registered in sampler_kinds (built in: "emcee", "mh")
     n_chains: int = 0  # walkers (emcee) or chains (mh); 0 = automatic
     n_steps: int = 1500  # first run length (after which diagnostics decide)
     max_steps: int = 20000
@@ -273,14 +273,49 @@ def run_emcee(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: 
                        warnings_)
 
 
+@dataclass
+class _Adaptation:
+    """Metropolis-Hastings burn-in: the proposal follows the chains' pooled covariance and a global
+    scale is tuned by Robbins-Monro steps toward the target acceptance, every ``block`` steps."""
+
+    cov: np.ndarray  # the Laplace covariance (fallback)
+    log_s: float
+    prop_cov: np.ndarray
+    chol: np.ndarray
+    hist: list[np.ndarray] = field(default_factory=list)
+    acc_hist: list[np.ndarray] = field(default_factory=list)
+    block: int = 50
+
+    @staticmethod
+    def start(cov: np.ndarray) -> _Adaptation:
+        log_s = math.log(2.38**2 / cov.shape[0])
+        return _Adaptation(cov, log_s, cov.copy(), np.linalg.cholesky(math.exp(log_s) * cov))
+
+    def observe(self, step: int, x: np.ndarray, accept: np.ndarray) -> None:
+        self.hist.append(x.copy())
+        self.acc_hist.append(accept)
+        if step % self.block:
+            return
+        rate = float(np.mean(self.acc_hist[-self.block:]))
+        self.log_s += 2.0 * (rate - MH_TARGET_ACCEPTANCE) / math.sqrt(step / self.block)
+        if step >= 4 * self.block:  # pooled covariance of the recent half of the history
+            d = x.shape[1]
+            emp = np.cov(np.concatenate(self.hist[len(self.hist) // 2:]).T).reshape(d, d)
+            self.prop_cov = emp + 1e-12 * np.diag(np.diag(emp) + 1e-300)
+        try:
+            self.chol = np.linalg.cholesky(math.exp(self.log_s) * self.prop_cov)
+        except np.linalg.LinAlgError:
+            self.chol = np.linalg.cholesky(math.exp(self.log_s) * self.cov)
+
+
 def run_mh(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: SamplerSettings,
            names: list[str]) -> ChainResult:
     """Adaptive random-walk Metropolis-Hastings, several independent chains in lock-step.
 
-    Adaptation (burn-in only): the proposal covariance follows the chains' pooled empirical
-    covariance and a global scale is tuned by Robbins-Monro steps toward an acceptance rate of 0.25.
-    The proposal is then frozen and the kept part is plain Metropolis-Hastings with a symmetric
-    Gaussian proposal (the q terms of the acceptance ratio cancel).
+    Adaptation (burn-in only, :class:`_Adaptation`): the proposal covariance follows the chains'
+    pooled empirical covariance and a global scale is tuned by Robbins-Monro steps toward an
+    acceptance rate of 0.25. The proposal is then frozen and the kept part is plain
+    Metropolis-Hastings with a symmetric Gaussian proposal (the q terms of the acceptance ratio cancel).
     """
     rng = np.random.default_rng(settings.seed)
     d = center.size
@@ -290,44 +325,23 @@ def run_mh(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: Sam
     x = _ball(rng, center, cov, n_c, 2.0, lp_fn)
     lp = lp_fn(x)
     burn = settings.burn_in or max(settings.n_steps // 2, 200)
-    prop_cov = cov.copy()
-    log_s = math.log(2.38**2 / d)
-    chol = np.linalg.cholesky(math.exp(log_s) * prop_cov)
-    hist: list[np.ndarray] = []
-    acc_hist: list[np.ndarray] = []
-    total = burn + settings.n_steps
-    step = 0
+    adapt = _Adaptation.start(cov)
+    total, step = burn + settings.n_steps, 0
     kept_x: list[np.ndarray] = []
     kept_lp: list[np.ndarray] = []
     kept_acc: list[np.ndarray] = []
-    warnings_: list[str] = []
-    block = 50
     while True:
         while step < total:
-            prop = x + rng.standard_normal((n_c, d)) @ chol.T
+            prop = x + rng.standard_normal((n_c, d)) @ adapt.chol.T
             lp_new = lp_fn(prop)
-            accept = np.log(rng.random(n_c)) < (lp_new - lp)
-            accept &= np.isfinite(lp_new)
+            accept = (np.log(rng.random(n_c)) < (lp_new - lp)) & np.isfinite(lp_new)
             x = np.where(accept[:, None], prop, x)
             lp = np.where(accept, lp_new, lp)
             step += 1
             if settings.progress is not None and (step % 100 == 0 or step == total):
                 settings.progress(step, total)
             if step <= burn:
-                hist.append(x.copy())
-                acc_hist.append(accept)
-                if step % block == 0:
-                    rate = float(np.mean(acc_hist[-block:]))
-                    gain = 1.0 / math.sqrt(step / block)
-                    log_s += 2.0 * gain * (rate - MH_TARGET_ACCEPTANCE)
-                    if step >= 4 * block:  # pooled covariance of the recent half of the history
-                        recent = np.concatenate(hist[len(hist) // 2:])
-                        emp = np.cov(recent.T).reshape(d, d)
-                        prop_cov = emp + 1e-12 * np.diag(np.diag(emp) + 1e-300)
-                    try:
-                        chol = np.linalg.cholesky(math.exp(log_s) * prop_cov)
-                    except np.linalg.LinAlgError:
-                        chol = np.linalg.cholesky(math.exp(log_s) * cov)
+                adapt.observe(step, x, accept)
             else:
                 kept_x.append(x.copy())
                 kept_lp.append(lp.copy())
@@ -340,8 +354,14 @@ def run_mh(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: Sam
         need = settings.ess_target / max(diag.ess_min, 1.0) * n_kept
         total = min(step + int(max(need - n_kept, n_kept // 2, 100)), settings.max_steps)
     acc = float(np.mean(kept_acc))
+    return ChainResult("mh", chains, np.stack(kept_lp, axis=1), acc, burn, step, count[0], diag,
+                       *_mh_verdict(diag, acc, step, settings))
+
+
+def _mh_verdict(diag: ChainDiagnostics, acc: float, step: int, settings: SamplerSettings) -> tuple[bool, list[str]]:
     diag.acceptance = acc
     converged = diag.meets(settings.rhat_target, settings.ess_target)
+    warnings_: list[str] = []
     if not converged:
         warnings_.append(f"Metropolis-Hastings stopped at {step} steps without meeting R-hat < "
                          f"{settings.rhat_target} and ESS >= {settings.ess_target:.0f} "
@@ -349,14 +369,4 @@ def run_mh(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: Sam
     lo, hi = MH_ACCEPTANCE_BAND
     if not lo <= acc <= hi:
         warnings_.append(f"Metropolis-Hastings acceptance {acc:.2f} outside [{lo}, {hi}]")
-    return ChainResult("mh", chains, np.stack(kept_lp, axis=1), acc, burn, step, count[0], diag,
-                       converged, warnings_)
-
-
-def run_sampler(log_prob: LogProb, center: np.ndarray, cov: np.ndarray, settings: SamplerSettings,
-                names: list[str]) -> ChainResult:
-    if settings.sampler == "emcee":
-        return run_emcee(log_prob, center, cov, settings, names)
-    if settings.sampler == "mh":
-        return run_mh(log_prob, center, cov, settings, names)
-    raise ValueError(f"unknown sampler {settings.sampler!r} (use 'mh' or 'emcee')")
+    return converged, warnings_

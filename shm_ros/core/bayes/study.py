@@ -25,13 +25,13 @@ from typing import Any
 import numpy as np
 
 from shm_ros.core.models.base import AffineModel
+from shm_ros.core.observations import ModalObservations
+from shm_ros.core.priors import JointPrior, Prior, weibull_matching
 
 from .fit import modal_fit
 from .forward import build_predictor
 from .likelihoods import FitnessJ
-from .observations import ModalObservations
 from .pairing import select_modes
-from .priors import JointPrior, Prior, weibull_matching
 from .update import UpdateConfig, update
 
 PRIOR_FAMILIES = ("normal", "weibull", "lognormal")

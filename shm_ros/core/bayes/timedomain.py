@@ -182,6 +182,13 @@ class TimeDomainLikelihood:
     def n_innovations(self) -> int:
         return self.record.outputs.shape[0] - self.ar_order
 
+    def prepare_at_map(self, theta: np.ndarray) -> bool:
+        """The residual's AR model, estimated once at the white-noise MAP (True: the MAP moves)."""
+        if not self.ar_order or self.ar_coef is not None:
+            return False
+        self.fix_ar(theta)
+        return True
+
     def extra_logprior(self, extra: np.ndarray) -> np.ndarray:
         return log_variance_logprior(self.priors, extra, self.variance == "sampled")
 

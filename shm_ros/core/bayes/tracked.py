@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 
 
 def observations_from_rows(rows: Sequence[Any], sensor_ids: Sequence[str] | None = None) -> ModalObservations:

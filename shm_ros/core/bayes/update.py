@@ -21,30 +21,24 @@ import numpy as np
 from shm_ros.core.config import check_choice, option
 from shm_ros.core.modal import mac, unit_max
 from shm_ros.core.models.base import AffineModel
+from shm_ros.core.observations import ModalObservations
+from shm_ros.core.priors import JointPrior, Prior, PriorError, priors_from_specs
 
 from .evidence import nested_evidence
 from .fit import modal_fit
 from .forward import build_predictor
-from .likelihoods import FitnessJ, FitnessLikelihood, GaussianModalLikelihood, InverseGamma, set_pairing
-from .model_error import ModelErrorLikelihood
-from .observations import ModalObservations
+from .likelihood_kinds.base import (
+    LIKELIHOODS,
+    Likelihood,
+    LikelihoodInputs,
+    LikelihoodKind,
+    LikelihoodName,
+    likelihood_kind,
+)
+from .likelihoods import FitnessJ
 from .pairing import DEFAULT_MAC_GATE, ModePairing, PairingGate, UnmodelledMode, pair_with_model, select_modes
-from .priors import JointPrior, Prior, PriorError, priors_from_specs
-from .records import JointTimeDomainLikelihood
-from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance, run_sampler
-from .timedomain import TimeDomainLikelihood
-
-
-class Likelihood(enum.StrEnum):
-    MODEL_ERROR = "model-error"  # modal data with a systematic model error shared by the windows
-    GAUSSIAN = "gaussian"  # Gaussian prediction error on modal data, windows independent
-    FITNESS = "fitness"  # the bridge paper's exp(-J / 2k^2)
-    TIME = "time"  # accelerations under the measured input
-
-
-class Sampler(enum.StrEnum):
-    EMCEE = "emcee"  # affine-invariant ensemble
-    MH = "mh"  # adaptive Metropolis-Hastings
+from .sampler_kinds.base import SAMPLERS, SamplerName, sampler_kind
+from .samplers import ChainResult, SamplerSettings, find_map, laplace_covariance
 
 
 class Variance(enum.StrEnum):  # prediction-error variances of the Gaussian likelihood
@@ -58,20 +52,16 @@ class Reduction(enum.StrEnum):
     NONE = "none"
 
 
-LIKELIHOODS = tuple(m.value for m in Likelihood)
-SAMPLERS = tuple(m.value for m in Sampler)
-
-
 @dataclass
 class UpdateConfig:
     """Settings of one updating run (every field has a default; all are plain data)."""
 
-    likelihood: str = option(Likelihood.MODEL_ERROR.value, "model-error: modal data with a systematic "
+    likelihood: str = option(LikelihoodName.MODEL_ERROR.value, "model-error: modal data with a systematic "
                              "model error shared by all windows (docs/updating.md); gaussian: windows "
                              "independent; the bridge paper's fitness exp(-J/2k^2); or time: "
-                             "accelerations under the measured input", choices=Likelihood)
-    sampler: str = option(Sampler.EMCEE.value, "emcee ensemble or adaptive Metropolis-Hastings",
-                          choices=Sampler)
+                             "accelerations under the measured input", choices=LikelihoodName)
+    sampler: str = option(SamplerName.EMCEE.value, "emcee ensemble or adaptive Metropolis-Hastings",
+                          choices=SamplerName)
     # priors by parameter name: {"dist": "normal", "mean": 1.0, "std": 0.1}; None = from the model
     # caller (``priors`` argument of :func:`update`); not an option: the structure file has them
     priors: dict[str, dict[str, Any]] | None = None
@@ -119,14 +109,15 @@ class UpdateConfig:
                         "matches the full model to 1e-7 around the MAP (checked)")
 
     def validate(self) -> None:
-        check_choice("update", "likelihood", self.likelihood, Likelihood)
-        check_choice("update", "sampler", self.sampler, Sampler)
+        check_choice("update", "likelihood", self.likelihood, LIKELIHOODS.names())  # built in and added
+        check_choice("update", "sampler", self.sampler, SAMPLERS.names())
         check_choice("update", "reduction", self.reduction, Reduction)
         check_choice("update", "variance", self.variance, Variance)
         check_choice("update", "fitness_j", self.fitness_j, FitnessJ)
-        if self.use_damping and self.likelihood != Likelihood.GAUSSIAN.value:
-            raise ValueError(f"update: use_damping needs likelihood 'gaussian' (damping ratios enter only that "
-                             f"likelihood), got likelihood {self.likelihood!r}")
+        if self.use_damping and not likelihood_kind(self.likelihood).uses_damping:
+            with_damping = [k.name for k in LIKELIHOODS if k.uses_damping]
+            raise ValueError(f"update: use_damping needs a likelihood damping ratios enter ({with_damping}), "
+                             f"got likelihood {self.likelihood!r}")
         if self.frequency_gate < 0 or not 0 <= self.mac_gate < 1:
             raise ValueError(f"update: frequency_gate must be >= 0 (0 = automatic) and mac_gate in "
                              f"[0, 1), got {self.frequency_gate}, {self.mac_gate}")
@@ -272,53 +263,21 @@ def _modal_predictor(model: AffineModel, data: ModalObservations, config: Update
 
 
 def build_likelihood(model: AffineModel, data: Any, config: UpdateConfig, *, predictor: Any = None,
-                     pairing: np.ndarray | None = None):
-    """The likelihood object the config asks for (batched call (B, d_total) -> (B,)).
+                     pairing: np.ndarray | None = None) -> tuple[Likelihood, Any]:
+    """The likelihood the config names (batched call (B, d_total) -> (B,)) and its predictor.
 
     Modal likelihoods: ``predictor`` (default: built for ``data``) and ``pairing``, the model mode
     of each of the data's modes (default: paired once at the nominal model, ungated; :func:`update`
-    passes its gated pairing and the data restricted to the paired modes).
+    passes its gated pairing and the data restricted to the paired modes). Others: predictor None.
     """
-    if config.likelihood == "time":
-        from .records import RecordSet
-        from .timedomain import AccelerationRecord, TimeDomainLikelihood
-
-        if isinstance(data, RecordSet):  # several events, one joint likelihood
-            return JointTimeDomainLikelihood(model, data, variance=config.variance, error_prior_shape=config.ig_shape,
-                                             ar_order=config.residual_ar_order), None
-
-        if not isinstance(data, AccelerationRecord):
-            raise TypeError("likelihood 'time' needs an AccelerationRecord (input and output "
-                            "accelerations), not modal data")
-        lik = TimeDomainLikelihood(model, data, variance=config.variance,
-                                   error_prior_shape=config.ig_shape, ar_order=config.residual_ar_order)
-        lik.n_theta = model.n_parameters
-        return lik, None
+    kind = likelihood_kind(config.likelihood)
+    if not kind.modal:
+        return kind.build(LikelihoodInputs(model, data, config)), None
     if not isinstance(data, ModalObservations):
         raise TypeError(f"likelihood {config.likelihood!r} needs ModalObservations")
     if predictor is None:
         predictor = _modal_predictor(model, data, config)
-    use_shapes = bool(predictor.sensor_ids) and data.has_shapes
-    modal: GaussianModalLikelihood | FitnessLikelihood | ModelErrorLikelihood
-    if config.likelihood == "model-error":
-        modal = ModelErrorLikelihood(
-            predictor, data, use_shapes=use_shapes, variance=config.variance,
-            freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
-            shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape))
-    elif config.likelihood == "gaussian":
-        modal = GaussianModalLikelihood(
-            predictor, data, use_shapes=use_shapes, variance=config.variance,
-            freq_prior=InverseGamma.weak(config.frequency_error_guess, config.ig_shape),
-            shape_prior=InverseGamma.weak(config.shape_error_guess, config.ig_shape),
-            use_damping=config.use_damping,
-            damping_prior=InverseGamma.weak(config.damping_error_guess, config.ig_shape))
-    else:
-        modal = FitnessLikelihood(predictor, data, alpha=config.alpha, beta=config.beta, k=config.k,
-                                  j=config.fitness_j)
-    if pairing is not None:
-        set_pairing(modal, pairing)
-    modal.n_theta = model.n_parameters
-    return modal, predictor
+    return kind.build(LikelihoodInputs(model, data, config, predictor, pairing)), predictor
 
 
 def update(model: AffineModel, observations: Any, config: UpdateConfig | None = None,
@@ -327,7 +286,7 @@ def update(model: AffineModel, observations: Any, config: UpdateConfig | None = 
            progress: Callable[[int, int], None] | None = None) -> Posterior:
     """Calibrate the model's parameters to the data; see the module docstring.
 
-    ``observations`` is :class:`ModalObservations` (likelihood ``gaussian`` or ``fitness``) or an
+    ``observations`` is :class:`ModalObservations` (the modal likelihoods) or an
     :class:`~shm_ros.core.bayes.timedomain.AccelerationRecord` (likelihood ``time``). ``priors``:
     the structure's parameter specs, a :class:`JointPrior`, or None to use ``config.priors``.
     ``warm_start``: a previous posterior of the same parameters (e.g. before new windows arrived);
@@ -347,32 +306,105 @@ def update(model: AffineModel, observations: Any, config: UpdateConfig | None = 
 def _update(model: AffineModel, observations: Any, config: UpdateConfig,
             priors: JointPrior | Sequence[Any] | None, warm_start: Posterior | None = None,
             progress: Callable[[int, int], None] | None = None) -> Posterior:
-    timing: dict[str, float] = {}
-    t0 = time.perf_counter()
-    warnings_: list[str] = []
+    """The steps of one run, each adding to the :class:`_Run`: pair, MAP, re-pair, sample, evidence,
+    summarise."""
+    run = _start(model, observations, config, joint_prior_for(model, config, priors), progress)
+    _pair(run)
+    _search_map(run, warm_start)
+    if run.lik.prepare_at_map(run.x_map[:run.d]) or _pair_again_at_map(run):
+        _search_map(run, None)
+    _after_map(run)
+    _sample(run)
+    _evidence(run)
+    return _summarise(run)
+
+
+@dataclass
+class _Run:
+    """One updating run: its inputs, and what each step of :func:`_update` adds."""
+
+    model: AffineModel
+    config: UpdateConfig
+    jp: JointPrior
+    kind: LikelihoodKind
+    full_obs: Any  # the data as given (modal data without empty modes)
+    progress: Callable[[int, int], None] | None
+    rng: np.random.Generator
+    t0: float
+    observations: Any = None  # the data the likelihood reads (modal: the paired modes only)
+    predictor: Any = None  # the exact predictor of the model's modes (modal likelihoods)
+    pairing: ModePairing | None = None
+    pairing_at: str = "prior mean"
+    lik: Any = None  # the likelihood with the exact predictor (a ``Likelihood``)
+    starts_theta: np.ndarray | None = None
+    x_map: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    lp_map: float = -np.inf
+    scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    names: list[str] = field(default_factory=list)
+    cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    chains: ChainResult | None = None
+    predictor_note: str | None = None
+    log_z: float | None = None
+    log_z_err: float | None = None
+    evidence_method: str | None = None
+    unmodelled: list[dict[str, Any]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    timing: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def d(self) -> int:
+        return self.jp.dim
+
+    def paired_likelihood(self, predictor: Any, config: UpdateConfig | None = None) -> Likelihood:
+        """The run's likelihood built again with another predictor (or config), same pairing."""
+        idx = None if self.pairing is None else self.pairing.model_index
+        return self.kind.build(LikelihoodInputs(self.model, self.observations, config or self.config,
+                                                predictor, idx))
+
+
+def _start(model: AffineModel, observations: Any, config: UpdateConfig, jp: JointPrior,
+           progress: Callable[[int, int], None] | None) -> _Run:
+    """The run object; modal data lose modes without any frequency."""
+    run = _Run(model, config, jp, likelihood_kind(config.likelihood), observations, progress,
+               np.random.default_rng(config.seed), time.perf_counter())
     if isinstance(observations, ModalObservations):
         if observations.n_windows == 0:
             raise ValueError("no windows to update from")
-        observations, dropped = observations.without_empty_modes()
+        run.full_obs, dropped = observations.without_empty_modes()
         if dropped:
-            warnings_.append(f"mode(s) {dropped} have no frequency in any window; left out")
-        if observations.n_modes == 0:
+            run.warnings.append(f"mode(s) {dropped} have no frequency in any window; left out")
+        if run.full_obs.n_modes == 0:
             raise ValueError("the modal data hold no frequency at all")
-    jp = joint_prior_for(model, config, priors)
+    run.observations = run.full_obs
+    return run
+
+
+def _pair(run: _Run) -> None:
+    """Modal likelihoods: pair the data's modes with the model's at the prior mean, behind the gate,
+    and build the likelihood on the paired modes; others: build the likelihood on the data."""
+    if not run.kind.modal:
+        run.lik = run.kind.build(LikelihoodInputs(run.model, run.full_obs, run.config))
+        return
+    if not isinstance(run.full_obs, ModalObservations):
+        raise TypeError(f"likelihood {run.config.likelihood!r} needs ModalObservations")
+    run.predictor = _modal_predictor(run.model, run.full_obs, run.config)
+    gate = PairingGate.resolve(run.config.frequency_gate, run.config.mac_gate, prior_cv(run.jp))
+    run.pairing = _gated(run.predictor, run.full_obs, np.array([p.mean for p in run.jp.priors]), gate)
+    if run.pairing.observed.size == 0:
+        raise ValueError("no observed mode pairs with a mode of the model at the prior mean: "
+                         + " ".join(u.message(gate) for u in run.pairing.unmodelled))
+    _use_pairing(run)
+
+
+def _use_pairing(run: _Run) -> None:
+    assert run.pairing is not None
+    run.observations = select_modes(run.full_obs, run.pairing.observed)
+    run.lik = run.paired_likelihood(run.predictor)
+
+
+def _log_posterior(jp: JointPrior, lik: Likelihood) -> Callable[[np.ndarray], np.ndarray]:
+    """Batched log-posterior of (theta, nuisance columns): prior + likelihood, -inf where either is."""
     d = jp.dim
-    full_obs = observations
-    pairing: ModePairing | None = None
-    pairing_at = "prior mean"
-    if isinstance(observations, ModalObservations) and config.likelihood != "time":
-        predictor = _modal_predictor(model, full_obs, config)
-        gate = PairingGate.resolve(config.frequency_gate, config.mac_gate, prior_cv(jp))
-        pairing = _gated(predictor, full_obs, np.array([p.mean for p in jp.priors]), gate)
-        if pairing.observed.size == 0:
-            raise ValueError("no observed mode pairs with a mode of the model at the prior mean: "
-                             + " ".join(u.message(gate) for u in pairing.unmodelled))
-        observations, lik = _paired_likelihood(model, full_obs, config, predictor, pairing)
-    else:
-        lik, predictor = build_likelihood(model, observations, config)
 
     def log_post(x: np.ndarray) -> np.ndarray:
         x = np.atleast_2d(x)
@@ -384,144 +416,163 @@ def _update(model: AffineModel, observations: Any, config: UpdateConfig,
         out[~np.isfinite(out)] = -np.inf
         return out
 
-    rng = np.random.default_rng(config.seed)
-    prior_std = np.array([p.std if np.isfinite(p.std) else 1.0 for p in jp.priors])
-    starts_theta = np.vstack([np.atleast_2d([p.mean for p in jp.priors]), jp.sample(rng, 400)])
-    if warm_start is not None and list(warm_start.parameter_names) == list(jp.names):
-        previous = warm_start.samples[rng.permutation(len(warm_start.samples))[:200]]
-        starts_theta = np.vstack([warm_start.theta("mean")[None, :], previous, starts_theta])
-    for attempt in (0, 1):
-        n_extra = lik.n_extra
-        names = list(jp.names) + list(lik.extra_names)
-        starts = np.hstack([starts_theta, lik.extra_initial(rng, starts_theta.shape[0])])
-        scale = np.concatenate([prior_std, np.ones(n_extra)])
-        x_map, lp_map = find_map(log_post, starts, scale, seed=config.seed)
-        if attempt == 0 and isinstance(lik, TimeDomainLikelihood | JointTimeDomainLikelihood) and lik.ar_order \
-                and lik.ar_coef is None:
-            # time domain: the residual's AR model is estimated once, at the white-noise MAP
-            lik.fix_ar(x_map[:d])
-            starts_theta = np.vstack([x_map[None, :d], starts_theta])
-            continue
-        if pairing is None or attempt == 1 or not config.pair_at_map:
-            break
-        # once, at the MAP: a nominal model far from the data may have paired a mode wrongly
-        again = _gated(predictor, full_obs, x_map[:d], pairing.gate)
-        if again.same_as(pairing) or again.observed.size == 0:
-            break
-        before = pairing.describe(full_obs.mode_numbers, pairing_at)
-        pairing, pairing_at = again, "MAP"
-        after = pairing.describe(full_obs.mode_numbers, pairing_at)
-        warnings_.append(f"pairing changed at the MAP: observed modes {before['observed_modes']} -> "
-                         f"model modes {before['model_modes']} became {after['observed_modes']} -> "
-                         f"{after['model_modes']}; the MAP was searched again")
-        observations, lik = _paired_likelihood(model, full_obs, config, predictor, pairing)
-        starts_theta = np.vstack([x_map[None, :d], starts_theta])
-    unmodelled: list[dict[str, Any]] = []
-    if pairing is not None:
-        unmodelled = [u.to_dict() for u in pairing.unmodelled]
-        warnings_ += [u.message(pairing.gate) for u in pairing.unmodelled]
-    if isinstance(full_obs, ModalObservations) and full_obs.unmodelled_modes:
-        # modes of a recording's windows that paired with no model mode (observations_for_model)
-        unmodelled += list(full_obs.unmodelled_modes)
-        warnings_ += [UnmodelledMode(**u).message(pairing.gate if pairing else PairingGate())
-                      for u in full_obs.unmodelled_modes]
-    cov = laplace_covariance(log_post, x_map, scale)
-    timing["map_s"] = time.perf_counter() - t0
-    exact_predictor = predictor
-    ritz_note = _try_ritz(model, lik, predictor, x_map, cov, d, config, rng)
+    return log_post
 
-    t1 = time.perf_counter()
-    settings = SamplerSettings(config.sampler, config.n_chains, config.n_steps, config.max_steps,
-                               config.burn_in, config.rhat_target, config.ess_target, config.seed,
-                               progress)
-    chains: ChainResult = run_sampler(log_post, x_map, cov, settings, names)
-    timing["sampling_s"] = time.perf_counter() - t1
-    flat = chains.flat
-    flat_lp = chains.log_prob.reshape(-1)
-    best = int(np.argmax(flat_lp))
-    if flat_lp[best] > lp_map:
-        x_map, lp_map = flat[best].copy(), float(flat_lp[best])
-    summary = summarise(flat[:, :d], x_map[:d], jp.names)
 
-    warnings_ += list(chains.warnings)
-    diag = {
-        "sampler": chains.sampler,
-        "rhat_max": chains.diagnostics.rhat_max,
-        "ess_min": chains.diagnostics.ess_min,
-        "acceptance": chains.acceptance,
-        "converged": chains.converged,
-        "n_chains": int(chains.chains.shape[0]),
-        "n_draws": int(chains.chains.shape[1]),
-        "burn_in": int(chains.burn_in),
-        "n_steps": int(chains.n_steps),
-        "n_evaluations": int(chains.n_evaluations),
-        "rhat": dict(zip(names, map(float, chains.diagnostics.rhat), strict=True)),
-        "ess_bulk": dict(zip(names, map(float, chains.diagnostics.ess_bulk), strict=True)),
-        "likelihood": config.likelihood,
-        "n_windows": int(getattr(observations, "n_windows", 1)),
-        "predictor": ritz_note or type(predictor).__name__ if predictor is not None else "time-domain",
-    }
-    if pairing is not None:
-        diag["pairing"] = pairing.describe(full_obs.mode_numbers, pairing_at)
-
-    noise: dict[str, Any] = {}
-    if config.likelihood in ("gaussian", "time", "model-error"):
-        if config.variance == "sampled":
-            for j, n in enumerate(lik.extra_names):
-                v = np.exp(flat[:, d + j])
-                noise[n.removeprefix("log_")] = {"mean": float(v.mean()), "std": float(v.std(ddof=1))}
-        # at the MAP: variances not sampled, and the model-error scales and offsets (model-error)
-        noise.update({k: {"mean": v} for k, v in lik.variance_estimates(x_map[:d]).items() if k not in noise})
-
-    if predictor is not None:
-        lik.predictor = exact_predictor  # scores and evidence with the exact model
-        idx = None if pairing is None else pairing.model_index
-        fit = modal_fit(predictor, observations, x_map[:d], idx)
-        fit_nominal = modal_fit(predictor, observations, model.nominal_theta(), idx)
+def _search_map(run: _Run, warm_start: Posterior | None) -> None:
+    """The MAP from the prior mean, prior draws, a previous posterior's draws and the last MAP."""
+    jp, d = run.jp, run.d
+    if run.starts_theta is None:
+        run.starts_theta = np.vstack([np.atleast_2d([p.mean for p in jp.priors]), jp.sample(run.rng, 400)])
+        if warm_start is not None and list(warm_start.parameter_names) == list(jp.names):
+            previous = warm_start.samples[run.rng.permutation(len(warm_start.samples))[:200]]
+            run.starts_theta = np.vstack([warm_start.theta("mean")[None, :], previous, run.starts_theta])
     else:
-        fit = lik.fit(x_map[:d])
-        fit_nominal = lik.fit(model.nominal_theta())
+        run.starts_theta = np.vstack([run.x_map[None, :d], run.starts_theta])
+    lik = run.lik
+    run.names = list(jp.names) + list(lik.extra_names)
+    starts = np.hstack([run.starts_theta, lik.extra_initial(run.rng, run.starts_theta.shape[0])])
+    prior_std = np.array([p.std if np.isfinite(p.std) else 1.0 for p in jp.priors])
+    run.scale = np.concatenate([prior_std, np.ones(lik.n_extra)])
+    run.x_map, run.lp_map = find_map(_log_posterior(jp, lik), starts, run.scale, seed=run.config.seed)
 
-    map_modes = _map_modes(model, observations, x_map[:d], fit) if predictor is not None else {}
 
-    log_z = log_z_err = None
-    if config.evidence:
-        t2 = time.perf_counter()
-        marginal = lik if getattr(lik, "variance", "marginal") == "marginal" else \
-            _marginal_twin(model, observations, config, predictor,
-                           None if pairing is None else pairing.model_index)
-        saved = getattr(marginal, "predictor", None)
-        note = _one_point_predictor(model, marginal, x_map[:d], cov[:d, :d])
-        try:
-            ev = nested_evidence(lambda x: safe_loglik(marginal, x, d), jp, n_live=config.n_live,
-                                 seed=config.seed)
-        finally:
-            if saved is not None:
-                marginal.predictor = saved
-        log_z, log_z_err = ev.log_evidence, ev.log_evidence_err
-        timing["evidence_s"] = time.perf_counter() - t2
-        diag["evidence_method"] = ev.method + (f", {note}" if note else "")
-    timing["total_s"] = time.perf_counter() - t0
+def _pair_again_at_map(run: _Run) -> bool:
+    """Once, at the MAP: a nominal model far from the data may have paired a mode wrongly. True when
+    the pairing changed (the likelihood is then rebuilt and the MAP searched again)."""
+    if run.pairing is None or not run.config.pair_at_map:
+        return False
+    again = _gated(run.predictor, run.full_obs, run.x_map[:run.d], run.pairing.gate)
+    if again.same_as(run.pairing) or again.observed.size == 0:
+        return False
+    before = run.pairing.describe(run.full_obs.mode_numbers, run.pairing_at)
+    run.pairing, run.pairing_at = again, "MAP"
+    after = run.pairing.describe(run.full_obs.mode_numbers, run.pairing_at)
+    run.warnings.append(f"pairing changed at the MAP: observed modes {before['observed_modes']} -> "
+                        f"model modes {before['model_modes']} became {after['observed_modes']} -> "
+                        f"{after['model_modes']}; the MAP was searched again")
+    _use_pairing(run)
+    return True
+
+
+def _after_map(run: _Run) -> None:
+    """The modes left out by the pairing (reported) and the Laplace covariance at the MAP."""
+    gate = run.pairing.gate if run.pairing is not None else PairingGate()
+    if run.pairing is not None:
+        run.unmodelled = [u.to_dict() for u in run.pairing.unmodelled]
+        run.warnings += [u.message(gate) for u in run.pairing.unmodelled]
+    if isinstance(run.full_obs, ModalObservations) and run.full_obs.unmodelled_modes:
+        # modes of a recording's windows that paired with no model mode (observations_for_model)
+        run.unmodelled += list(run.full_obs.unmodelled_modes)
+        run.warnings += [UnmodelledMode(**u).message(gate) for u in run.full_obs.unmodelled_modes]
+    run.cov = laplace_covariance(_log_posterior(run.jp, run.lik), run.x_map, run.scale)
+    run.timing["map_s"] = time.perf_counter() - run.t0
+
+
+def _sample(run: _Run) -> None:
+    """MCMC from the MAP with the registered sampler (with a Rayleigh-Ritz predictor when it is exact
+    enough); a better point found by the chains becomes the MAP."""
+    lik = run.lik
+    ritz = _ritz_predictor(run)
+    if ritz is not None:
+        lik = run.paired_likelihood(ritz[0])
+        run.predictor_note = ritz[1]
+    t1 = time.perf_counter()
+    c = run.config
+    settings = SamplerSettings(c.sampler, c.n_chains, c.n_steps, c.max_steps, c.burn_in, c.rhat_target,
+                               c.ess_target, c.seed, run.progress)
+    run.chains = sampler_kind(c.sampler).run(_log_posterior(run.jp, lik), run.x_map, run.cov, settings,
+                                             run.names)
+    run.timing["sampling_s"] = time.perf_counter() - t1
+    flat_lp = run.chains.log_prob.reshape(-1)
+    best = int(np.argmax(flat_lp))
+    if flat_lp[best] > run.lp_map:
+        run.x_map, run.lp_map = run.chains.flat[best].copy(), float(flat_lp[best])
+    run.warnings += list(run.chains.warnings)
+
+
+def _evidence(run: _Run) -> None:
+    """Log evidence by nested sampling over theta, the variances integrated out."""
+    if not run.config.evidence:
+        return
+    t2 = time.perf_counter()
+    d = run.d
+    cheaper = _one_point_predictor(run)
+    marginal = run.lik
+    if cheaper is not None or run.config.variance != Variance.MARGINAL.value:
+        twin = UpdateConfig(**{**asdict(run.config), "variance": Variance.MARGINAL.value})
+        predictor = cheaper[0] if cheaper is not None else run.predictor
+        marginal = run.paired_likelihood(predictor, twin) if run.kind.modal else \
+            run.kind.build(LikelihoodInputs(run.model, run.observations, twin))
+    ev = nested_evidence(lambda x: safe_loglik(marginal, x, d), run.jp, n_live=run.config.n_live,
+                         seed=run.config.seed)
+    run.log_z, run.log_z_err = ev.log_evidence, ev.log_evidence_err
+    run.timing["evidence_s"] = time.perf_counter() - t2
+    run.evidence_method = ev.method + (f", {cheaper[1]}" if cheaper is not None else "")
+
+
+def _summarise(run: _Run) -> Posterior:
+    """The posterior: parameter summaries, diagnostics, noise, fit at the MAP and nominal, MAP modes."""
+    assert run.chains is not None
+    d, jp, chains = run.d, run.jp, run.chains
+    flat = chains.flat
+    theta_map = run.x_map[:d]
+    if run.kind.modal:
+        idx = None if run.pairing is None else run.pairing.model_index
+        fit = modal_fit(run.predictor, run.observations, theta_map, idx)
+        fit_nominal = modal_fit(run.predictor, run.observations, run.model.nominal_theta(), idx)
+        map_modes = _map_modes(run.model, run.observations, theta_map, fit)
+    else:
+        fit, fit_nominal, map_modes = run.lik.fit(theta_map), run.lik.fit(run.model.nominal_theta()), {}
+    run.timing["total_s"] = time.perf_counter() - run.t0
     return Posterior(
-        parameter_names=list(jp.names), parameters=summary, samples=flat[:, :d].copy(),
-        log_prob=flat_lp, chains=chains.chains, chain_names=names, diagnostics=diag, fit=fit,
-        fit_nominal=fit_nominal, log_evidence=log_z, log_evidence_err=log_z_err, noise=noise,
-        priors={p.name: p.describe() for p in jp.priors}, warnings=warnings_, timing_s=timing,
-        map_modes=map_modes, unmodelled_modes=unmodelled)
+        parameter_names=list(jp.names), parameters=summarise(flat[:, :d], theta_map, jp.names),
+        samples=flat[:, :d].copy(), log_prob=chains.log_prob.reshape(-1), chains=chains.chains,
+        chain_names=run.names, diagnostics=_diagnostics(run), fit=fit, fit_nominal=fit_nominal,
+        log_evidence=run.log_z, log_evidence_err=run.log_z_err, noise=_noise(run),
+        priors={p.name: p.describe() for p in jp.priors}, warnings=run.warnings, timing_s=run.timing,
+        map_modes=map_modes, unmodelled_modes=run.unmodelled)
+
+
+def _diagnostics(run: _Run) -> dict[str, Any]:
+    ch = run.chains
+    assert ch is not None
+    diag = {
+        "sampler": ch.sampler, "rhat_max": ch.diagnostics.rhat_max, "ess_min": ch.diagnostics.ess_min,
+        "acceptance": ch.acceptance, "converged": ch.converged,
+        "n_chains": int(ch.chains.shape[0]), "n_draws": int(ch.chains.shape[1]),
+        "burn_in": int(ch.burn_in), "n_steps": int(ch.n_steps), "n_evaluations": int(ch.n_evaluations),
+        "rhat": dict(zip(run.names, map(float, ch.diagnostics.rhat), strict=True)),
+        "ess_bulk": dict(zip(run.names, map(float, ch.diagnostics.ess_bulk), strict=True)),
+        "likelihood": run.config.likelihood,
+        "n_windows": int(getattr(run.observations, "n_windows", 1)),
+        "predictor": (run.predictor_note or type(run.predictor).__name__) if run.predictor is not None
+        else "time-domain",
+    }
+    if run.pairing is not None:
+        diag["pairing"] = run.pairing.describe(run.full_obs.mode_numbers, run.pairing_at)
+    if run.evidence_method is not None:
+        diag["evidence_method"] = run.evidence_method
+    return diag
+
+
+def _noise(run: _Run) -> dict[str, Any]:
+    """Sampled variances (posterior mean and std), then the likelihood's own estimates at the MAP."""
+    assert run.chains is not None
+    flat, d = run.chains.flat, run.d
+    noise: dict[str, Any] = {}
+    for j, n in enumerate(run.lik.extra_names if run.config.variance == Variance.SAMPLED.value else []):
+        v = np.exp(flat[:, d + j])
+        noise[n.removeprefix("log_")] = {"mean": float(v.mean()), "std": float(v.std(ddof=1))}
+    estimates = run.lik.variance_estimates(run.x_map[:d])
+    noise.update({k: {"mean": v} for k, v in estimates.items() if k not in noise})
+    return noise
 
 
 def _gated(predictor: Any, obs: ModalObservations, theta: np.ndarray, gate: PairingGate) -> ModePairing:
     """The data's modes (mean frequency, mean shape) paired with the model's at one theta."""
     phi = obs.reference_shapes() if (predictor.sensor_ids and obs.has_shapes) else None
     return pair_with_model(predictor, obs.mean_frequencies(), phi, theta, gate, obs.mode_numbers)
-
-
-def _paired_likelihood(model: AffineModel, obs: ModalObservations, config: UpdateConfig, predictor: Any,
-                       pairing: ModePairing) -> tuple[ModalObservations, Any]:
-    """The data restricted to the paired modes and the likelihood with that fixed pairing."""
-    kept = select_modes(obs, pairing.observed)
-    lik, _ = build_likelihood(model, kept, config, predictor=predictor, pairing=pairing.model_index)
-    return kept, lik
 
 
 def _map_modes(model: AffineModel, obs: ModalObservations, theta: np.ndarray, fit: dict) -> dict:
@@ -572,70 +623,56 @@ def safe_loglik(lik: Any, x: np.ndarray, d: int) -> np.ndarray:
     return out
 
 
-def _modes_used(lik: Any) -> int:
+def _modes_used(run: _Run) -> int:
     """How many of the model's lowest modes the likelihood reads (its pairing may skip some)."""
-    st = lik.stats
-    return int(st.model_index.max()) + 1 if st.model_index is not None and st.model_index.size else len(st.f_ref)
+    assert run.pairing is not None
+    return int(run.pairing.model_index.max()) + 1
 
 
-def _try_ritz(model: AffineModel, lik: Any, predictor: Any, x_map: np.ndarray, cov: np.ndarray,
-              d: int, config: UpdateConfig, rng: np.random.Generator) -> str | None:
-    """Swap in a Rayleigh-Ritz predictor for sampling when the model is large and the projection
-    is accurate to 1e-7 (frequencies, MAC) over a wide region around the MAP (6 Laplace standard
-    deviations); otherwise keep the exact predictor. Returns a note for the diagnostics or None."""
+def _ritz_predictor(run: _Run) -> tuple[Any, str] | None:
+    """A Rayleigh-Ritz predictor for sampling, with a note for the diagnostics, when the model is
+    large and the projection is accurate to 1e-7 (frequencies, MAC) over a wide region around the
+    MAP (6 Laplace standard deviations); None keeps the exact predictor."""
     from .forward import RitzModalPredictor
 
-    if not config.ritz or predictor is None or model.n_dof < 40:
+    model, predictor, d, x_map, cov = run.model, run.predictor, run.d, run.x_map, run.cov
+    if not run.config.ritz or predictor is None or model.n_dof < 40:
         return None
     sd = np.sqrt(np.clip(np.diag(cov)[:d], 0, None))
     step = np.maximum(3.0 * sd, 1e-3 * np.abs(x_map[:d]))
     ritz = RitzModalPredictor(model, predictor.sensor_ids, predictor.n_modes, x_map[:d], step)
     L = np.linalg.cholesky(cov[:d, :d] + 1e-300 * np.eye(d))
-    check = x_map[:d] + 6.0 * rng.standard_normal((64, d)) @ L.T / np.sqrt(d)
+    check = x_map[:d] + 6.0 * run.rng.standard_normal((64, d)) @ L.T / np.sqrt(d)
     check = np.vstack([x_map[:d], check[np.all(check > 0, axis=1)]])
-    n_req = _modes_used(lik)
-    ferr, macerr = ritz.max_error(predictor, check, min(n_req + 1, predictor.n_modes))
+    ferr, macerr = ritz.max_error(predictor, check, min(_modes_used(run) + 1, predictor.n_modes))
     if ferr < 1e-7 and macerr < 1e-7:
-        lik.predictor = ritz
-        return f"ritz({ritz.basis_size} of {model.n_dof} DOF; max freq error {ferr:.1e})"
+        return ritz, f"ritz({ritz.basis_size} of {model.n_dof} DOF; max freq error {ferr:.1e})"
     return None
 
 
-def _one_point_predictor(model: AffineModel, lik: Any, theta: np.ndarray, cov: np.ndarray) -> str | None:
+def _one_point_predictor(run: _Run) -> tuple[Any, str] | None:
     """Nested sampling evaluates one point at a time, where the IIRS iteration's per-call cost
     dominates; the full model gives the same modes (checked: 1e-6 in frequency, MAC, at 32 points
     around the MAP) and is far cheaper per point for small models, so it is used for the evidence."""
     from .forward import FullModalPredictor, ReducedModalPredictor
 
-    pred = getattr(lik, "predictor", None)
+    pred, model, theta = run.predictor, run.model, run.x_map[:run.d]
     if not isinstance(pred, ReducedModalPredictor) or model.n_dof > 40:
         return None
     full = FullModalPredictor(model, pred.sensor_ids, pred.n_modes)
     rng = np.random.default_rng(0)
-    L = np.linalg.cholesky(cov + 1e-300 * np.eye(theta.size))
+    L = np.linalg.cholesky(run.cov[:run.d, :run.d] + 1e-300 * np.eye(theta.size))
     pts = np.vstack([theta, theta + 6.0 * rng.standard_normal((31, theta.size)) @ L.T])
     pts = pts[np.all(pts > 0, axis=1)]
     f_r, p_r = pred(pts)
     f_f, p_f = full(pts)
-    n = min(_modes_used(lik), pred.n_modes)
+    n = min(_modes_used(run), pred.n_modes)
     ok = np.max(np.abs(f_r[:, :n] / f_f[:, :n] - 1)) < 1e-6
     if p_r.shape[1]:
         ok &= np.max(1 - mac(np.swapaxes(p_r[:, :, :n], 1, 2), np.swapaxes(p_f[:, :, :n], 1, 2))) < 1e-6
     if not ok:
         return None
-    lik.predictor = full
-    return "full model (equal to the IIRS model to 1e-6, cheaper per point)"
-
-
-def _marginal_twin(model: AffineModel, data: Any, config: UpdateConfig, predictor: Any = None,
-                   pairing: np.ndarray | None = None):
-    """The same likelihood with the variances integrated out (the evidence needs only theta)."""
-    twin = UpdateConfig(**{**asdict(config), "variance": "marginal"})
-    if pairing is None:
-        lik, _ = build_likelihood(model, data, twin)
-    else:
-        lik, _ = build_likelihood(model, data, twin, predictor=predictor, pairing=pairing)
-    return lik
+    return full, "full model (equal to the IIRS model to 1e-6, cheaper per point)"
 
 
 def priors_from_structure(spec: Any) -> list[Any]:

@@ -26,10 +26,10 @@ from collections.abc import Callable
 import numpy as np
 from scipy.optimize import minimize
 
-from shm_ros.core.bayes.observations import ModalObservations
 from shm_ros.core.bayes.pairing import PairingGate, gated_pairing
-from shm_ros.core.bayes.priors import priors_from_specs
 from shm_ros.core.models import build_model
+from shm_ros.core.observations import ModalObservations
+from shm_ros.core.priors import priors_from_specs
 from shm_ros.core.structure import StructureSpec
 
 from .candidates.base import CANDIDATES, Candidate, Context

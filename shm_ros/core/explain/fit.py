@@ -302,7 +302,7 @@ def evidence_check(fn: GainFn, box: Box, n_live: int, seed: int) -> tuple[float,
 def nested_check(fn: GainFn, box: Box, n_live: int, seed: int) -> tuple[float, float]:
     """ln Z by nested sampling (dynesty) on the unit cube."""
     from shm_ros.core.bayes.evidence import nested_evidence
-    from shm_ros.core.bayes.priors import JointPrior, Prior
+    from shm_ros.core.priors import JointPrior, Prior
 
     prior = JointPrior([Prior.make("uniform", {"low": 0.0, "high": 1.0}, s.name) for s in box.specs])
     res = nested_evidence(lambda u: _evaluate(fn, box, u), prior, n_live=n_live, dlogz=0.1, seed=seed,

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 
 from .candidates.base import Candidate
 from .config import ExplainConfig

@@ -28,8 +28,8 @@ import math
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
 from shm_ros.core.modal import sign_aligned
+from shm_ros.core.observations import ModalObservations
 
 from .candidates.base import Modification
 from .surrogate import Surrogate, _eig

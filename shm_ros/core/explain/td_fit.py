@@ -31,11 +31,11 @@ from scipy.special import logsumexp
 from scipy.stats import norm
 
 from shm_ros.core.bayes.likelihoods import ig_marginal_loglik
-from shm_ros.core.bayes.priors import JointPrior
 from shm_ros.core.bayes.records import JointTimeDomainLikelihood
 from shm_ros.core.bayes.timedomain import ar_fit
-from shm_ros.core.predict.batch import batch_responses
 from shm_ros.core.predict.signals import nrms_pct
+from shm_ros.core.priors import JointPrior
+from shm_ros.core.response.batch import batch_responses
 
 from .candidates.base import Candidate
 from .td_model import FactorModel, shape_logprior

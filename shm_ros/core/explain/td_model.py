@@ -17,7 +17,7 @@ one (``zeta_1``, ``omega_1`` of the unsoftened model at ``theta``): a mode ``j``
 the one of the unsoftened model: a softening spring leaves its dashpot alone, as in the simulator's
 truth. The damper braces' dashpots are not scaled (their own law, not the structure's damping).
 Rows ``[theta, r, s, d, g]`` (``r`` the damping shape, :data:`SHAPE_NAME`) go through the shared response code
-(:func:`shm_ros.core.predict.batch.batch_responses`), so a batch of parameter sets is one batched
+(:func:`shm_ros.core.response.batch.batch_responses`), so a batch of parameter sets is one batched
 discretisation per event.
 """
 

@@ -96,7 +96,7 @@ def node_steps(model: AffineModel, rows: np.ndarray, col: int, lo: np.ndarray, h
 def varying_responses(steps: NodeSteps, values: np.ndarray, seg_len: int, u: np.ndarray) -> np.ndarray:
     """Outputs (B, n_outputs, N) from rest of the draws of ``steps`` whose factor takes ``values[:, j]``
     (B, J; inside the nodes' range) in samples ``j * seg_len`` to ``(j + 1) * seg_len`` (the last
-    segment to the end); ``u`` (n_inputs, N) as for :func:`shm_ros.core.predict.batch.batch_responses`."""
+    segment to the end); ``u`` (n_inputs, N) as for :func:`shm_ros.core.response.batch.batch_responses`."""
     values = np.atleast_2d(np.asarray(values, float))
     B, n = values.shape[0], steps.nodes.shape[1]
     W = _lagrange(steps.nodes, values)  # (B, J, n)

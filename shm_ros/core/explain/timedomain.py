@@ -29,11 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from shm_ros.core.bayes.priors import priors_from_specs
 from shm_ros.core.bayes.records import JointTimeDomainLikelihood, RecordSet
 from shm_ros.core.config import option
 from shm_ros.core.models import build_model
 from shm_ros.core.predict.record import EventRecord
+from shm_ros.core.priors import priors_from_specs
 from shm_ros.core.structure import StructureSpec
 
 from .candidates._common import amplitude

@@ -254,10 +254,6 @@ class IngestCore:
         self._temps_t.append(t)
         self._temps_v.append(v)
 
-    def add_temperature_array(self, sensor_id: str, stamps_ns: np.ndarray, values_c: np.ndarray) -> None:
-        for t, v in zip(np.asarray(stamps_ns).tolist(), np.asarray(values_c).tolist(), strict=True):
-            self.add_temperature(sensor_id, t, v)
-
     def report_error(self, source: str, message: str, level: Level | int = Level.ERROR,
                      code: str = "input_error") -> None:
         """Record a fault found outside the core (e.g. a bag that cannot be read further)."""

@@ -343,10 +343,9 @@ class AffineModel:
             raise ValueError(f"model {self.name!r} is not a girder: it has no deck coordinates")
         return deck_observation(self.node_x, list(xs))
 
-    @property
-    def observed_sensors(self) -> list[str]:
-        """Sensors the model can observe, in structure-file order."""
-        return list(self.sensor_rows)
+    def observed_sensors(self, sensor_ids: list[str] | None = None) -> list[str]:
+        """Those of ``sensor_ids`` (default: all the model's) that the model observes, order kept."""
+        return [s for s in (sensor_ids or list(self.sensor_rows)) if s in self.sensor_rows]
 
     def master_dofs(self, sensor_ids: list[str] | None = None) -> list[int]:
         """DOF indices of sensors located on DOFs (the masters of a reduction), sensor order kept.

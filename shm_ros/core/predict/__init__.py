@@ -10,7 +10,8 @@ uncertainty, at measured and unmeasured floors (docs/predict.md, docs/interfaces
 - :mod:`.scores`  Table 3 and the JSON of ``prediction.json``.
 """
 
-from .batch import batch_responses
+from shm_ros.core.response.batch import batch_responses
+
 from .config import Baseline, PredictConfig, Unmeasured
 from .draws import PosteriorDraws, draws_from_posterior, nominal_draws
 from .predict import ChannelPrediction, EventPrediction, predict_event, prediction_outputs

@@ -24,8 +24,8 @@ from scipy.stats import norm
 
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import Output, Quantity, drift_outputs, node_row, sensor_outputs
+from shm_ros.core.response.batch import batch_responses, single_blas_thread
 
-from .batch import batch_responses, single_blas_thread
 from .config import PredictConfig, Unmeasured
 from .draws import PosteriorDraws, nominal_draws
 from .expansion import expansion_matrix

@@ -5,14 +5,13 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 
+from shm_ros.core.response.signals import arias_fractions, strong_motion
+
 from .config import Baseline, PredictConfig
 from .record import EventRecord
 
-
-def arias_fractions(a: np.ndarray) -> np.ndarray:
-    """Cumulative Arias intensity of ``a`` (N,) normalised to 1 at the end (0 for a silent record)."""
-    c = np.cumsum(np.asarray(a, dtype=float) ** 2)
-    return c / c[-1] if c.size and c[-1] > 0 else np.zeros_like(c)
+__all__ = ["arias_fractions", "strong_motion", "pre_event_end", "baseline_correct", "local_mean_square",
+           "nrms_pct"]
 
 
 def pre_event_end(a: np.ndarray, fs: float, onset_arias: float, min_pre_event_s: float) -> int:
@@ -38,12 +37,6 @@ def baseline_correct(x: np.ndarray, n_pre: int, how: Baseline | str) -> np.ndarr
     coef, *_ = np.linalg.lstsq(A[ok], pre2[ok], rcond=None)
     trend = np.column_stack([np.ones_like(t), t]) @ coef
     return x - trend.reshape(x.shape)
-
-
-def strong_motion(a: np.ndarray, lo: float = 0.05, hi: float = 0.95) -> slice:
-    """Samples between ``lo`` and ``hi`` of the Arias intensity of ``a`` (the strong-motion part)."""
-    f = arias_fractions(np.asarray(a, dtype=float))
-    return slice(int(np.searchsorted(f, lo)), int(np.searchsorted(f, hi)) + 1)
 
 
 def local_mean_square(y: np.ndarray, fs: float, window_s: float) -> np.ndarray:

@@ -4,7 +4,7 @@ Two recursions run sample by sample and so cannot be vectorised over time:
 
 * :func:`first_order_filters`: many complex first-order filters ``q[k] = p q[k-1] + beta u[k] +
   alpha u[k-1]`` from rest, each with its own pole and weights (the modal route of
-  :mod:`shm_ros.core.predict.batch`). ``scipy.signal.lfilter`` takes one filter per call: a call
+  :mod:`shm_ros.core.response.batch`). ``scipy.signal.lfilter`` takes one filter per call: a call
   per pole, draw and input cost ~50 us each, mostly overhead.
 * :func:`segment_response`: the first-order-hold state recursion whose matrices change segment by
   segment (:mod:`shm_ros.core.explain.td_varying`). scipy has no time-varying state-space filter;

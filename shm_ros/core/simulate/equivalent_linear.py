@@ -54,10 +54,6 @@ class EquivalentLinearTrack:
     damping_ratios: np.ndarray  # (w, n_modes)
     family: str = ""  # the mode family followed ("": every reported mode)
 
-    @property
-    def centre_s(self) -> np.ndarray:
-        return self.start_s + 0.5 * self.length_s
-
 
 @dataclass
 class EventSimulation:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.tracking.config import TrackingConfig
 from shm_ros.core.tracking.environment import EnvironmentalFit
 from shm_ros.core.tracking.novelty import alarm_episodes

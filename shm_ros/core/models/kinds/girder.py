@@ -217,10 +217,6 @@ class GirderMesh:
         i = int(np.argmin(np.abs(self.node_x - x)))
         return i if abs(self.node_x[i] - x) <= tol else None
 
-    def element_at(self, x: float) -> int:
-        e = int(np.searchsorted(self.node_x, x, side="right")) - 1
-        return min(max(e, 0), self.n_elements - 1)
-
 
 def girder_mesh(g: GirderSpec, extra_x: list[float] | None = None, elements_per_span: int | None = None) -> GirderMesh:
     """Nodes: ``elements_per_span`` equal divisions of each span, plus bearings and ``extra_x``.

@@ -1,0 +1,1 @@
+"""The MCMC samplers of updating, one file each; see :mod:`.base` for the extension point."""
