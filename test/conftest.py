@@ -41,3 +41,20 @@ def full_size() -> bool:
 def test_data() -> Path:
     """The repository's own test-data folder, test/data/."""
     return TEST_DATA
+
+
+@pytest.fixture(autouse=True)
+def _two_a_scope_check(request, monkeypatch):
+    """In the identify tests, every identification with the default two-A scope (stable
+    candidates) is redone with the all-orders check and must pick the same modes
+    (test/two_a_scope_check.py; ``SHM_TWO_A_CHECK=0`` leaves it out, to time the tests alone)."""
+    name = request.module.__name__.rsplit(".", 1)[-1]
+    if not name.startswith("test_identify_") or os.environ.get("SHM_TWO_A_CHECK", "1") == "0":
+        yield None
+        return
+    import two_a_scope_check
+
+    check = two_a_scope_check.install(monkeypatch)
+    yield check
+    assert not check.differences, "the two-A check on stable candidates changed the picks: " + \
+        "; ".join(check.differences)
