@@ -290,7 +290,7 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Seq
         if not out_names:
             raise ValueError(f"ssi-io: no output channel besides the input(s) {ins}")
         i = cfg.block_rows or max(20, int(np.ceil(cfg.max_order / len(out_names))) + 2)
-        model = ssi.ssi_io(y, u, fs, i, cfg.max_order, lq="qr" if cfg.lq == "auto" else cfg.lq)
+        model = ssi.ssi_io(y, u, fs, i, cfg.max_order, lq=cfg.lq)
         refs = None
     else:
         y = data
