@@ -85,9 +85,12 @@ def test_killed_batch_resumes_without_redoing_finished_bags(bags, tmp_path):
     assert sorted(second.bags_run) == sorted(set(b.bag for b in bags) - set(first.bags_run))
     assert any(f"resuming: {N_BAGS // 2} of {N_BAGS} bags" in s for s in lines)
     assert _outputs(tmp_path / "resumed") == _outputs(tmp_path / "whole")
+    assert not (tmp_path / "resumed" / ".bags").exists()  # finished: nothing kept
 
-    # other settings: nothing is taken from the earlier run
+    # a killed batch started again with other settings takes nothing from the killed run
+    with pytest.raises(Killed):
+        run_batch(bags, settings, CountingEngine(die_after=1), tmp_path / "other", log=lambda s: None)
     again = CountingEngine()
     run_batch(bags, BatchSettings(window_s=60.0, track={"reference_windows": 4}, run_update=False), again,
-              tmp_path / "resumed", log=lambda s: None)
+              tmp_path / "other", log=lambda s: None)
     assert len(again.bags_run) == N_BAGS

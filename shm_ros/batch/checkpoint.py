@@ -4,7 +4,8 @@ Each bag's job writes its result to ``OUT/.bags/<key>.pkl`` as soon as it is don
 temporary file, then renamed: a job killed half-way leaves nothing). The key covers what the result
 depends on: the bag's path and files (names, sizes, modification times), the structure file's
 content and the batch settings; a bag that changed, or a batch run with other settings, is
-identified again. A restarted batch loads the finished bags and runs the others only. The files are
+identified again. A restarted batch loads the finished bags and runs the others only; a batch that
+has written its outputs removes the folder. The files are
 Python pickles of the batch's own results: read them only from output folders you wrote.
 """
 
@@ -14,6 +15,7 @@ import hashlib
 import json
 import os
 import pickle
+import shutil
 from dataclasses import asdict
 from pathlib import Path
 
@@ -62,3 +64,8 @@ def identify_bag_kept(job: tuple[ArchiveBag, BatchSettings, str]) -> BagResult:
         pickle.dump(result, fh, protocol=pickle.HIGHEST_PROTOCOL)
     os.replace(tmp, target)
     return result
+
+
+def clear(out: str | Path) -> None:
+    """Remove the kept results (the batch has written its outputs)."""
+    shutil.rmtree(Path(out) / FOLDER, ignore_errors=True)

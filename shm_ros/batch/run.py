@@ -3,8 +3,9 @@
 Output folder: one sub-folder per structure (named after the structure) with ``modes.json``,
 ``tracked_modes.csv``, ``tracking.json`` and ``posterior.json`` (when the structure file has
 parameters), and ``batch.json`` with what ran where and every error. Every finished bag is kept in
-``.bags/`` there (:mod:`shm_ros.batch.checkpoint`): a batch killed half-way and started again with
-the same arguments identifies only the bags it had not finished.
+``.bags/`` there until the batch has written its outputs (:mod:`shm_ros.batch.checkpoint`): a batch
+killed half-way and started again with the same arguments identifies only the bags it had not
+finished.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ def run_batch(bags: Sequence[ArchiveBag], settings: BatchSettings, engine: Engin
     structure_results: list[StructureResult] = engine.map(process_structure, jobs,
                                                           progress=_progress("structures", log))
     summary = _write(out, settings, bag_results, structure_results)
+    checkpoint.clear(out)  # finished: the outputs hold everything
     log(f"done in {time.monotonic() - t0:.0f} s -> {out}")
     return summary
 
