@@ -9,6 +9,7 @@ installs it for the ``test_identify_*`` modules.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -42,6 +43,7 @@ class ScopeCheck:
 
     compared: int = 0
     poles: int = 0
+    cpu_s: float = 0.0  # CPU seconds of the comparisons (the all-orders diagrams redone)
     differences: list[str] = field(default_factory=list)
 
     def wrap(self, original):
@@ -50,7 +52,9 @@ class ScopeCheck:
             st = cfg.stability
             if st.two_a and st.two_a_scope == TwoAScope.STABLE:
                 every = replace(cfg, stability=replace(st, two_a_scope=TwoAScope.ALL.value))
+                c0 = time.process_time()
                 ref = original(model, orders, every, duration_s)
+                self.cpu_s += time.process_time() - c0
                 self.compared += 1
                 self.poles += len(out[0])
                 self.differences += [f"{model.method}, {model.block_rows} block rows: {d}"
@@ -64,7 +68,17 @@ class ScopeCheck:
         return diagram_picks
 
 
+TOTAL = ScopeCheck()  # over the test session (printed at its end by conftest.py)
+
+
 def install(monkeypatch) -> ScopeCheck:
     check = ScopeCheck()
     monkeypatch.setattr(identify, "diagram_picks", check.wrap(identify.diagram_picks))
     return check
+
+
+def add_to_total(check: ScopeCheck) -> None:
+    TOTAL.compared += check.compared
+    TOTAL.poles += check.poles
+    TOTAL.cpu_s += check.cpu_s
+    TOTAL.differences += check.differences
