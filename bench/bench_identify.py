@@ -32,6 +32,7 @@ import tracemalloc
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -209,11 +210,11 @@ def main(argv: list[str] | None = None) -> int:
         # timing on the first window: the tools take turns, round after round, so that a change
         # of the machine's load falls on all of them; the median of the rounds is reported
         times: dict[str, list[tuple[float, float]]] = {t: [] for t in tools}
-        results: dict[str, tuple] = {}
+        results: dict[str, Any] = {}
         for _ in range(args.repeat):
             for tool in tools:
                 out, wall, cpu = _once(call(tool, window, truth))
-                results[tool] = out  # type: ignore[assignment]
+                results[tool] = out
                 times[tool].append((wall, cpu))
         for tool in tools:
             f, z, phi = results[tool]
