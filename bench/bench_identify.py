@@ -3,7 +3,8 @@
 One 12-channel x 60,000-sample window (10 min at 100 Hz) of the test-side simulator
 (``test/synthetic_oma.py``: 36-DOF building, non-proportional damping, coloured non-stationary
 forcing, 2 % sensor noise, gravity offsets, drift), 40 block rows, model orders 1..100 step 1,
-uncertainty off. Timed: the whole call from raw window to modal estimate (ours: pre-processing,
+uncertainty off. Timed (median of ``--repeat`` rounds in which the tools take turns, wall and
+CPU seconds): the whole call from raw window to modal estimate (ours: pre-processing,
 subspace step, poles of all orders with both estimates of A, stability, automatic picking;
 pyOMA2: ``SingleSetup.run_by_name`` = Hankel matrix, SVD, poles of all orders, stability labels,
 plus ``mpe`` with the TRUE frequencies given as the selection). Peak memory: tracemalloc peak of
@@ -31,6 +32,7 @@ import tracemalloc
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
+from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -126,21 +128,21 @@ def _pool(per_window: list[list[dict]]) -> list[dict]:
     return out
 
 
-def _timed(fn, *args, repeat: int = 1):
-    """Best wall and CPU time of ``repeat`` runs, then the tracemalloc peak of one more
-    (untimed) run. CPU time (one BLAS thread) is the fairer measure on a shared machine."""
-    best = cpu = np.inf
-    out = None
-    for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
-        out = fn(*args)
-        best = min(best, time.perf_counter() - t0)
-        cpu = min(cpu, time.process_time() - c0)
+def _once(fn, *args) -> tuple[object, float, float]:
+    """One call: its result, wall and CPU seconds (CPU: one BLAS thread; the fairer measure on a
+    shared machine)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    out = fn(*args)
+    return out, time.perf_counter() - t0, time.process_time() - c0
+
+
+def _peak(fn, *args) -> float:
+    """tracemalloc peak (MiB) of one more, untimed run."""
     tracemalloc.start()
     fn(*args)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    return out, best, cpu, peak / 2 ** 20
+    return peak / 2 ** 20
 
 
 # ---------------------------------------------------------------------------- campaign workers
@@ -179,6 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--methods", nargs="+", choices=["ssi-cov", "ssi-data"],
                     default=["ssi-cov", "ssi-data"], help="methods to compare (default both)")
     ap.add_argument("--seed", type=int, default=2024)
+    ap.add_argument("--repeat", type=int, default=5,
+                    help="timing rounds on the first window (median reported; default 5)")
     ap.add_argument("--accuracy-windows", type=int, default=8,
                     help="windows (seeds seed, seed+1, ...) over which accuracy is averaged "
                          "(default 8; the campaign cycles the first 8)")
@@ -197,25 +201,33 @@ def main(argv: list[str] | None = None) -> int:
         # pyOMA2's SSIdat uses
         tools = (["shm_ros", "shm_ros (UPC)"] if method == "ssi-data" else ["shm_ros"]) + [
             "pyOMA2 1.4.3"]
+
+        def call(tool: str, w: Window, tr: so.Truth, method: str = method) -> Callable[[], tuple]:
+            if tool.startswith("shm_ros"):
+                return lambda: _ours(w, method, *(("upc",) if "UPC" in tool else ()))
+            return lambda: _pyoma(w, method, list(tr.frequency_hz[:4]))
+
+        # timing on the first window: the tools take turns, round after round, so that a change
+        # of the machine's load falls on all of them; the median of the rounds is reported
+        times: dict[str, list[tuple[float, float]]] = {t: [] for t in tools}
+        results: dict[str, Any] = {}
+        for _ in range(args.repeat):
+            for tool in tools:
+                out, wall, cpu = _once(call(tool, window, truth))
+                results[tool] = out
+                times[tool].append((wall, cpu))
         for tool in tools:
-            ours = tool.startswith("shm_ros")
-            run: Callable[..., tuple]
-            extra: tuple
-            if ours:
-                run, extra = _ours, (("upc",) if "UPC" in tool else ())
-            else:
-                run, extra = _pyoma, (list(truth.frequency_hz[:4]),)
-            # timing on the first window (pyOMA2 SSI-dat, tens of seconds, is timed once)
-            reps = 1 if (not ours and method == "ssi-data") else 3
-            (f, z, phi), t, cpu, mem = _timed(run, window, method, *extra, repeat=reps)
-            # accuracy over all the accuracy windows
+            f, z, phi = results[tool]
             acc = [_accuracy(truth, f, z, phi)]
             for w, tr in windows[1:]:
-                ex = extra if ours else (list(tr.frequency_hz[:4]),)
-                acc.append(_accuracy(tr, *run(w, method, *ex)))
-            rows.append({"tool": tool, "method": method, "time_s": t, "cpu_s": cpu,
+                acc.append(_accuracy(tr, *call(tool, w, tr)()))
+            wall, cpu = np.median(np.array(times[tool]), axis=0)
+            mem = _peak(call(tool, window, truth))
+            rows.append({"tool": tool, "method": method, "time_s": float(wall), "cpu_s": float(cpu),
+                         "wall_runs": [t[0] for t in times[tool]], "cpu_runs": [t[1] for t in times[tool]],
                          "peak_mib": mem, "accuracy_first": acc[0], "accuracy": _pool(acc)})
-            print(f"{tool} {method}: {t:.3f} s wall, {cpu:.3f} s CPU, {mem:.0f} MiB", flush=True)
+            print(f"{tool} {method}: median {wall:.3f} s wall, {cpu:.3f} s CPU over {args.repeat} "
+                  f"rounds, {mem:.0f} MiB", flush=True)
 
     camp_windows = [w for w, _ in windows[:8]]
     camps = []
@@ -224,12 +236,14 @@ def main(argv: list[str] | None = None) -> int:
         camps.append(c)
         print(f"campaign {method}: {c['windows']} windows in {c['wall_s']:.1f} s", flush=True)
 
-    load = os.getloadavg()[0]
+    load = os.getloadavg()
     result = {"window": {"channels": N_CH, "samples": window.n_samples, "fs_hz": FS,
                          "block_rows": BLOCK_ROWS, "max_order": MAX_ORDER},
               "truth_hz": list(map(float, truth.frequency_hz[:4])),
               "truth_damping": list(map(float, truth.damping_ratio[:4])),
               "runs": rows, "campaign": camps, "load_average": load,
+              "blas_threads": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                              "MKL_NUM_THREADS")},
               "accuracy_windows": len(windows),
               "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
     # a partial run (one method or no campaign) must not overwrite the full run's files
@@ -270,7 +284,9 @@ def _markdown(r: dict) -> str:
                      f"{c['extrapolated_1152_s']:.0f} | {c['dedicated_2core_1152_s']:.0f} |")
     lines.append("")
     lines.append(f"Truth modes 1-4: {', '.join(f'{f:.3f}' for f in r['truth_hz'])} Hz; "
-                 f"load average at the end {r['load_average']:.1f}.")
+                 f"load average at the end (1/5/15 min) "
+                 f"{' / '.join(f'{x:.1f}' for x in r['load_average'])}; wall and CPU are medians of "
+                 "the timing rounds (tools in turn).")
     return "\n".join(lines) + "\n"
 
 

@@ -12,7 +12,8 @@ Two kinds of data, the same channels for every tool:
   (mutual nearest with MAC >= 0.9) are listed side by side.
 
 Settings: shm_ros = ``identify`` defaults (``auto`` -> ``ssi-io``; band, decimation and block rows
-chosen automatically, orders up to 60) on the simulated windows and on the bridge's 200 Hz record
+chosen automatically, orders up to 60) on the simulated windows, with the band from the nominal
+model of the scenario's structure file as ``shm-ros identify`` takes it, and on the bridge's 200 Hz record
 (no nominal model: the band comes from the spectrum); mdof = the bridge decimated to 50 Hz, one
 model of order
 ``--order`` (default 20) and horizon ``--horizon`` (default 40), ``find="AC"`` (modes depend on
@@ -40,11 +41,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 import scipy.signal as sig  # noqa: E402
 
+from shm_ros.core.band import band_frequencies  # noqa: E402
 from shm_ros.core.identify import IdentifyConfig, identify_prepared, identify_window  # noqa: E402
 from shm_ros.core.modal import mac_matrix  # noqa: E402
 from shm_ros.core.preprocess import preprocess  # noqa: E402
 from shm_ros.core.simulate.campaign import simulate_campaign  # noqa: E402
 from shm_ros.core.simulate.scenario import named_scenario  # noqa: E402
+from shm_ros.core.structure import structure_from_dict  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "bench" / "results"
@@ -139,8 +142,12 @@ def simulated(n_windows: int, order: int, horizon: int, repeat: int, okid_window
     rows: dict[str, dict] = {}
     for seed in range(n_windows):
         sc = named_scenario("building-earthquake", n_windows=1, window_s=300.0, seed=seed)
-        sim = simulate_campaign(sc).window(0)
+        campaign = simulate_campaign(sc)
+        sim = campaign.window(0)
         w = sim.to_window()
+        # what `shm-ros identify` does with the structure file: its nominal model sets the band
+        spec = structure_from_dict(campaign.nominal_structure)
+        nominal, _ = band_frequencies(spec, "auto", IdentifyConfig().band_modes)
         # the in-plane (x) modes the ground input excites; y and twist modes are in the truth too
         in_x = np.asarray(sim.truth["mode_families"]) == "x"
         ft = np.asarray(sim.truth["frequencies_hz"])[in_x][:N_MODES]
@@ -152,7 +159,7 @@ def simulated(n_windows: int, order: int, horizon: int, repeat: int, okid_window
         y = y - y.mean(axis=0)
         dt = 1.0 / w.sample_rate_hz
         tools = {
-            "shm_ros ssi-io (identify defaults)": partial(_ours, w),
+            "shm_ros ssi-io (identify defaults)": partial(_ours, w, nominal),
             f"mdof SRIM (order {order})": partial(mdof_modes, u, y, dt, "srim", order, horizon),
         }
         if seed < okid_windows:  # minutes of CPU per 300 s window
@@ -178,8 +185,8 @@ def simulated(n_windows: int, order: int, horizon: int, repeat: int, okid_window
     return out
 
 
-def _ours(window):
-    est = identify_window(window)
+def _ours(window, nominal: list[float] | None):
+    est = identify_window(window, IdentifyConfig(nominal_frequencies_hz=nominal))
     return np.array([m.frequency_hz for m in est.modes]), np.array([m.damping_ratio for m in est.modes])
 
 

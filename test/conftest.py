@@ -41,3 +41,29 @@ def full_size() -> bool:
 def test_data() -> Path:
     """The repository's own test-data folder, test/data/."""
     return TEST_DATA
+
+
+@pytest.fixture(autouse=True)
+def _two_a_scope_check(request, monkeypatch):
+    """In the identify tests, every identification with the default two-A scope (stable
+    candidates) is redone with the all-orders check and must pick the same modes
+    (test/two_a_scope_check.py; ``SHM_TWO_A_CHECK=0`` leaves it out, to time the tests alone)."""
+    name = request.module.__name__.rsplit(".", 1)[-1]
+    if not name.startswith("test_identify_") or os.environ.get("SHM_TWO_A_CHECK", "1") == "0":
+        yield None
+        return
+    import two_a_scope_check
+
+    check = two_a_scope_check.install(monkeypatch)
+    yield check
+    two_a_scope_check.add_to_total(check)
+    assert not check.differences, "the two-A check on stable candidates changed the picks: " + \
+        "; ".join(check.differences)
+
+
+def pytest_terminal_summary(terminalreporter):
+    checker = sys.modules.get("two_a_scope_check")
+    if checker is not None and checker.TOTAL.compared:
+        t = checker.TOTAL
+        terminalreporter.write_line(f"two-A scope check: {t.compared} identifications compared with the "
+                                    f"all-orders check, {len(t.differences)} differences, {t.cpu_s:.1f} s CPU")

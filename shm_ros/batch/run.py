@@ -2,7 +2,10 @@
 
 Output folder: one sub-folder per structure (named after the structure) with ``modes.json``,
 ``tracked_modes.csv``, ``tracking.json`` and ``posterior.json`` (when the structure file has
-parameters), and ``batch.json`` with what ran where and every error.
+parameters), and ``batch.json`` with what ran where and every error. Every finished bag is kept in
+``.bags/`` there until the batch has written its outputs (:mod:`shm_ros.batch.checkpoint`): a batch
+killed half-way and started again with the same arguments identifies only the bags it had not
+finished.
 """
 
 from __future__ import annotations
@@ -15,9 +18,10 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+from shm_ros.batch import checkpoint
 from shm_ros.batch.archive import ArchiveBag
 from shm_ros.batch.engines import Engine
-from shm_ros.batch.jobs import BagResult, BatchSettings, StructureResult, identify_bag, process_structure
+from shm_ros.batch.jobs import BagResult, BatchSettings, StructureResult, process_structure
 from shm_ros.core.progress import Progress
 
 
@@ -27,8 +31,16 @@ def run_batch(bags: Sequence[ArchiveBag], settings: BatchSettings, engine: Engin
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     log(f"{len(bags)} bags, {len({b.structure for b in bags})} structure(s), engine {engine.name}")
-    bag_results: list[BagResult] = engine.map(identify_bag, [(b, settings) for b in bags],
-                                              progress=_progress("bags", log))
+    kept = [checkpoint.path_for(out, b, settings) for b in bags]
+    finished = {i: r for i, p in enumerate(kept) if (r := checkpoint.load(p)) is not None}
+    if finished:
+        log(f"resuming: {len(finished)} of {len(bags)} bags already identified "
+            f"({out / checkpoint.FOLDER}); {len(bags) - len(finished)} to go")
+    todo = [i for i in range(len(bags)) if i not in finished]
+    fresh = engine.map(checkpoint.identify_bag_kept, [(bags[i], settings, str(kept[i])) for i in todo],
+                       progress=_progress("bags", log))
+    finished.update(zip(todo, fresh, strict=True))
+    bag_results: list[BagResult] = [finished[i] for i in range(len(bags))]
     groups: dict[str, list] = {}
     for r in bag_results:
         groups.setdefault(r.structure, []).extend(r.estimates)
@@ -36,6 +48,7 @@ def run_batch(bags: Sequence[ArchiveBag], settings: BatchSettings, engine: Engin
     structure_results: list[StructureResult] = engine.map(process_structure, jobs,
                                                           progress=_progress("structures", log))
     summary = _write(out, settings, bag_results, structure_results)
+    checkpoint.clear(out)  # finished: the outputs hold everything
     log(f"done in {time.monotonic() - t0:.0f} s -> {out}")
     return summary
 

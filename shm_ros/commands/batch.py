@@ -10,6 +10,8 @@ the nearest structure.yaml in its folder or above it, so one archive may hold ma
 The jobs run on Dask: a local cluster of --workers single-threaded processes by default, or the
 cluster whose scheduler is --scheduler. --config is YAML with optional sections `identify`,
 `track`, `update` (each a mapping of that stage's options) and `window_s`.
+A killed batch resumes: the same command again skips the bags it had finished (kept in
+DIR/.bags/ until the outputs are written).
 """
 
 from __future__ import annotations

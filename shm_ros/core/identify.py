@@ -31,15 +31,20 @@ from shm_ros.core.stabilization import (
     FilterReport,
     PickedMode,
     PickingConfig,
+    PoleFlags,
     StabilityConfig,
+    TwoAScope,
     classify,
     pick_modes_reported,
     real_mode_shape,
+    standard_error,
+    two_a_flags,
 )
 from shm_ros.core.types import ModalEstimate, Mode, Window
 
 __all__ = ["Method", "Weighting", "LQ", "IdentifyConfig", "IdentificationResult", "identify_window",
-           "identify_window_detailed", "identify_prepared", "identify_array", "METHODS"]
+           "identify_window_detailed", "identify_prepared", "identify_array", "diagram_picks",
+           "METHODS"]
 
 
 class Method(enum.StrEnum):
@@ -132,6 +137,7 @@ class IdentifyConfig:
         check_choice("identify", "weighting", self.weighting, Weighting)
         check_choice("identify", "lq", self.lq, LQ)
         check_choice("identify", "band", self.band, BandSource)
+        check_choice("identify", "stability.two_a_scope", self.stability.two_a_scope, TwoAScope)
         self.preprocess.validate()
         return self
 
@@ -284,7 +290,7 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Seq
         if not out_names:
             raise ValueError(f"ssi-io: no output channel besides the input(s) {ins}")
         i = cfg.block_rows or max(20, int(np.ceil(cfg.max_order / len(out_names))) + 2)
-        model = ssi.ssi_io(y, u, fs, i, cfg.max_order, lq="qr" if cfg.lq == "auto" else cfg.lq)
+        model = ssi.ssi_io(y, u, fs, i, cfg.max_order, lq=cfg.lq)
         refs = None
     else:
         y = data
@@ -302,13 +308,7 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Seq
         else:
             model = ssi.ssi_data(y, fs, i, cfg.max_order, refs, lq=cfg.lq, weighting=cfg.weighting)
     orders = np.arange(max(1, cfg.min_order), model.observability.shape[1] + 1, cfg.order_step)
-    st = cfg.stability
-    poles = ssi.poles_all_orders(model, orders, two_a=st.two_a, match_scale=(
-        st.two_a_freq_tol, st.two_a_damping_tol, st.two_a_mac_min),
-        shapes_for=(st.freq_tol, st.damping_tol),
-        std_scale=max(st.damping_sigmas, st.two_a_sigmas) / np.sqrt(data.shape[0] / fs))
-    flags = classify(poles, cfg.stability, fs, duration_s=data.shape[0] / fs)
-    picked, report = pick_modes_reported(poles, flags, cfg.picking, use_filters=cfg.use_filters)
+    poles, flags, picked, report = diagram_picks(model, orders, cfg, data.shape[0] / fs)
     std_f = np.full(len(picked), np.nan)
     std_z = np.full(len(picked), np.nan)
     if cfg.uncertainty and picked and method in (Method.SSI_COV, Method.SSI_DATA):
@@ -334,6 +334,29 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Seq
         f_sp, p_sp = sig.welch(y, fs=fs, nperseg=min(4096, y.shape[0]), axis=0)
         diagram.spectrum_hz, diagram.spectrum = f_sp, p_sp.mean(axis=1)
     return IdentificationResult(est, diagram, fs, out_names, notes, filters=report)
+
+
+def diagram_picks(model: ssi.SubspaceModel, orders: np.ndarray, cfg: IdentifyConfig, duration_s: float
+                  ) -> tuple[ssi.PoleSet, PoleFlags, list[PickedMode], FilterReport]:
+    """Poles of every order, their flags, the picked modes and the filter report.
+
+    The two-A check validates the poles ``stability.two_a_scope`` says: every pole of every
+    order, or (default) the stable, physical candidates, at the orders where they occur
+    (:func:`shm_ros.core.ssi.two_a_partners`). Only those candidates enter picking, and each
+    gets the same verdict either way, so the picks are the same."""
+    st = cfg.stability
+    every = st.two_a and st.two_a_scope == TwoAScope.ALL
+    match = (st.two_a_freq_tol, st.two_a_damping_tol, st.two_a_mac_min)
+    std_scale = max(st.damping_sigmas, st.two_a_sigmas) / np.sqrt(duration_s)
+    poles = ssi.poles_all_orders(model, orders, two_a=every, match_scale=match,
+                                 shapes_for=(st.freq_tol, st.damping_tol), std_scale=std_scale)
+    flags = classify(poles, st, model.sample_rate_hz, duration_s=duration_s)
+    if st.two_a and not every:
+        poles = ssi.two_a_partners(model, poles, flags.stable & flags.physical_ok, match, std_scale)
+        sigma = standard_error(poles.frequency_hz, poles.damping_ratio, duration_s)
+        flags.two_a_ok = two_a_flags(poles, st, sigma)
+    picked, report = pick_modes_reported(poles, flags, cfg.picking, use_filters=cfg.use_filters)
+    return poles, flags, picked, report
 
 
 def _cov_replicates(y: np.ndarray, refs: np.ndarray, i: int, max_order: int, n_blocks: int):

@@ -31,6 +31,7 @@ What each check removed is counted in a :class:`FilterReport`.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,8 +42,18 @@ from shm_ros.core.modal import mac_matrix
 from shm_ros.core.modal import real_shape as real_mode_shape
 from shm_ros.core.ssi import PoleSet
 
-__all__ = ["StabilityConfig", "PickingConfig", "PoleFlags", "PickedMode", "FilterReport", "mpc",
+__all__ = ["TwoAScope", "StabilityConfig", "two_a_flags", "PickingConfig", "PoleFlags", "PickedMode",
+           "FilterReport", "mpc",
            "classify", "standard_error", "pick_modes", "pick_modes_reported", "real_mode_shape"]
+
+
+class TwoAScope(enum.StrEnum):
+    """Which poles the two-A check validates (docs/identify.md)."""
+
+    # The building paper's use: the second estimate of A validates the poles that passed the
+    # stabilization criteria; it is solved only at the orders where such poles occur.
+    STABLE = "stable"  # stable, physical candidate poles, at the orders where they occur
+    ALL = "all"  # every pole of every order (the whole diagram shows its verdict)
 
 
 @dataclass
@@ -58,6 +69,10 @@ class StabilityConfig:
     two_a_sigmas: float = option(1.0, "two-A agreement: relative frequency and damping differences up to "
                                  "this many standard errors sqrt(zeta / (2 pi f T)) are accepted too")
     two_a_mac_min: float = option(0.9, "two-A agreement: MAC")
+    two_a_scope: str = option(TwoAScope.STABLE.value, "poles the two-A check validates: stable (the "
+                              "stable, physical candidates, at the orders where they occur; the same "
+                              "picks at a fraction of the cost) or all (every pole of every order)",
+                              choices=TwoAScope)
     mpc_min: float = option(0.5, "smallest modal phase collinearity (0 disables the MPC filter)")
     damping_min: float = option(0.0, "physical pole: damping ratio above this")
     damping_max: float = option(0.20, "physical pole: damping ratio at most this")
@@ -155,18 +170,24 @@ def classify(poles: PoleSet, cfg: StabilityConfig, sample_rate_hz: float,
         mac = mac_matrix(poles.shape[i], poles.shape[j]) >= cfg.mac_min
         stable_f[i] = df.any(axis=1)
         stable[i] = (df & dz & mac).any(axis=1)
-    if cfg.two_a:
-        wide = cfg.two_a_sigmas * sigma
-        with np.errstate(invalid="ignore"):
-            two_a = ((_rel(poles.frequency_hz, poles.frequency_b_hz) < np.maximum(cfg.two_a_freq_tol, wide))
-                     & _damping_close(poles.damping_ratio, poles.damping_b, cfg.two_a_damping_tol, wide)
-                     & (poles.mac_b >= cfg.two_a_mac_min))
-    else:
-        two_a = np.ones(n, bool)
+    two_a = two_a_flags(poles, cfg, sigma)
     fmax = cfg.freq_max_hz if cfg.freq_max_hz is not None else 0.45 * sample_rate_hz
     physical = ((poles.damping_ratio > cfg.damping_min) & (poles.damping_ratio <= cfg.damping_max)
                 & (poles.frequency_hz > cfg.freq_min_hz) & (poles.frequency_hz <= fmax))
     return PoleFlags(m, stable_f, stable, two_a, m >= cfg.mpc_min, physical)
+
+
+def two_a_flags(poles: PoleSet, cfg: StabilityConfig, sigma: np.ndarray) -> np.ndarray:
+    """Per pole: its backward partner agrees in frequency, damping and MAC (all True when the
+    check is off; False for a pole without a partner, e.g. one the check did not validate).
+    ``sigma``: the poles' standard errors (:func:`standard_error`)."""
+    if not cfg.two_a:
+        return np.ones(len(poles), bool)
+    wide = cfg.two_a_sigmas * sigma
+    with np.errstate(invalid="ignore"):
+        return ((_rel(poles.frequency_hz, poles.frequency_b_hz) < np.maximum(cfg.two_a_freq_tol, wide))
+                & _damping_close(poles.damping_ratio, poles.damping_b, cfg.two_a_damping_tol, wide)
+                & (poles.mac_b >= cfg.two_a_mac_min))
 
 
 def _cluster(freq: np.ndarray, shapes: np.ndarray, cutoff: float) -> np.ndarray:
