@@ -31,10 +31,13 @@ from shm_ros.core.bayes.pairing import PairingGate, gated_pairing
 from shm_ros.core.bayes.priors import priors_from_specs
 from shm_ros.core.models import build_model
 from shm_ros.core.structure import StructureSpec
+from shm_ros.errors import NoWindowsError, NumericalFailure
 
 from .candidates.base import CANDIDATES, Candidate, Context
 from .config import ExplainConfig
+from .failures import failed_result, numerical
 from .fit import Box, FitResult, evidence_check, fit
+from .fit_ratio import combined, modal_fit_ratio
 from .groups import GroupModel, build_groups
 from .jobs import Job, iso_time, result
 from .likelihood import S_RANGE, CandidateLikelihood, catch_all_gain
@@ -248,7 +251,11 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     """Which physics the nominal model is missing, fitted and compared by evidence (module docstring)."""
     config = config or ExplainConfig()
     say = progress or (lambda stage, frac: None)
+    if obs.n_windows == 0:
+        raise NoWindowsError("the modal data hold no window")
     obs, dropped = obs.without_empty_modes()
+    if obs.n_modes == 0:
+        raise NoWindowsError(f"none of the {obs.n_windows} window(s) holds an identified mode")
     notes = [f"mode {m} has no frequency in any window; left out" for m in dropped]
     order = np.argsort(obs.times)
     obs = obs.subset(order)
@@ -290,14 +297,21 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     tried: list[CandidateResult] = []
     keys: dict[str, tuple[str, float | None]] = {}
     jobs: dict[str, tuple[Job, FitResult]] = {}
+    failed: list[CandidateResult] = []
     for i, p in enumerate(proposals):
         say(f"fit {p.candidate} on {p.group}", (i + 0.5) / max(len(proposals), 1))
         ctx = Context(context.times_s, context.covariates, context.start_epoch_s, dict(p.hints))
         cand = CANDIDATES.get(p.candidate)(p.group, ctx)
         job = Job(cand, sur, lik, train)
-        fr = fit(job.gain, job.specs, seed=config.seed + i, n_is=config.n_importance,
-                 sensitivity=config.prior_sensitivity)
-        res = result(job, fr, r_all, train, epoch, z_all)
+        try:
+            with numerical(cand.label):
+                fr = fit(job.gain, job.specs, seed=config.seed + i, n_is=config.n_importance,
+                         sensitivity=config.prior_sensitivity)
+                res = result(job, fr, r_all, train, epoch, z_all)
+        except NumericalFailure as exc:  # named numerical failures only: the candidate failed, the run goes on
+            failed.append(failed_result(cand.vocabulary, cand.label, cand.group, exc, cand.explanation))
+            notes.append(f"{cand.label}: {failed[-1].reasons[0]}")
+            continue
         res.extra["proposal_reason"] = p.reason
         spec_key = next(s for s in job.specs if s.name == cand.key_parameter())
         keys[res.label] = (spec_key.name, spec_key.null)
@@ -308,6 +322,8 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
                 if res.extra["surrogate_error"] > config.surrogate_tolerance:
                     notes.append(f"{res.label}: surrogate frequency error {res.extra['surrogate_error']:.1e} "
                                  f"exceeds {config.surrogate_tolerance:.0e}")
+        form = res.extra.get("form_gain")
+        res.form_fits = None if form is None else bool(form <= threshold)
         tried.append(res)
         jobs[res.label] = (job, fr)
     accepted = decide(tried, keys, threshold, held_before, None, config.tie_nats, config.tie_fraction)
@@ -316,8 +332,8 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
         for i, c in enumerate(accepted):
             say(f"evidence check of {c.label}", 0.95)
             job = jobs[c.label][0]
-            c.log_evidence_gain_check, err, method = evidence_check(job.gain, Box(job.specs), config.n_live,
-                                                                    config.seed + i)
+            chk, err, method = evidence_check(job.gain, Box(job.specs), config.n_live, config.seed + i)
+            c.log_evidence_gain_check = chk - job.cand.look_elsewhere()
             c.extra.update({"check_method": method, "check_err": err})
             tol = max(0.5, 3.0 * math.hypot(c.log_evidence_gain_err, err))
             c.extra["check_agrees"] = bool(abs(c.log_evidence_gain_check - c.log_evidence_gain) <= tol)
@@ -369,11 +385,13 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
                                        f"(smooth function of covariates and time: {catch:.1f} nats vs best "
                                        f"named {best_named:.1f})")}
     if unexplained is not None and accepted:
-        # the named effects stay (each beat the nominal model on its own terms); the catch-all's lead
-        # says that structure remains which they do not explain: reported, with where and when
+        # the named effects stay listed (each beat the nominal model on its own terms) but are downgraded:
+        # structure remains which they do not explain, and a smooth function of the covariates and time
+        # explains it better than they do together; a downgraded effect is not a confident name
         unexplained["summary"] = f"{unexplained['summary']}; the accepted effects explain part of it"
         for c in accepted:
-            c.reasons.append(f"note: a smooth function of the covariates and time per mode (the catch-all, "
+            c.downgraded_by = "catch_all"
+            c.reasons.append(f"downgraded: a smooth function of the covariates and time per mode (the catch-all, "
                              f"{catch:.1f} nats) fits better than the named effects together")
     # observed modes no model mode pairs with, seen in enough windows
     for u in base.unpaired:
@@ -392,12 +410,48 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
     whiteness = residual_whiteness(figures["log_residual_before"], figures["log_residual_after"], base.mode_numbers)
     if chain and (left := whiteness.note()):
         notes.append(left)
+    _whiteness_downgrade(accepted, whiteness if chain else None, base.mode_numbers)
+    ratio = combined(_modal_ratio(r_all, J, context, last, chain, base.mode_numbers))
     say("done", 1.0)
-    return Verdict(mismatch=mismatch, missing_physics=accepted, tried=tried, fit_before=fit_before,
+    return Verdict(mismatch=mismatch, missing_physics=accepted, tried=tried + failed, fit_before=fit_before,
                    fit_after=fit_after, held_out_before=held_before, held_out_after=held_after,
                    unexplained=unexplained, scatter=noise,
                    threshold={**threshold_info, "catch_all_gain": catch}, notes=notes,
-                   figures=figures, whiteness=whiteness)
+                   figures=figures, whiteness=whiteness, fit_ratio=ratio[0], fit_ratio_details=ratio[1])
+
+
+def _whiteness_downgrade(accepted: list[CandidateResult], whiteness, mode_numbers: list[int]) -> None:
+    """A named effect is downgraded by the whiteness check when the mode it moves most still follows a
+    course in time after the accepted effects that they did not even halve
+    (:meth:`.whiteness.Whiteness.unexplained_course`): it does not explain what it claims to."""
+    course = [] if whiteness is None else whiteness.unexplained_course()
+    for c in accepted:
+        delta = c.extra.get("delta")
+        if not course or c.downgraded_by is not None or delta is None:
+            continue
+        main = mode_numbers[int(np.nanargmax(np.nanstd(delta, axis=0)))]
+        if main in course:
+            c.downgraded_by = "whiteness"
+            c.reasons.append(f"downgraded: mode {main}, which it moves most, still follows a course in time after "
+                             "the accepted effects, which they did not even halve")
+
+
+def _modal_ratio(r_all, J, context, last, chain, mode_numbers):
+    """The fit ratio after the accepted effects (:mod:`.fit_ratio`): the misfit of the model re-calibrated
+    with them (the nominal parameters' linearised shift that best fits the mean misfit, as the
+    likelihood's mean part), per mode over its scatter."""
+    r = np.array(r_all, float)
+    if last is not None:
+        d, _ = last[0].deltas(last[1])
+        if d is not None:
+            r = r - d[0]
+    mean = np.nanmean(r, axis=0)
+    if J.size and np.isfinite(mean).all():
+        shift, *_ = np.linalg.lstsq(J, mean, rcond=None)
+        r = r - (J @ shift)[None]
+    amp = next((context.covariates[k] for k in ("rms_accel_m_s2", "pga_m_s2") if k in context.covariates), None)
+    steps = [int(c.extra["change_window"]) for c in chain if "change_window" in c.extra]
+    return modal_fit_ratio(r, list(mode_numbers), amp, steps)
 
 
 def _series(obs, base, context, train, r_all, z_all, last, epoch, form_of) -> dict:

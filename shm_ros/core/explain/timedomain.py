@@ -35,9 +35,12 @@ from shm_ros.core.config import option
 from shm_ros.core.models import build_model
 from shm_ros.core.predict.record import EventRecord
 from shm_ros.core.structure import StructureSpec
+from shm_ros.errors import NumericalFailure
 
 from .candidates._common import amplitude
 from .candidates.base import CANDIDATES, Context
+from .failures import failed_result, numerical
+from .fit_ratio import combined, events_fit_ratio
 from .select import decide, shipped_threshold
 from .td_fit import (
     EventPosterior,
@@ -53,6 +56,7 @@ from .td_model import SEGMENT_S, FactorModel, event_data, segment_amplitudes
 from .types import CandidateResult, FitScores, Mismatch, Verdict
 
 THRESHOLD_FILE = "threshold_timedomain.json"
+MIN_EVENTS = 3  # a calibration set and at least one held-out event
 TD_CANDIDATES = ("amplitude_stiffness", "amplitude_damping", "amplitude_added_damping")
 
 
@@ -129,14 +133,22 @@ def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeD
                             for e, a in enumerate(seg_amp)])
     ctx_in = Context(times_s=seg_t, covariates={"rms_accel_m_s2": np.concatenate(seg_amp)},
                      hints={"covariate": "rms_accel_m_s2"})
-    for label in cfg.candidates:
+    failed: list[CandidateResult] = []
+    if n_ev < MIN_EVENTS:
+        say(f"{n_ev} event(s): too few to fit a candidate and score it on held-out events")
+    for label in (cfg.candidates if n_ev >= MIN_EVENTS else []):
         only = getattr(CANDIDATES.get(label), "resolutions", None)  # a candidate may need one resolution
         for res in (r for r in cfg.resolutions if only is None or r in only):
             say(f"fitting {label} ({res.replace('_', ' ')})")
             within = res == "within_event"
             cand = CANDIDATES.get(label)("EI", ctx_in if within else ctx)
-            r, pending = _fit_candidate(cand, lik, prior, u_n, lap_n.log_z, train, test,
-                                        segments if within else None, strongest)
+            try:
+                with numerical(f"{cand.label} ({res.replace('_', ' ')})"):
+                    r, pending = _fit_candidate(cand, lik, prior, u_n, lap_n.log_z, train, test,
+                                                segments if within else None, strongest)
+            except NumericalFailure as exc:  # named numerical failures only: the candidate failed
+                failed.append(failed_result(cand.vocabulary, f"{cand.label}/{res}", cand.group, exc, cand.explanation))
+                continue
             r.extra["nrms_per_event"] = r.extra.pop("_nrms").tolist()
             r.extra["resolution"] = res
             if within:
@@ -166,6 +178,15 @@ def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeD
                                  f"per-event NRMS with {cfg.amplitude}: {corr:+.2f}"))
     theta = dict(zip(lik.model.parameter_names[:len(u_n)], map(float, u_n), strict=True))
     examples = {r.label: r.extra.pop("_example") for r in results}
+    results += failed
+    ratio = combined(events_fit_ratio(after, data.noise_nrms if data.noise_nrms is not None
+                                      else np.full(n_ev, np.nan)))
+    notes = [*data.notes, f"time domain: {n_ev} events, held out {[int(i) for i in test]} (amplitude order), nominal "
+             f"parameters at the MAP: {theta}"]
+    if n_ev < MIN_EVENTS:
+        notes.append(f"{n_ev} event(s): no candidate was fitted (at least {MIN_EVENTS} are needed, a calibration "
+                     "set and a held-out event); the nominal model's fit is reported")
+    notes += [f"{c.label}: {c.reasons[0]}" for c in failed]
     figures: dict = {"events": {"window_ids": data.window_ids, cfg.amplitude: amp.tolist(),
                                 "nrms_before": before.tolist(), "nrms_after": after.tolist(),
                                 "held_out": [int(i) for i in test], "nominal_parameters": theta}}
@@ -178,9 +199,7 @@ def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeD
         figures["form"] = _form_curve(accepted[0])
     return Verdict(mismatch=mismatch, missing_physics=accepted, tried=results, fit_before=_scores(before),
                    fit_after=_scores(after), held_out_before=_scores(held_before), held_out_after=held_after,
-                   threshold=thr, notes=[*data.notes, f"time domain: {n_ev} events, held out {list(test)} "
-                                         f"(amplitude order), nominal parameters at the MAP: {theta}"],
-                   figures=figures)
+                   threshold=thr, notes=notes, figures=figures, fit_ratio=ratio[0], fit_ratio_details=ratio[1])
 
 
 def _form_curve(c: CandidateResult) -> dict:
