@@ -50,3 +50,17 @@ def building_table(out: Path, seed: int, n_windows: int = 240, slope_per_c: floa
     (out / "modes.csv").write_text("\n".join(rows) + "\n")
     (out / "structure.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
     return out / "structure.yaml", out / "modes.csv"
+
+
+def null_campaign(seed: int, kind: str, n_windows: int):
+    """A null replicate for ``bench/calibrate_explain.py --generator explain_fit_synth:null_campaign``:
+    the building's own truth without an effect, (ModalObservations, StructureSpec). ``kind`` is
+    ignored (one kind here)."""
+    import tempfile
+
+    from shm_ros.io.structure import load_structure
+    from shm_ros.io.tables import read_tracked_modes
+
+    with tempfile.TemporaryDirectory() as tmp:
+        structure, table = building_table(Path(tmp), seed, n_windows=n_windows)
+        return read_tracked_modes(table), load_structure(structure)

@@ -39,3 +39,14 @@ def test_one_mode_off_does_not_fit(tmp_path, capsys):
     assert "nominal model explains" not in out
     html = (tmp_path / "o" / "report.html").read_text()
     assert "does not fit" in html and "explains the recordings within their scatter" not in html
+
+
+def test_the_threshold_calibration_takes_a_campaign_generator_and_locate():
+    """The hook for recalibrating the threshold under realistic nulls (bench/calibrate_explain.py):
+    a generator's null replicate, explained with locate on, gives one row of the null statistic."""
+    from bench.calibrate_explain import replicate
+
+    row = replicate((5, "building", 96, 300, "explain_fit_synth:null_campaign", True))
+    assert row["seed"] == 5 and row["kind"] == "building"
+    # the model's own truth without an effect: locate proposes nothing, or nothing clears a usual threshold
+    assert row["max_gain"] < 5.0, row
