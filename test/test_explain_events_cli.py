@@ -57,11 +57,13 @@ def test_explain_events_writes_a_time_domain_verdict(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no_input.yaml" in err and "input" in err
 
-    # no event window (a window shorter than the 20 s an event needs leaves none): a verdict that says
-    # so, status no_windows, exit code 3
-    assert main(["explain", "--structure", str(s_path), "--events", str(bag), "--window", "5",
+    # no event window (an ambient recording of the same building): a verdict that says so, status
+    # no_windows, exit code 3
+    calm = tmp_path / "calm"
+    assert main(["simulate", "building", "--out", str(calm), "--windows", "1", "--window-s", "30", "--quiet"]) == 0
+    assert main(["explain", "--structure", str(calm / "structure.yaml"), "--events", str(calm / "bag"),
                  "--out", str(tmp_path / "z")]) == 3
     v = json.loads((tmp_path / "z" / "verdict.json").read_text())
     assert v["status"] == "no_windows" and v["model_fits"] is None and v["missing_physics"] == []
-    assert str(bag) in v["mismatch"]["summary"] and "event" in v["mismatch"]["summary"]
+    assert str(calm / "bag") in v["mismatch"]["summary"] and "event" in v["mismatch"]["summary"]
     assert "no_windows" in capsys.readouterr().out

@@ -23,5 +23,7 @@ def test_the_worked_example_runs_with_one_command(tmp_path):
     verdict = json.loads((out / "explain" / "verdict.json").read_text())
     assert verdict["missing_physics"][0]["name"] == "temperature_dependent_stiffness", verdict["missing_physics"]
     assert "frequency RMSE" in run.stdout and "misfit left" in run.stdout, run.stdout
-    for name in ("data", "form", "candidates"):
-        assert (out / "explain" / f"explain_example_{name}.png").stat().st_size > 10_000
+    # drawn, not empty (the candidates' chart has one bar per candidate: on 96 windows locate, reading the
+    # training windows only, may propose one)
+    for name, size in (("data", 10_000), ("form", 10_000), ("candidates", 4_000)):
+        assert (out / "explain" / f"explain_example_{name}.png").stat().st_size > size

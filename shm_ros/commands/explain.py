@@ -108,20 +108,17 @@ def _events_verdict(args: argparse.Namespace, spec, config):
     (a ``--time-domain.`` option of the same name wins)."""
     from shm_ros.commands.options import config_from_args
     from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
-    from shm_ros.core.ingest.config import EventDetector, IngestConfig
     from shm_ros.core.models import build_model
     from shm_ros.core.predict import event_from_window
     from shm_ros.errors import InputError, NoWindowsError
     from shm_ros.io.recording import windows_from_bag
+    from shm_ros.io.tracked_source import event_ingest
 
     if not spec.input_sensor_ids():
         raise InputError(f"{args.structure}: --events needs a measured input (`input: {{sensor: ...}}`), and "
                          "the structure declares none")
-    # None: the ingest default (600 s). The recording is declared to hold events: a window is one when
-    # STA/LTA triggers or its peak acceleration reaches the strong-motion trigger (a short record that
-    # starts a few seconds before its onset leaves the long-term average too little quiet to trigger)
-    windows, _ = windows_from_bag(args.events, spec, args.window,
-                                  config=IngestConfig(event_detector=EventDetector.EITHER))
+    # None: the ingest default (600 s); events by STA/LTA or the strong-motion peak (event_ingest)
+    windows, _ = windows_from_bag(args.events, spec, args.window, config=event_ingest(spec))
     events = [w for w in windows if w.is_event]
     if not events:
         raise NoWindowsError(f"{args.events}: no event window among its {len(windows)} window(s)")

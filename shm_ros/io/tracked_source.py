@@ -15,6 +15,16 @@ import numpy as np
 from shm_ros.errors import InputError, NoWindowsError
 
 
+def event_ingest(spec: Any) -> Any:
+    """The ingest settings of a recording of a structure with a measured input: a window is an event
+    when STA/LTA triggers or its peak reaches the strong-motion trigger (a 20 s record that starts a
+    few seconds before its onset leaves the long-term average too little quiet to trigger). None (the
+    ingest defaults) without an input."""
+    from shm_ros.core.ingest.config import EventDetector, IngestConfig
+
+    return IngestConfig(event_detector=EventDetector.EITHER) if spec.input_sensor_ids() else None
+
+
 def _stderr(prog: str) -> Callable[[str], None]:
     return lambda text: print(f"{prog}: note: {text}", file=sys.stderr)
 
@@ -22,7 +32,11 @@ def _stderr(prog: str) -> Callable[[str], None]:
 def tracked_observations_from_bag(bag: str, spec: Any, observed: list[str], window_s: float | None = None,
                                   note: Callable[[str], None] | None = None) -> Any:
     """:class:`~shm_ros.core.bayes.observations.ModalObservations` of ``bag`` with shapes at
-    ``observed`` (the model's sensors). Windows that cannot be identified are noted and skipped."""
+    ``observed`` (the model's sensors). Windows that cannot be identified are noted and skipped.
+
+    With a measured input in the structure, a window with a strong-motion peak counts as an event
+    even where STA/LTA cannot trigger (a short earthquake record), so that its amplitude covariates
+    (``pga_m_s2``) are those of an event; the event windows found are noted."""
     from threadpoolctl import threadpool_limits
 
     from shm_ros.core.bayes.tracked import observations_from_tracking
@@ -32,7 +46,12 @@ def tracked_observations_from_bag(bag: str, spec: Any, observed: list[str], wind
     from shm_ros.io.recording import windows_from_bag
 
     note = note or _stderr("shm-ros")
-    windows, _ = windows_from_bag(bag, spec, window_s)
+    windows, _ = windows_from_bag(bag, spec, window_s, config=event_ingest(spec))
+    events = sum(w.is_event for w in windows)
+    if events and spec.input_sensor_ids():
+        note(f"{events} of {len(windows)} window(s) are events with the measured input "
+             f"{', '.join(spec.input_sensor_ids())}: explained per event (modal estimates with their amplitude "
+             "covariates); --events explains them in the time domain")
     if not windows:
         raise NoWindowsError(f"{bag}: no usable window in the recording")
     estimates = []
