@@ -485,10 +485,13 @@ def _catch_all(run: Run) -> None:
 
 
 def _unmodelled(run: Run) -> None:
-    """Observed modes no model mode pairs with, seen in enough windows."""
+    """Observed modes no model mode pairs with, seen in enough windows (the others said in a note)."""
     for u in run.base.unpaired:
         frac = u.get("fraction_of_windows")
         if frac is not None and frac < run.config.min_unpaired_fraction:
+            run.notes.append(f"observed mode {u.get('mode')} at {u['frequency_hz']:.3f} Hz could not be paired with a "
+                             f"model mode ({u.get('reason')}); seen in {frac:.0%} of the windows, too few to call it "
+                             "unmodelled")
             continue
         run.accepted.append(CandidateResult(
             name="unmodelled_modes", label=f"unmodelled_modes/mode{u.get('mode')}", form="a mode the model class lacks",
