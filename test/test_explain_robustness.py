@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -44,6 +45,8 @@ def _campaign(seed: int, tmp: Path) -> list:
         v = o.verdict
         if v["status"] == "ok":
             assert v["fit_ratio"] is None or v["model_fits"] == (v["fit_ratio"] < 5.0), v["fit_ratio"]
+            # a dead or missing sensor leaves no NaN in the scores
+            assert all(x is not None and math.isfinite(x) for x in v["fit"]["before"].values()), (spec, path, v["fit"])
         out.append(o)
     return out
 

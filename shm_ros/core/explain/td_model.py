@@ -159,6 +159,12 @@ def segment_amplitudes(records: list[AccelerationRecord], period_s: float,
     return amps, lens
 
 
+def _recorded(x: np.ndarray) -> bool:
+    """Whether a channel's samples hold a record: finite values that vary."""
+    x = x[np.isfinite(x)]
+    return x.size > 1 and float(np.ptp(x)) > 0.0
+
+
 def event_data(events: list[EventRecord], onset_arias: float = 0.001, min_pre_event_s: float = 1.0,
                baseline: Baseline | str = Baseline.MEAN) -> EventData:
     """Records for the joint likelihood (offsets removed as the prediction stage removes them,
@@ -172,9 +178,9 @@ def event_data(events: list[EventRecord], onset_arias: float = 0.001, min_pre_ev
     for ev in events:
         if ev.channel_ids != ids:
             raise InputError(f"event {ev.window_id}: channels {ev.channel_ids} differ from the first event's {ids}")
-    # a channel with no finite sample in an event (a missing or dead sensor) is left out of every event
-    empty = [c for c in range(len(ids)) if any(not np.isfinite(np.asarray(ev.outputs, float)[:, c]).any()
-                                               for ev in events)]
+    # a channel with no record in an event (no finite sample: a missing sensor; a constant value: a dead
+    # one) is left out of every event
+    empty = [c for c in range(len(ids)) if any(not _recorded(np.asarray(ev.outputs, float)[:, c]) for ev in events)]
     keep = [c for c in range(len(ids)) if c not in empty]
     if not keep:
         raise NoWindowsError("explain (time domain): no output channel has a record in every event")
