@@ -12,6 +12,13 @@ largest evidence gain over all candidates of the replicate: the null distributio
 candidate's log Bayes factor". The threshold is its ``--quantile`` (default 99 %) over the replicates,
 so a clean campaign clears it by chance in about 1 % of cases even when every candidate is tried.
 
+Recalibration under realistic nulls (docs/explain.md, "The threshold"): ``--generator MODULE:FUNCTION``
+takes the replicates from any campaign generator, a callable ``(seed, kind, n_windows) -> (obs, spec)``
+(a ``ModalObservations`` and a ``StructureSpec``; e.g. truths from an independent FE code with slow
+unmeasured drivers, correlated identification error, mode swaps), and ``--with-locate`` runs explain
+as it runs for a user (locate on, on the training windows only): the statistic is then the largest
+gain among what locate proposed (``-inf``, no false alarm possible, when it proposed nothing).
+
 The JSON also records the order-statistic interval of the quantile (distribution-free, binomial) so
 the reader can see how well the replicates pin it down, and the catch-all's gain on the same
 replicates (not part of the threshold; the catch-all must clear it too).
@@ -57,22 +64,36 @@ def _every_candidate(obs, baseline, context, config, groups):
     return mm, default_proposals(groups), []
 
 
-def replicate(args: tuple[int, str, int, int]) -> dict[str, Any]:
-    """Largest evidence gain over every candidate of one clean replicate (and which one it was)."""
+def generator(spec: str):
+    """``MODULE:FUNCTION`` -> the campaign generator ``(seed, kind, n_windows) -> (obs, spec)``."""
+    import importlib
+
+    sys.path.insert(0, str(ROOT / "test"))
+    module, _, name = spec.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def replicate(args: tuple[int, str, int, int, str, bool]) -> dict[str, Any]:
+    """Largest evidence gain over the candidates of one null replicate (and which one it was)."""
     from threadpoolctl import threadpool_limits
 
     import shm_ros.core.explain.explain as ex
     from shm_ros.core.explain.config import ExplainConfig
 
-    seed, kind, n_windows, n_is = args
+    seed, kind, n_windows, n_is, source, with_locate = args
     t0 = time.process_time()
-    obs, spec = clean_table(seed, kind, n_windows)
-    ex._locate = _every_candidate  # the calibration's null statistic is over all candidates
+    obs, spec = (generator(source) if source else clean_table)(seed, kind, n_windows)
+    if not with_locate:
+        ex._locate = _every_candidate  # the statistic over all candidates
     with threadpool_limits(1):
         v = ex.explain(obs, spec, ExplainConfig(threshold=math.inf, nested_check=False, prior_sensitivity=False,
                                                 second_round=False, surrogate_check=False, n_importance=n_is,
                                                 seed=seed))
-    best = max(v.tried, key=lambda c: c.log_evidence_gain)
+    fitted = [c for c in v.tried if c.failed is None]
+    if not fitted:
+        return {"seed": seed, "kind": kind, "max_gain": -math.inf, "argmax": "nothing proposed", "n_candidates": 0,
+                "catch_all_gain": v.threshold.get("catch_all_gain"), "cpu_s": round(time.process_time() - t0, 1)}
+    best = max(fitted, key=lambda c: c.log_evidence_gain)
     return {"seed": seed, "kind": kind, "max_gain": float(best.log_evidence_gain), "argmax": best.label,
             "n_candidates": len(v.tried), "catch_all_gain": v.threshold.get("catch_all_gain"),
             "cpu_s": round(time.process_time() - t0, 1)}
@@ -98,14 +119,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--importance", type=int, default=1500, help="importance draws per evidence")
     ap.add_argument("--out", default=str(ROOT / "shm_ros/core/explain/threshold.json"))
+    ap.add_argument("--generator", default="", help="MODULE:FUNCTION of a null campaign generator "
+                    "(seed, kind, n_windows) -> (obs, spec); default: the clean tables of test/explain_cases.py")
+    ap.add_argument("--with-locate", action="store_true", help="explain as for a user (locate on): the "
+                    "statistic is the largest gain among locate's proposals")
     ap.add_argument("--log", default="", help="every replicate's row (JSON lines); rows already there are reused")
     a = ap.parse_args(argv)
     t0 = time.time()
-    jobs = [(a.seed + i, KINDS[i % 2], a.windows, a.importance) for i in range(a.replicates)]
+    jobs = [(a.seed + i, KINDS[i % 2], a.windows, a.importance, a.generator, a.with_locate)
+            for i in range(a.replicates)]
     rows: list[dict[str, Any]] = []
     if a.log and Path(a.log).is_file():  # resume: replicates already in the log are not run again
         done = {(r["seed"], r["kind"]): r for r in map(json.loads, Path(a.log).read_text().splitlines()) if r}
-        rows = [done[(s, k)] for s, k, _, _ in jobs if (s, k) in done]
+        rows = [done[(j[0], j[1])] for j in jobs if (j[0], j[1]) in done]
         jobs = [j for j in jobs if (j[0], j[1]) not in done]
     log = open(a.log, "a") if a.log else None  # noqa: SIM115 - kept open while replicates stream in
     with ProcessPoolExecutor(a.jobs) as pool:
@@ -127,10 +153,15 @@ def main(argv: list[str] | None = None) -> int:
     for r in rows:
         argmax[r["argmax"]] = argmax.get(r["argmax"], 0) + 1
     out = {"log_bayes_factor": round(max(thr, 0.0), 2), "provisional": False,
-           "statistic": f"{100 * a.quantile:g}th percentile over clean replicates of the largest evidence "
-                        "gain over all candidates (every candidate on its default groups)",
+           "statistic": (f"{100 * a.quantile:g}th percentile over {'null' if a.generator else 'clean'} replicates "
+                         "of the largest evidence gain over "
+                         + ("locate's proposals (locate on)" if a.with_locate
+                            else "all candidates (every candidate on its default groups)")),
+           "generator": a.generator or "test/explain_cases.py clean tables", "locate": bool(a.with_locate),
            "command": (f"OPENBLAS_NUM_THREADS=1 python -m bench.calibrate_explain --replicates {a.replicates} "
-                       f"--windows {a.windows} --seed {a.seed} --importance {a.importance} --jobs {a.jobs}"),
+                       f"--windows {a.windows} --seed {a.seed} --importance {a.importance} --jobs {a.jobs}"
+                       + (f" --generator {a.generator}" if a.generator else "")
+                       + (" --with-locate" if a.with_locate else "")),
            "replicates": a.replicates, "windows": a.windows, "kinds": list(KINDS), "seed": a.seed,
            "percentile": 100 * a.quantile,
            "percentile_interval_90": [round(lo, 2), round(hi, 2)],

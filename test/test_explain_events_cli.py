@@ -3,7 +3,7 @@
 The pipeline runs from a simulated earthquake bag (the building with a measured ground input) to
 verdict.json, with the event windows ingest flags (docs/interfaces.md §1) as the records; the
 science of the path is tested in test_explain_timedomain.py. Errors name the file: a structure
-without a measured input, a recording with too few events."""
+without a measured input; a recording without an event window gives a verdict with status no_windows."""
 
 from __future__ import annotations
 
@@ -57,8 +57,13 @@ def test_explain_events_writes_a_time_domain_verdict(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no_input.yaml" in err and "input" in err
 
-    # too few events: a window longer than the recording's bursts leaves none
-    assert main(["explain", "--structure", str(s_path), "--events", str(bag), "--window", "5",
-                 "--out", str(tmp_path / "z")]) == 2
-    err = capsys.readouterr().err
-    assert str(bag) in err and "event" in err
+    # no event window (an ambient recording of the same building): a verdict that says so, status
+    # no_windows, exit code 3
+    calm = tmp_path / "calm"
+    assert main(["simulate", "building", "--out", str(calm), "--windows", "1", "--window-s", "30", "--quiet"]) == 0
+    assert main(["explain", "--structure", str(calm / "structure.yaml"), "--events", str(calm / "bag"),
+                 "--out", str(tmp_path / "z")]) == 3
+    v = json.loads((tmp_path / "z" / "verdict.json").read_text())
+    assert v["status"] == "no_windows" and v["model_fits"] is None and v["missing_physics"] == []
+    assert str(calm / "bag") in v["mismatch"]["summary"] and "event" in v["mismatch"]["summary"]
+    assert "no_windows" in capsys.readouterr().out

@@ -44,3 +44,8 @@ def test_explain_node_publishes_the_verdict(tmp_path):
     assert v["whiteness_modes"] == w["mode_numbers"] and v["still_structured_modes"] == w["still_structured"]
     assert v["lag1_after"] == pytest.approx(w["lag1_after"])
     assert max(v["lag1_before"]) > 0.5 and max(v["lag1_after"]) < max(v["lag1_before"]), v
+    # does the model fit? the ratio, the flag and each entry's form flag and downgrade, as in verdict.json
+    assert v["status"] == doc["status"] == "ok"
+    assert v["model_fits"] == doc["model_fits"] and v["fit_ratio"] == pytest.approx(doc["fit_ratio"])
+    assert [(m["form_fits"], m["downgraded_by"]) for m in v["missing_physics"]] == [
+        (m["form_fits"], m["downgraded_by"]) for m in doc["missing_physics"]]

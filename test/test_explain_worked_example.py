@@ -34,8 +34,10 @@ def test_the_worked_example_runs_with_one_command(tmp_path):
     assert after < 0.5 * before, (before, after)
     from matplotlib.image import imread
 
-    for name in ("data", "form", "candidates"):
+    # drawn, not empty (the candidates' chart has one bar per candidate: on 96 windows locate, reading the
+    # training windows only, may propose one)
+    for name, size in (("data", 10_000), ("form", 10_000), ("candidates", 4_000)):
         png = out / "explain" / f"explain_example_{name}.png"
-        assert png.stat().st_size > 10_000
+        assert png.stat().st_size > size
         img = imread(png)
         assert min(img.shape[:2]) > 200 and img[..., :3].std() > 0.05, (name, img.shape)  # drawn, not blank

@@ -25,7 +25,7 @@ from acceptance_seeds import acceptance_seeds
 from bayes_synth import FULL
 from model_form_synth import FREQ_SCATTER, N_MODES, _vertical, analysis_model
 
-from shm_ros.core.bayes.observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.bayes.thermal_law import ThermalLaw, predicted_at, referred_by_law
 from shm_ros.core.bayes.update import UpdateConfig, build_likelihood, update
 from shm_ros.core.simulate.campaign import simulate_campaign

@@ -30,7 +30,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--bag", help="recording (rosbag2); identified and tracked first")
     src.add_argument("--events", help="recording (rosbag2) of earthquake events with the structure's measured "
                      "input: explained in the time domain (docs/explain.md, Time domain)")
-    p.add_argument("--window", type=float, default=None, help="--bag/--events: window length, s (default 600)")
+    p.add_argument("--window", type=float, default=None,
+                   help="--bag/--events: window length, s (default: the ingest default, 600; an event shorter "
+                   "than it is one window of its own length)")
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     add_options(p.add_argument_group("explain (ExplainConfig; the explain node's parameters of the same names)"),
@@ -45,36 +47,19 @@ def run(args: argparse.Namespace) -> int:
 
     from shm_ros.commands.options import config_from_args
     from shm_ros.core.explain.config import ExplainConfig
-    from shm_ros.core.explain.explain import explain
-    from shm_ros.core.models import build_model
-    from shm_ros.core.progress import Progress
+    from shm_ros.core.explain.types import Verdict
+    from shm_ros.errors import NoWindowsError
     from shm_ros.io.structure import load_structure
     from shm_ros.io.verdict_files import write_verdict
 
     out = Path(args.out)
+    config = config_from_args(ExplainConfig, args)
+    spec = load_structure(args.structure)
+    status = 0
     try:
-        config = config_from_args(ExplainConfig, args)
-        spec = load_structure(args.structure)
-        if args.events:
-            verdict = _events_verdict(args, spec, config)
-        elif args.modes:
-            from shm_ros.io.tables import read_tracked_modes
-
-            obs = read_tracked_modes(args.modes)
-        else:
-            from shm_ros.io.tracked_source import tracked_observations_from_bag
-
-            model = build_model(spec)
-            observed = model.observed_sensors(spec.sensor_ids)
-            obs = tracked_observations_from_bag(
-                args.bag, spec, observed, args.window,
-                lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))
-        if not args.events:
-            bar = Progress("explain", every_s=2.0)  # explain reports (stage, fraction done)
-            verdict = explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
-    except Exception as exc:  # file, table, structure and model errors name their source
-        print(f"shm-ros explain: error: {exc}", file=sys.stderr)
-        return 2
+        verdict = _verdict(args, spec, config)
+    except NoWindowsError as exc:  # nothing to analyse: a verdict that says so, exit code 3
+        verdict, status = Verdict.no_windows(str(exc)), exc.exit_code
     cfg = asdict(config) | {"structure": args.structure, "modes": args.modes, "bag": args.bag, "events": args.events}
     path = write_verdict(out, verdict, cfg, getattr(config, "seed", None))
     if not args.no_report:
@@ -87,10 +72,33 @@ def run(args: argparse.Namespace) -> int:
         build_report(inputs, out)
     print(format_verdict(verdict.to_dict()))
     print(f"wrote {path}")
-    return 0
+    return status
 
 
-MIN_EVENTS = 3  # a calibration set and at least one held-out event
+def _verdict(args: argparse.Namespace, spec, config):
+    """The verdict of the chosen source (``--events``, ``--modes`` or ``--bag``). Errors the user can
+    act on are :class:`shm_ros.errors.ShmError` and reach the command line's one-line message; any
+    other exception is a bug and shows its traceback."""
+    from shm_ros.core.explain.explain import explain
+    from shm_ros.core.models import build_model
+    from shm_ros.core.progress import Progress
+
+    if args.events:
+        return _events_verdict(args, spec, config)
+    if args.modes:
+        from shm_ros.io.tables import read_tracked_modes
+
+        obs = read_tracked_modes(args.modes)
+    else:
+        from shm_ros.io.tracked_source import tracked_observations_from_bag
+
+        model = build_model(spec)
+        observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
+        obs = tracked_observations_from_bag(
+            args.bag, spec, observed, args.window,
+            lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))
+    bar = Progress("explain", every_s=2.0)  # explain reports (stage, fraction done)
+    return explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
 
 
 def _events_verdict(args: argparse.Namespace, spec, config):
@@ -102,32 +110,54 @@ def _events_verdict(args: argparse.Namespace, spec, config):
     from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
     from shm_ros.core.models import build_model
     from shm_ros.core.predict import event_from_window
+    from shm_ros.errors import InputError, NoWindowsError
     from shm_ros.io.recording import windows_from_bag
+    from shm_ros.io.tracked_source import event_ingest
 
     if not spec.input_sensor_ids():
-        raise ValueError(f"{args.structure}: --events needs a measured input (`input: {{sensor: ...}}`), and "
+        raise InputError(f"{args.structure}: --events needs a measured input (`input: {{sensor: ...}}`), and "
                          "the structure declares none")
-    windows, _ = windows_from_bag(args.events, spec, args.window)
+    # None: the ingest default (600 s); events by STA/LTA or the strong-motion peak (event_ingest)
+    windows, _ = windows_from_bag(args.events, spec, args.window, config=event_ingest(spec))
     events = [w for w in windows if w.is_event]
-    if len(events) < MIN_EVENTS:
-        raise ValueError(f"{args.events}: {len(events)} event window(s) among {len(windows)}; the time-domain "
-                         f"path needs at least {MIN_EVENTS}")
+    if not events:
+        raise NoWindowsError(f"{args.events}: no event window among its {len(windows)} window(s)")
     model = build_model(spec)
     cfg = config_from_args(TimeDomainConfig, args, "time_domain.",
                            TimeDomainConfig(threshold=config.threshold, tie_nats=config.tie_nats, seed=config.seed))
-    return explain_events([event_from_window(w, model) for w in events], spec, cfg,
-                          progress=lambda text: print(f"shm-ros explain: {text}", file=sys.stderr))
+    records = []
+    for w in events:
+        try:
+            records.append(event_from_window(w, model))
+        except InputError as exc:  # an event without a usable input record is left out, and said so
+            print(f"shm-ros explain: note: {exc}; event left out", file=sys.stderr)
+    if not records:
+        raise NoWindowsError(f"{args.events}: no event window with a usable input record")
+    return explain_events(records, spec, cfg, progress=lambda text: print(f"shm-ros explain: {text}", file=sys.stderr))
 
 
 def format_verdict(v: dict) -> str:
     """A few lines for the terminal: mismatch summary, accepted physics, fit before / after."""
     lines = [f"mismatch: {v['mismatch']['summary']}"]
+    if v.get("status", "ok") != "ok":
+        return "\n".join([*lines, f"status: {v['status']} (nothing was analysed)"])
+    from shm_ros.core.explain.fit_ratio import fit_sentence
+
+    lines.append(fit_sentence(v))
     if not v["missing_physics"]:
-        lines.append("missing physics: none (the nominal model explains the data)")
+        lines.append("missing physics: none (the nominal model explains the data)" if v.get("model_fits")
+                     else "missing physics: none named")
     for i, m in enumerate(v["missing_physics"], 1):
         where = f" at {m['where']}" if m.get("where") else ""
         when = f" from {m['time']}" if m.get("time") else ""
-        lines.append(f"{i}. {m['name']}{where}{when}: {m['form']} (log evidence gain {m['log_evidence_gain']:.1f})")
+        down = m.get("downgraded_by")
+        flags = "".join([", its form does not fit what it explains" if m.get("form_fits") is False else "",
+                         f", downgraded by the {down.replace('_', '-')}" if down else ""])
+        lines.append(f"{i}. {m['name']}{where}{when}: {m['form']} (log evidence gain {m['log_evidence_gain']:.1f}"
+                     f"{flags})")
+    failed = [c["label"] for c in v.get("candidates", []) if c.get("failed")]
+    if failed:
+        lines.append(f"failed (numerical): {', '.join(failed)}")
     f = v["fit"]
     if "nrms_pct" in f["before"]:  # the time-domain path
         lines.append(f"NRMS {f['before']['nrms_pct']:.1f} % -> {f['after'].get('nrms_pct', float('nan')):.1f} %; "
@@ -149,3 +179,4 @@ def format_verdict(v: dict) -> str:
                      else f"misfit left: noise on every mode (lag-1 autocorrelation at most "
                           f"{max(w['lag1_after'], default=0.0):.2f})")
     return "\n".join(lines)
+

@@ -62,25 +62,28 @@ def channel_map_of(structure_or_map: Any) -> ChannelMap:
     return ChannelMap.from_structure(structure_or_map)
 
 
-def windows_from_bag(path: str | Path, structure_or_channel_map: Any, window_s: float = 600.0, *,
+def windows_from_bag(path: str | Path, structure_or_channel_map: Any, window_s: float | None = None, *,
                      config: IngestConfig | None = None) -> tuple[list[Window], list[Diagnostic]]:
     """All windows of a bag and the diagnostics found on the way (see :func:`ingest_bag`)."""
     res = ingest_bag(path, structure_or_channel_map, window_s, config=config)
     return res.windows, res.diagnostics
 
 
-def ingest_bag(path: str | Path, structure_or_channel_map: Any, window_s: float = 600.0, *,
+def ingest_bag(path: str | Path, structure_or_channel_map: Any, window_s: float | None = None, *,
                config: IngestConfig | None = None, margin_s: float = 10.0) -> IngestResult:
     """Read a bag through :class:`IngestCore`; unrelated topics are ignored (and listed).
 
     ``config`` overrides every setting except ``window_s`` when given (its ``window_s`` is replaced
-    by the argument). Messages come in receive-time order; a window is cut once the receive time is
+    by the argument; None: the configuration's, by default the ingest default of 600 s, so that an
+    event shorter than it is one window of its own length). Messages come in receive-time order; a
+    window is cut once the receive time is
     ``margin_s`` past its end (so header stamps may lag receive times by up to ``margin_s``; an
     AccelBlock longer than that widens the margin).
     """
     cmap = channel_map_of(structure_or_channel_map)
     base = IngestConfig() if config is None else config
-    config = IngestConfig(**{**base.__dict__, "window_s": window_s, "max_latency_s": float("inf")})
+    config = IngestConfig(**{**base.__dict__, "window_s": base.window_s if window_s is None else window_s,
+                             "max_latency_s": float("inf")})
     core = IngestCore(cmap, config)
     feeder = _BagFeeder(core, Path(path), margin_s)
     feeder.run()

@@ -147,8 +147,13 @@ def _missing(x: ReportInputs) -> str | None:
     v = x.explain.verdict
     found = [m for m in v.get("missing_physics", []) if m.get("name") != "unmodelled_modes"]
     unmod = [m for m in v.get("missing_physics", []) if m.get("name") == "unmodelled_modes"]
-    if not found:
+    if v.get("status", "ok") != "ok":
+        return f"What the model is missing: not analysed ({v['status']})."
+    if not found and v.get("model_fits"):
         s = "What the model is missing: nothing that the recordings can show beyond their scatter"
+    elif not found:
+        s = (f"What the model is missing: nothing named, yet the model does not fit within the scatter "
+             f"(fit ratio {v.get('fit_ratio') if v.get('fit_ratio') is not None else 'unknown'})")
     else:
         m = found[0]
         when = f" from {m['time']}" if m.get("time") else ""
@@ -160,6 +165,8 @@ def _missing(x: ReportInputs) -> str | None:
             s += f"; adding it brings the frequency misfit from {b:.2f} % to {a:.2f} % RMS"
         if len(found) > 1:
             s += f" (and {len(found) - 1} more effect(s), see the explanation)"
+        if v.get("model_fits") is False:
+            s += f"; even so the model does not fit within the scatter (fit ratio {float(v['fit_ratio']):.1f})"
     if unmod:
         s += (f"; the recordings also hold modes the model's class cannot have ({unmod[0].get('where', '')}): "
               "a richer model (e.g. 3-D) would be needed for them")

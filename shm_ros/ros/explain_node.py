@@ -4,9 +4,9 @@ Accumulates the track node's ``/shm/tracked_modes`` (one row per window; a row s
 once). Once ``min_windows`` rows have arrived, and again after every ``min_new_windows`` new rows or
 when a replay ends (``/shm/replay/done``), it explains all rows so far in a worker process
 (:mod:`shm_ros.ros.explain_worker`, the executor never waits) and publishes a ``Verdict`` on
-``/shm/verdict`` (latched) when it is the first or when the set of accepted physics changed, i.e.
-when the support for a missing effect crossed its threshold. ``output_dir`` gets verdict.json, the
-figures' numbers and report.html after every run.
+``/shm/verdict`` (latched) when it is the first or when the set of accepted physics or whether the
+model fits changed, i.e. when the support for a missing effect crossed its threshold. ``output_dir``
+gets verdict.json, the figures' numbers and report.html after every run.
 
 **Event series** (docs/explain.md, Time domain): with a structure that declares a measured input, the
 node also keeps the event windows of ``/shm/windows`` (those ingest flags as events, docs/interfaces.md
@@ -77,7 +77,8 @@ def verdict_to_msg(v: dict[str, Any]) -> Any:
         msg.missing_physics.append(MissingPhysics(
             name=e["name"], form=str(e.get("form", "")), where=str(e.get("where", "")),
             parameter_names=list(params), parameter_values=list(params.values()),
-            log_evidence_gain=float(e["log_evidence_gain"])))
+            log_evidence_gain=float(e["log_evidence_gain"]), form_fits=e.get("form_fits") is not False,
+            form_fits_known=e.get("form_fits") is not None, downgraded_by=str(e.get("downgraded_by") or "")))
     f, nan = v["fit"], float("nan")
     msg.before_frequency_rmse_pct = float(f["before"].get("frequency_rmse_pct", nan))
     msg.before_mac_mean = float(f["before"].get("mac_mean", nan))
@@ -95,6 +96,11 @@ def verdict_to_msg(v: dict[str, Any]) -> Any:
     msg.lag1_before = [float(x) for x in w.get("lag1_before", [])]
     msg.lag1_after = [float(x) for x in w.get("lag1_after", [])]
     msg.still_structured_modes = [int(k) for k in w.get("still_structured", [])]
+    msg.status = str(v.get("status", "ok"))
+    ratio = v.get("fit_ratio")
+    msg.fit_ratio = nan if ratio is None else float(ratio)
+    msg.model_fits = bool(v.get("model_fits"))
+    msg.model_fits_known = v.get("model_fits") is not None
     return msg
 
 
@@ -126,7 +132,8 @@ class ExplainNode(Node):
         self.flush = False  # a replay ended: from now on, run on whatever new rows have arrived
         self.future: Any = None
         self.started = 0.0
-        self.last: dict[str, tuple[str, ...]] = {}  # the accepted physics of the last verdict of each kind
+        # the accepted physics (and whether the model fits) of the last verdict of each kind
+        self.last: dict[str, tuple[str, ...]] = {}
         self.runs = 0
         self.diag = Diagnostics(self, "explain", summary=lambda: (
             "ok", f"{len(self.rows)} windows received, {self.runs} runs"
@@ -218,10 +225,14 @@ class ExplainNode(Node):
                 self.workers.restart()
             return None
         accepted = tuple(e["name"] for e in verdict["missing_physics"])
-        text = ", ".join(accepted) or "nothing missing"
-        self.diag.report("ok", f"{count} {unit} in {took:.1f} s: {text}", name, **{key: count})
-        if accepted != self.last.get(name):
-            self.last[name] = accepted
+        fits = {True: "model fits", False: f"model does NOT fit (fit ratio {verdict.get('fit_ratio')})",
+                None: "fit ratio unknown"}[verdict.get("model_fits")]
+        text = f"{', '.join(accepted) or 'nothing named'}; {fits}"
+        level = "warn" if verdict.get("model_fits") is False else "ok"
+        self.diag.report(level, f"{count} {unit} in {took:.1f} s: {text}", name, **{key: count})
+        state = (*accepted, f"model_fits={verdict.get('model_fits')}")
+        if state != self.last.get(name):
+            self.last[name] = state
             self.pub.publish(verdict_to_msg(verdict))
             self.get_logger().info(f"verdict from {count} {unit}: {text}")
         return accepted

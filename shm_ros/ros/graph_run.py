@@ -61,14 +61,18 @@ def verdict_record(msg: Any) -> dict[str, Any]:
     return {"summary": msg.summary, "mismatch_modes": list(msg.mismatch_modes),
             "missing_physics": [{"name": m.name, "where": m.where, "form": m.form,
                                  "parameters": dict(zip(m.parameter_names, m.parameter_values, strict=False)),
-                                 "log_evidence_gain": m.log_evidence_gain} for m in msg.missing_physics],
+                                 "log_evidence_gain": m.log_evidence_gain,
+                                 "form_fits": m.form_fits if m.form_fits_known else None,
+                                 "downgraded_by": m.downgraded_by or None} for m in msg.missing_physics],
             "before_frequency_rmse_pct": msg.before_frequency_rmse_pct,
             "after_frequency_rmse_pct": msg.after_frequency_rmse_pct, "kind": msg.kind,
             "before_nrms_pct": msg.before_nrms_pct, "after_nrms_pct": msg.after_nrms_pct,
             "held_out_before_nrms_pct": msg.held_out_before_nrms_pct,
             "held_out_after_nrms_pct": msg.held_out_after_nrms_pct,
             "whiteness_modes": list(msg.whiteness_modes), "lag1_before": list(msg.lag1_before),
-            "lag1_after": list(msg.lag1_after), "still_structured_modes": list(msg.still_structured_modes)}
+            "lag1_after": list(msg.lag1_after), "still_structured_modes": list(msg.still_structured_modes),
+            "status": msg.status, "fit_ratio": msg.fit_ratio,
+            "model_fits": msg.model_fits if msg.model_fits_known else None}
 
 
 def read_pipeline_bag(path: Path) -> PipelineRecord:

@@ -75,13 +75,13 @@ def at_sensors(obs: ModalObservations, sensor_ids: Sequence[str]) -> ModalObserv
 
 
 def observations_from_tracking(estimates: Sequence[Any], sensor_ids: Sequence[str],
-                               config: Any = None) -> ModalObservations:
+                               config: Any = None, structure: Any = None) -> ModalObservations:
     """Per-window modal estimates -> tracked (``shm_ros.core.tracking.track``, as ``shm-ros track``)
     -> one column per tracked mode, shapes at ``sensor_ids``. The tracker's notes (modes born, ...)
     become the table's notes."""
     from shm_ros.core.tracking import TrackingConfig, track
 
-    res = track(list(estimates), config or TrackingConfig())
+    res = track(list(estimates), config or TrackingConfig(), structure=structure)
     obs = at_sensors(res.observations, sensor_ids)
     found = np.mean(np.isfinite(obs.frequencies_hz), axis=0)
     obs.notes = [f"{obs.n_windows} windows tracked: "

@@ -1,5 +1,10 @@
 """The whole chain: tracked-modes table + nominal structure -> :class:`~.types.Verdict`.
 
+An explicit phase pipeline on one :class:`Run` (``explain`` runs them in order): ``_start`` (time
+order, held-out split), ``_baseline``, ``_locate_phase``, ``_fit``, ``_decide``, ``_second_round``,
+``_final_estimates``, ``_catch_all``, ``_unmodelled`` and ``_verdict`` (figures' numbers, whiteness,
+fit ratio); each reads and adds fields of the run.
+
 1. **Baseline.** The tracked modes are paired once with the nominal model's modes (frequency and
    MAC gates, :func:`shm_ros.core.bayes.pairing.gated_pairing`); modes that pair with none are
    ``unmodelled_modes``. The nominal parameters are calibrated to the training windows' mean
@@ -22,6 +27,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
@@ -31,10 +38,13 @@ from shm_ros.core.models import build_model
 from shm_ros.core.observations import ModalObservations
 from shm_ros.core.priors import priors_from_specs
 from shm_ros.core.structure import StructureSpec
+from shm_ros.errors import NoWindowsError, NumericalFailure
 
 from .candidates.base import CANDIDATES, Candidate, Context
 from .config import ExplainConfig
+from .failures import failed_result, numerical
 from .fit import Box, FitResult, evidence_check, fit
+from .fit_ratio import combined, modal_fit_ratio
 from .groups import GroupModel, build_groups
 from .jobs import Job, iso_time, result
 from .likelihood import S_RANGE, CandidateLikelihood, catch_all_gain
@@ -43,7 +53,7 @@ from .scoring import damping_scores, scatter, scores
 from .select import decide, shipped_threshold
 from .shapes import break_tie
 from .surrogate import Surrogate
-from .types import Baseline, CandidateResult, Mismatch, Proposal, Verdict
+from .types import Baseline, CandidateResult, FitScores, Mismatch, Proposal, Verdict
 from .whiteness import residual_whiteness
 
 Progress = Callable[[str, float], None]
@@ -243,144 +253,247 @@ def _shape_tiebreak(tied: list[CandidateResult], jobs, sur: Surrogate, obs: Moda
 
 # -- entry point -------------------------------------------------------------------------------------
 
+@dataclass
+class Run:
+    """One explain run: its inputs, and what each phase adds (the phases below, in order)."""
+
+    obs: ModalObservations
+    spec: StructureSpec
+    config: ExplainConfig
+    say: Progress
+    notes: list[str]
+    times_s: np.ndarray
+    epoch: float
+    train: np.ndarray
+    # baseline
+    base: Baseline = field(init=False)
+    J: np.ndarray = field(init=False)
+    sur: Surrogate = field(init=False)
+    kept: list[int] = field(init=False)
+    r_all: np.ndarray = field(init=False)
+    rd_all: np.ndarray | None = field(init=False)
+    z_all: np.ndarray | None = field(init=False)
+    context: Context = field(init=False)
+    lik: CandidateLikelihood = field(init=False)
+    fit_before: FitScores = field(init=False)
+    held_before: FitScores = field(init=False)
+    noise: dict[str, float | None] = field(init=False)
+    # locate
+    groups: GroupModel = field(init=False)
+    mismatch: Mismatch = field(init=False)
+    proposals: list[Proposal] = field(init=False)
+    threshold: float = field(init=False)
+    threshold_info: dict[str, Any] = field(init=False)
+    # fit, decide, second round, final estimates, catch-all
+    tried: list[CandidateResult] = field(default_factory=list)
+    failed: list[CandidateResult] = field(default_factory=list)
+    keys: dict[str, tuple[str, float | None]] = field(default_factory=dict)
+    jobs: dict[str, tuple[Job, FitResult]] = field(default_factory=dict)
+    accepted: list[CandidateResult] = field(default_factory=list)
+    chain: list[CandidateResult] = field(default_factory=list)  # the accepted effects fitted one on another
+    fixed: list[tuple[Candidate, np.ndarray]] = field(default_factory=list)
+    last: tuple[Job, np.ndarray] | None = None  # the latest accepted effect's job and MAP (training windows)
+    form_of: tuple[Candidate, np.ndarray] | None = None
+    fit_after: FitScores | None = None
+    held_after: FitScores | None = None
+    catch: float | None = None
+    unexplained: dict[str, Any] | None = None
+
+
 def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig | None = None,
             progress: Progress | None = None) -> Verdict:
-    """Which physics the nominal model is missing, fitted and compared by evidence (module docstring)."""
-    config = config or ExplainConfig()
-    say = progress or (lambda stage, frac: None)
+    """Which physics the nominal model is missing, fitted and compared by evidence (module docstring):
+    the phases in order on one :class:`Run`."""
+    run = _start(obs, spec, config or ExplainConfig(), progress or (lambda stage, frac: None))
+    for phase in (_baseline, _locate_phase, _fit, _decide, _second_round, _final_estimates, _catch_all,
+                  _unmodelled):
+        phase(run)
+    return _verdict(run)
+
+
+def _start(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig, say: Progress) -> Run:
+    """The windows in time order without modes never found, the held-out split."""
+    if obs.n_windows == 0:
+        raise NoWindowsError("the modal data hold no window")
     obs, dropped = obs.without_empty_modes()
-    notes = [f"mode {m} has no frequency in any window; left out" for m in dropped]
-    order = np.argsort(obs.times)
-    obs = obs.subset(order)
+    if obs.n_modes == 0:
+        raise NoWindowsError(f"none of the {obs.n_windows} window(s) holds an identified mode")
+    obs = obs.subset(np.argsort(obs.times))
     times_s = obs.times - obs.times[0]
-    epoch = float(obs.times[0]) if obs.time_kind == "iso" else 0.0
-    train = split(times_s, config)
-    say("baseline", 0.0)
-    base, J = calibrate_baseline(obs, spec, train, config)
-    groups = build_groups(spec, base.theta)
-    sur = Surrogate(groups, base.model_index)
-    base.sensitivities = sur.sensitivities()
-    kept = [obs.mode_numbers.index(m) for m in base.mode_numbers]
-    r_all = base.log_residual
+    return Run(obs, spec, config, say, [f"mode {m} has no frequency in any window; left out" for m in dropped],
+               times_s, float(obs.times[0]) if obs.time_kind == "iso" else 0.0, split(times_s, config))
+
+
+def _baseline(run: Run) -> None:
+    """Calibrated nominal model, its groups and surrogate, the misfit per window, the likelihood and
+    the scores before any effect."""
+    obs, config, train = run.obs, run.config, run.train
+    run.say("baseline", 0.0)
+    run.base, run.J = calibrate_baseline(obs, run.spec, train, config)
+    run.groups = build_groups(run.spec, run.base.theta)
+    run.sur = Surrogate(run.groups, run.base.model_index)
+    run.base.sensitivities = run.sur.sensitivities()
+    run.kept = [obs.mode_numbers.index(m) for m in run.base.mode_numbers]
     # keep the baseline's pairing frequencies consistent with the group model (the same matrices)
-    r_all = r_all + np.log(base.f_model)[None] - sur.log_f_base[None]
-    rd_all = None
-    if obs.damping is not None:
-        rd_all = np.log(np.where(obs.damping[:, kept] > 0, obs.damping[:, kept], np.nan))
+    run.r_all = run.base.log_residual + np.log(run.base.f_model)[None] - run.sur.log_f_base[None]
+    run.z_all = None if obs.damping is None else obs.damping[:, run.kept]
+    run.rd_all = None if run.z_all is None else np.log(np.where(run.z_all > 0, run.z_all, np.nan))
     covariates = {k: np.asarray(v, float) for k, v in obs.covariates.items()}
     for short, name in (("rms_accel", "rms_accel_m_s2"), ("pga", "pga_m_s2"), ("temperature", "temperature_c")):
         if short in covariates and name not in covariates:  # tables that name covariates without units
             covariates[name] = covariates.pop(short)
-    context = Context(times_s=times_s, covariates=covariates,
-                      start_epoch_s=epoch)
-    lik = CandidateLikelihood(r_all[train], J, None if rd_all is None else rd_all[train],
-                              tau=config.effect_form_error, noise_guess=config.noise_guess,
-                              damping_noise_guess=config.damping_noise_guess)
-    fit_before, held_before = scores(r_all, None, train)
-    z_all = None if obs.damping is None else obs.damping[:, kept]
-    fit_before.damping_rmse_pct, held_before.damping_rmse_pct = damping_scores(z_all, None, train)
-    noise = {"frequency_pct": scatter(r_all), "damping_points": scatter(z_all)}
-    mismatch, proposals, more = _locate(obs, base, context, config, groups)
-    notes += more
-    threshold_info = shipped_threshold()
-    threshold = float(config.threshold if config.threshold is not None else threshold_info["log_bayes_factor"])
-    if config.threshold is not None:
-        threshold_info = {**threshold_info, "log_bayes_factor": threshold, "provisional": False,
-                          "note": "set in the configuration"}
-    tried: list[CandidateResult] = []
-    keys: dict[str, tuple[str, float | None]] = {}
-    jobs: dict[str, tuple[Job, FitResult]] = {}
-    for i, p in enumerate(proposals):
-        say(f"fit {p.candidate} on {p.group}", (i + 0.5) / max(len(proposals), 1))
-        ctx = Context(context.times_s, context.covariates, context.start_epoch_s, dict(p.hints))
+    run.context = Context(times_s=run.times_s, covariates=covariates, start_epoch_s=run.epoch)
+    run.lik = CandidateLikelihood(run.r_all[train], run.J, None if run.rd_all is None else run.rd_all[train],
+                                  tau=config.effect_form_error, noise_guess=config.noise_guess,
+                                  damping_noise_guess=config.damping_noise_guess)
+    run.fit_before, run.held_before = scores(run.r_all, None, train)
+    run.fit_before.damping_rmse_pct, run.held_before.damping_rmse_pct = damping_scores(run.z_all, None, train)
+    run.noise = {"frequency_pct": scatter(run.r_all), "damping_points": scatter(run.z_all)}
+
+
+def _locate_phase(run: Run) -> None:
+    """Where the misfit is and what to fit (training windows only), and the threshold in force."""
+    run.mismatch, run.proposals, more = _locate(run.obs, run.base, run.context, run.config, run.groups)
+    run.notes += more
+    info = shipped_threshold()
+    run.threshold = float(run.config.threshold if run.config.threshold is not None else info["log_bayes_factor"])
+    if run.config.threshold is not None:
+        info = {**info, "log_bayes_factor": run.threshold, "provisional": False, "note": "set in the configuration"}
+    run.threshold_info = info
+
+
+def _fit(run: Run) -> None:
+    """Every proposal fitted with its evidence; a named numerical failure fails that candidate only."""
+    config = run.config
+    for i, p in enumerate(run.proposals):
+        run.say(f"fit {p.candidate} on {p.group}", (i + 0.5) / max(len(run.proposals), 1))
+        ctx = Context(run.context.times_s, run.context.covariates, run.context.start_epoch_s, dict(p.hints))
         cand = CANDIDATES.get(p.candidate)(p.group, ctx)
-        job = Job(cand, sur, lik, train)
-        fr = fit(job.gain, job.specs, seed=config.seed + i, n_is=config.n_importance,
-                 sensitivity=config.prior_sensitivity)
-        res = result(job, fr, r_all, train, epoch, z_all)
+        job = Job(cand, run.sur, run.lik, run.train)
+        try:
+            with numerical(cand.label):
+                fr = fit(job.gain, job.specs, seed=config.seed + i, n_is=config.n_importance,
+                         sensitivity=config.prior_sensitivity)
+                res = result(job, fr, run.r_all, run.train, run.epoch, run.z_all)
+        except NumericalFailure as exc:  # named numerical failures only: the candidate failed, the run goes on
+            run.failed.append(failed_result(cand.vocabulary, cand.label, cand.group, exc, cand.explanation))
+            run.notes.append(f"{cand.label}: {run.failed[-1].reasons[0]}")
+            continue
         res.extra["proposal_reason"] = p.reason
         spec_key = next(s for s in job.specs if s.name == cand.key_parameter())
-        keys[res.label] = (spec_key.name, spec_key.null)
+        run.keys[res.label] = (spec_key.name, spec_key.null)
         if config.surrogate_check:
             mod = cand.modify(fr.theta_map[None])
             if mod.groups:
-                res.extra["surrogate_error"] = sur.check(mod)
+                res.extra["surrogate_error"] = run.sur.check(mod)
                 if res.extra["surrogate_error"] > config.surrogate_tolerance:
-                    notes.append(f"{res.label}: surrogate frequency error {res.extra['surrogate_error']:.1e} "
-                                 f"exceeds {config.surrogate_tolerance:.0e}")
-        tried.append(res)
-        jobs[res.label] = (job, fr)
-    accepted = decide(tried, keys, threshold, held_before, None, config.tie_nats, config.tie_fraction)
-    accepted = _shape_tiebreak(accepted, jobs, sur, obs, kept, train, config.tie_nats)
+                    run.notes.append(f"{res.label}: surrogate frequency error {res.extra['surrogate_error']:.1e} "
+                                     f"exceeds {config.surrogate_tolerance:.0e}")
+        form = res.extra.get("form_gain")
+        res.form_fits = None if form is None else bool(form <= run.threshold)
+        run.tried.append(res)
+        run.jobs[res.label] = (job, fr)
+
+
+def _decide(run: Run) -> None:
+    """Acceptance (threshold, held out, interval), ties broken by the shapes, the second estimator."""
+    config = run.config
+    accepted = decide(run.tried, run.keys, run.threshold, run.held_before, None, config.tie_nats, config.tie_fraction)
+    run.accepted = _shape_tiebreak(accepted, run.jobs, run.sur, run.obs, run.kept, run.train, config.tie_nats)
     if config.nested_check:  # the second, independent estimator for every accepted candidate
-        for i, c in enumerate(accepted):
-            say(f"evidence check of {c.label}", 0.95)
-            job = jobs[c.label][0]
-            c.log_evidence_gain_check, err, method = evidence_check(job.gain, Box(job.specs), config.n_live,
-                                                                    config.seed + i)
+        for i, c in enumerate(run.accepted):
+            run.say(f"evidence check of {c.label}", 0.95)
+            job = run.jobs[c.label][0]
+            chk, err, method = evidence_check(job.gain, Box(job.specs), config.n_live, config.seed + i)
+            c.log_evidence_gain_check = chk - job.cand.look_elsewhere()
             c.extra.update({"check_method": method, "check_err": err})
             tol = max(0.5, 3.0 * math.hypot(c.log_evidence_gain_err, err))
             c.extra["check_agrees"] = bool(abs(c.log_evidence_gain_check - c.log_evidence_gain) <= tol)
             if not c.extra["check_agrees"]:
-                notes.append(f"{c.label}: the two evidence estimators differ by "
-                             f"{abs(c.log_evidence_gain_check - c.log_evidence_gain):.2f} nats (> {tol:.2f})")
-    fit_after, held_after = fit_before, held_before
+                run.notes.append(f"{c.label}: the two evidence estimators differ by "
+                                 f"{abs(c.log_evidence_gain_check - c.log_evidence_gain):.2f} nats (> {tol:.2f})")
+    run.fit_after, run.held_after = run.fit_before, run.held_before
+    if run.accepted:
+        first = run.accepted[0]
+        run.fit_after = first.fit_after or run.fit_before
+        run.held_after = first.held_out_after or run.held_before
+        run.last = (run.jobs[first.label][0], run.jobs[first.label][1].theta_map)
+        run.chain = [first]
+        run.fixed = [(run.last[0].cand, run.last[1])]
+
+
+def _second_round(run: Run) -> None:
+    """More effects fitted on top of the accepted one (:func:`.rounds.more_effects`)."""
+    if not (run.accepted and run.config.second_round):
+        return
+    more, run.fit_after, run.held_after, more_last, run.fixed = more_effects(
+        run.accepted, run.tried, run.jobs, run.proposals, run.context, run.sur, run.lik, run.train, run.r_all,
+        run.epoch, run.threshold, run.config, run.say, run.z_all, run.obs, run.kept)
+    run.accepted += more
+    run.chain += more
+    run.last = more_last or run.last
+
+
+def _final_estimates(run: Run) -> None:
+    """The accepted effects' parameters re-estimated on every window (:func:`.rounds.final_estimates`)."""
+    if not run.chain:
+        return
+    config = run.config
+    run.say("final estimates on every window", 0.97)
+    lik_all = CandidateLikelihood(run.r_all, run.J, run.rd_all, tau=config.effect_form_error,
+                                  noise_guess=config.noise_guess, damping_noise_guess=config.damping_noise_guess)
+    twins = [(c, run.jobs[c.label][0].cand) for c in run.accepted
+             if all(c is not x for x in run.chain) and c.label in run.jobs]
+    final = list(run.fixed)
+    final_estimates(run.chain, final, twins, run.sur, lik_all, run.epoch, config)
+    run.form_of = final[-1]  # the figure of the fitted form shows the reported estimates
+
+
+def _catch_all(run: Run) -> None:
+    """A smooth function of the covariates and time per mode: structure no named effect explains; when
+    it beats the named effects together they are downgraded."""
+    if not run.config.catch_all:
+        return
+    threshold, accepted = run.threshold, run.accepted
+    basis, names = catch_all_basis(run.context)
+    per_mode, fitted = catch_all_gain(run.r_all[run.train], basis[run.train], run.config.noise_guess)
+    run.catch = catch = float(per_mode.sum())
+    # the named model: the accepted effects together (each one's gain is over those before it)
+    best_named = (sum(c.log_evidence_gain for c in [accepted[0], *accepted[1 + len(accepted[0].tied_with):]])
+                  if accepted else max((c.log_evidence_gain for c in run.tried), default=-math.inf))
+    if not (catch > threshold and catch > best_named):
+        return
+    strong = [run.base.mode_numbers[k] for k in np.argsort(per_mode)[::-1] if per_mode[k] > threshold]
+    amp = np.nanmax(np.abs(fitted), axis=1)
+    tt = run.times_s[run.train]
+    hot = tt[amp >= np.nanquantile(amp, 0.9)] if np.isfinite(amp).any() else tt
+    when = [iso_time(run.epoch, float(x)) if run.epoch else float(x) for x in (hot.min(), hot.max())]
+    run.unexplained = {"modes": strong, "log_evidence_gain": catch, "best_named_gain": best_named,
+                       "when": {"from": when[0], "to": when[1]}, "basis": names,
+                       "summary": (f"structured misfit in modes {strong} that no candidate explains (smooth "
+                                   f"function of covariates and time: {catch:.1f} nats vs best named "
+                                   f"{best_named:.1f})")}
     if accepted:
-        fit_after = accepted[0].fit_after or fit_before
-        held_after = accepted[0].held_out_after or held_before
-    last = (jobs[accepted[0].label][0], jobs[accepted[0].label][1].theta_map) if accepted else None
-    form_of: tuple[Candidate, np.ndarray] | None = None
-    chain = accepted[:1]
-    fixed = [(last[0].cand, last[1])] if last else []
-    if accepted and config.second_round:
-        more_accepted, fit_after, held_after, more_last, fixed = more_effects(
-            accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config, say,
-            z_all, obs, kept)
-        accepted += more_accepted
-        chain += more_accepted
-        last = more_last or last
-    if chain:
-        say("final estimates on every window", 0.97)
-        lik_all = CandidateLikelihood(r_all, J, rd_all, tau=config.effect_form_error, noise_guess=config.noise_guess,
-                                      damping_noise_guess=config.damping_noise_guess)
-        twins = [(c, jobs[c.label][0].cand) for c in accepted if all(c is not x for x in chain) and c.label in jobs]
-        final = [(c, th) for c, th in fixed]
-        final_estimates(chain, final, twins, sur, lik_all, epoch, config)
-        form_of = final[-1]  # the figure of the fitted form shows the reported estimates
-    catch = None
-    unexplained = None
-    if config.catch_all:
-        basis, names = catch_all_basis(context)
-        per_mode, fitted = catch_all_gain(r_all[train], basis[train], config.noise_guess)
-        catch = float(per_mode.sum())
-        # the named model: the accepted effects together (each one's gain is over those before it)
-        best_named = (sum(c.log_evidence_gain for c in [accepted[0], *accepted[1 + len(accepted[0].tied_with):]])
-                      if accepted else max((c.log_evidence_gain for c in tried), default=-math.inf))
-        if catch > threshold and catch > best_named:
-            strong = [base.mode_numbers[k] for k in np.argsort(per_mode)[::-1] if per_mode[k] > threshold]
-            amp = np.nanmax(np.abs(fitted), axis=1)
-            tt = times_s[train]
-            hot = tt[amp >= np.nanquantile(amp, 0.9)] if np.isfinite(amp).any() else tt
-            unexplained = {"modes": strong, "log_evidence_gain": catch, "best_named_gain": best_named,
-                           "when": {"from": iso_time(epoch, float(hot.min())) if epoch else float(hot.min()),
-                                    "to": iso_time(epoch, float(hot.max())) if epoch else float(hot.max())},
-                           "basis": names,
-                           "summary": (f"structured misfit in modes {strong} that no candidate explains "
-                                       f"(smooth function of covariates and time: {catch:.1f} nats vs best "
-                                       f"named {best_named:.1f})")}
-    if unexplained is not None and accepted:
-        # the named effects stay (each beat the nominal model on its own terms); the catch-all's lead
-        # says that structure remains which they do not explain: reported, with where and when
-        unexplained["summary"] = f"{unexplained['summary']}; the accepted effects explain part of it"
+        # the named effects stay listed (each beat the nominal model on its own terms) but are downgraded:
+        # structure remains which they do not explain, and a smooth function of the covariates and time
+        # explains it better than they do together; a downgraded effect is not a confident name
+        run.unexplained["summary"] += "; the accepted effects explain part of it"
         for c in accepted:
-            c.reasons.append(f"note: a smooth function of the covariates and time per mode (the catch-all, "
+            c.downgraded_by = "catch_all"
+            c.reasons.append(f"downgraded: a smooth function of the covariates and time per mode (the catch-all, "
                              f"{catch:.1f} nats) fits better than the named effects together")
-    # observed modes no model mode pairs with, seen in enough windows
-    for u in base.unpaired:
+
+
+def _unmodelled(run: Run) -> None:
+    """Observed modes no model mode pairs with, seen in enough windows (the others said in a note)."""
+    for u in run.base.unpaired:
         frac = u.get("fraction_of_windows")
-        if frac is not None and frac < config.min_unpaired_fraction:
+        if frac is not None and frac < run.config.min_unpaired_fraction:
+            run.notes.append(f"observed mode {u.get('mode')} at {u['frequency_hz']:.3f} Hz could not be paired with a "
+                             f"model mode ({u.get('reason')}); seen in {frac:.0%} of the windows, too few to call it "
+                             "unmodelled")
             continue
-        accepted.append(CandidateResult(
+        run.accepted.append(CandidateResult(
             name="unmodelled_modes", label=f"unmodelled_modes/mode{u.get('mode')}", form="a mode the model class lacks",
             where=f"observed mode {u.get('mode')} at {u['frequency_hz']:.3f} Hz", parameters={}, intervals={},
             log_evidence_gain=0.0, log_evidence_gain_check=None, log_evidence_gain_err=0.0, prior_sensitivity={},
@@ -388,16 +501,59 @@ def explain(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig |
             explanation="The structure has a mode the model cannot have (e.g. a lateral or torsional mode of "
                         "a plane model): the model class, not its parameters, is incomplete.",
             extra={"unmodelled": u}))
-    figures = _series(obs, base, context, train, r_all, z_all, last, epoch, form_of)
-    whiteness = residual_whiteness(figures["log_residual_before"], figures["log_residual_after"], base.mode_numbers)
-    if chain and (left := whiteness.note()):
-        notes.append(left)
-    say("done", 1.0)
-    return Verdict(mismatch=mismatch, missing_physics=accepted, tried=tried, fit_before=fit_before,
-                   fit_after=fit_after, held_out_before=held_before, held_out_after=held_after,
-                   unexplained=unexplained, scatter=noise,
-                   threshold={**threshold_info, "catch_all_gain": catch}, notes=notes,
-                   figures=figures, whiteness=whiteness)
+
+
+def _verdict(run: Run) -> Verdict:
+    """Figures' numbers, whiteness of what remains (and its downgrade), the fit ratio: the verdict."""
+    figures = _series(run.obs, run.base, run.context, run.train, run.r_all, run.z_all, run.last, run.epoch,
+                      run.form_of)
+    modes = run.base.mode_numbers
+    whiteness = residual_whiteness(figures["log_residual_before"], figures["log_residual_after"], modes)
+    if run.chain and (left := whiteness.note()):
+        run.notes.append(left)
+    _whiteness_downgrade(run.accepted, whiteness if run.chain else None, modes)
+    ratio = combined(_modal_ratio(run.r_all, run.J, run.context, run.last, run.chain, modes))
+    run.say("done", 1.0)
+    assert run.fit_after is not None and run.held_after is not None
+    return Verdict(mismatch=run.mismatch, missing_physics=run.accepted, tried=run.tried + run.failed,
+                   fit_before=run.fit_before, fit_after=run.fit_after, held_out_before=run.held_before,
+                   held_out_after=run.held_after, unexplained=run.unexplained, scatter=run.noise,
+                   threshold={**run.threshold_info, "catch_all_gain": run.catch}, notes=run.notes,
+                   figures=figures, whiteness=whiteness, fit_ratio=ratio[0], fit_ratio_details=ratio[1])
+
+
+def _whiteness_downgrade(accepted: list[CandidateResult], whiteness, mode_numbers: list[int]) -> None:
+    """A named effect is downgraded by the whiteness check when the mode it moves most still follows a
+    course in time after the accepted effects that they did not even halve
+    (:meth:`.whiteness.Whiteness.unexplained_course`): it does not explain what it claims to."""
+    course = [] if whiteness is None else whiteness.unexplained_course()
+    for c in accepted:
+        delta = c.extra.get("delta")
+        if not course or c.downgraded_by is not None or delta is None:
+            continue
+        main = mode_numbers[int(np.nanargmax(np.nanstd(delta, axis=0)))]
+        if main in course:
+            c.downgraded_by = "whiteness"
+            c.reasons.append(f"downgraded: mode {main}, which it moves most, still follows a course in time after "
+                             "the accepted effects, which they did not even halve")
+
+
+def _modal_ratio(r_all, J, context, last, chain, mode_numbers):
+    """The fit ratio after the accepted effects (:mod:`.fit_ratio`): the misfit of the model re-calibrated
+    with them (the nominal parameters' linearised shift that best fits the mean misfit, as the
+    likelihood's mean part), per mode over its scatter."""
+    r = np.array(r_all, float)
+    if last is not None:
+        d, _ = last[0].deltas(last[1])
+        if d is not None:
+            r = r - d[0]
+    mean = np.nanmean(r, axis=0)
+    if J.size and np.isfinite(mean).all():
+        shift, *_ = np.linalg.lstsq(J, mean, rcond=None)
+        r = r - (J @ shift)[None]
+    amp = next((context.covariates[k] for k in ("rms_accel_m_s2", "pga_m_s2") if k in context.covariates), None)
+    steps = [int(c.extra["change_window"]) for c in chain if "change_window" in c.extra]
+    return modal_fit_ratio(r, list(mode_numbers), amp, steps)
 
 
 def _series(obs, base, context, train, r_all, z_all, last, epoch, form_of) -> dict:

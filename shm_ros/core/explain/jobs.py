@@ -10,6 +10,7 @@ import numpy as np
 from .candidates.base import Candidate, Modification, ParamSpec
 from .config import ExplainConfig
 from .fit import FitResult, fit
+from .form_check import form_gain
 from .likelihood import CandidateLikelihood
 from .scoring import damping_scores, scores
 from .surrogate import Surrogate
@@ -135,6 +136,9 @@ class OnTop(Candidate):
     def key_parameter(self) -> str:
         return self.new.key_parameter()
 
+    def look_elsewhere(self) -> float:
+        return self.new.look_elsewhere()
+
 
 def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch: float,
            z_all: np.ndarray | None = None) -> CandidateResult:
@@ -151,12 +155,19 @@ def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch:
     res = CandidateResult(
         name=c.vocabulary, label=c.label, form=c.form(fr.theta_map), where=c.group,
         parameters=c.describe(fr.theta_map), intervals=fr.intervals,
-        log_evidence_gain=float(fr.evidence.log_z), log_evidence_gain_check=fr.check,
+        log_evidence_gain=float(fr.evidence.log_z) - c.look_elsewhere(),
+        log_evidence_gain_check=None if fr.check is None else fr.check - c.look_elsewhere(),
         log_evidence_gain_err=float(fr.evidence.err), prior_sensitivity=dict(fr.prior_sensitivity),
         time=iso_time(epoch, c.time(fr.theta_map)), explanation=c.explanation, fit_after=fit_after,
         held_out_after=held_after)
     if delta is not None:
         res.extra["delta"] = delta  # (W, K) change of ln f at the MAP: ties (select.decide)
+        mod = c.modify(np.atleast_2d(fr.theta_map))
+        if mod.groups:  # the form flag's evidence (form_check): smooth functions of the effect's factor
+            x = np.asarray(next(iter(mod.groups.values()))[0], float)
+            res.extra["form_gain"] = form_gain(x[train], (r_all - delta)[train], job.lik.noise_guess)
+    if c.look_elsewhere():
+        res.extra["look_elsewhere_nats"] = c.look_elsewhere()
     res.extra.update({"key_parameter": key, "gain_at_map": fr.gain_map, "acts_on": res_acts, "evaluations": fr.n_eval,
                       "check_method": fr.check_method, "check_err": fr.check_err})
     t0 = c.time(fr.theta_map)

@@ -121,6 +121,7 @@ class CandidateLikelihood:
                  tau: float = 0.1, noise_guess: float = 0.003, damping_noise_guess: float = 0.2,
                  ig_shape: float = 1.0):
         self.tau = float(tau)
+        self.noise_guess = float(noise_guess)
         self.freq = _Part.make(r, ig_shape, noise_guess)
         self.damp = None if rd is None or not np.isfinite(rd).any() else _Part.make(rd, ig_shape, damping_noise_guess)
         ok = self.freq.ok

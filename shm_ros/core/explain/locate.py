@@ -1,6 +1,7 @@
 """Locate: where the calibrated nominal model and the data disagree, and which candidates to fit.
 
-Residuals ``r[w, k] = ln f_obs - ln f_model`` (:class:`~.types.Baseline`) are noise plus a per-mode
+Residuals ``r[w, k] = ln f_obs - ln f_model`` (:class:`~.types.Baseline`) of the training windows
+only (the held-out ones are read as missing: they stay a test of what locate proposes) are noise plus a per-mode
 offset (model-form error) when the model lacks nothing that changes between windows. Anything else
 shows up as structure in time, and locate asks, in this order:
 
@@ -69,7 +70,7 @@ def locate(obs, baseline: Baseline, context: Context, config: LocateConfig | Non
            ) -> tuple[Mismatch, list[Proposal]]:
     """Residual analysis -> (mismatch, proposals); see the module docstring."""
     cfg = config or LocateConfig()
-    R = np.asarray(baseline.log_residual, float)
+    R = training_only(np.asarray(baseline.log_residual, float), baseline.train)
     W, K = R.shape
     ok = np.isfinite(R)
     Rc = R - np.nanmedian(R, axis=0)
@@ -113,6 +114,15 @@ def locate(obs, baseline: Baseline, context: Context, config: LocateConfig | Non
     mism = Mismatch(modes=structured + [int(u["mode"]) for u in unpaired if u.get("mode") is not None],
                     sensors=list(getattr(obs, "sensor_ids", [])), covariates=corr, summary=summary, details=details)
     return mism, unique
+
+
+def training_only(values: np.ndarray, train: np.ndarray | None) -> np.ndarray:
+    """``values`` (W, K) with the held-out windows' rows missing (NaN): locate reads the training windows
+    only, so that the held-out windows stay a test of everything the residual analysis proposes."""
+    out = np.array(values, dtype=float)
+    if train is not None:
+        out[~np.asarray(train, bool)] = np.nan
+    return out
 
 
 # -- noise or structure ------------------------------------------------------------------------------
@@ -202,6 +212,16 @@ def _step_profile(Z: np.ndarray, ok: np.ndarray, X: np.ndarray, lo: int, hi: int
     return int(cs[j]), float(gains[j])
 
 
+def _span(ok: np.ndarray, c: int) -> list[int]:
+    """The windows a change found at ``c`` may lie in: from the first window after the last one with
+    data before ``c`` to the first with data from ``c`` on (a held-out block reads as no data: a change
+    inside it is placed by the windows around it)."""
+    has = np.asarray(ok, bool).any(axis=1).reshape(-1)
+    before = np.flatnonzero(has[:c])
+    after = np.flatnonzero(has[c:])
+    return [int(before[-1] + 1) if before.size else 0, int(c + after[0]) if after.size else int(c)]
+
+
 def _threshold(df: int, n_profile: int, cfg: LocateConfig) -> float:
     return float(stats.chi2.isf(cfg.significance / max(n_profile, 1), df))
 
@@ -257,7 +277,8 @@ def _select(Z: np.ndarray, ok: np.ndarray, covs: dict[str, np.ndarray], t: np.nd
             c, g = _step_profile(Z, ok, X, lo, hi)
             col = (np.arange(W) >= c).astype(float)[:, None]
             options.append((g - _threshold(K, hi - lo, cfg),
-                            _Effect("step", col, g, {"change_index": c, "change_time_s": float(t[c])})))
+                            _Effect("step", col, g, {"change_index": c, "change_time_s": float(t[c]),
+                                                     "change_span": _span(ok, c)})))
         if "hours" not in have:  # windows of the day (slow or jammed traffic, crowds)
             best, n = _hours(Z, ok, X, hour, [], cfg)
             if best is not None:
@@ -415,7 +436,7 @@ def _damping(obs, baseline: Baseline, covs: dict[str, np.ndarray], cfg: LocateCo
         return None
     cols = [obs.mode_numbers.index(m) for m in baseline.mode_numbers if m in obs.mode_numbers]
     with np.errstate(divide="ignore", invalid="ignore"):
-        L = np.log(np.asarray(D, float)[:, cols])
+        L = training_only(np.log(np.asarray(D, float)[:, cols]), baseline.train)
     L = L - np.nanmedian(L, axis=0)
     best = None
     for name in ("rms_accel_m_s2", "pga_m_s2"):
@@ -435,7 +456,9 @@ def _damping(obs, baseline: Baseline, covs: dict[str, np.ndarray], cfg: LocateCo
 def _correlations(R: np.ndarray, covs: dict[str, np.ndarray], hour: np.ndarray) -> dict[str, float]:
     """Correlation of the modes' mean centred misfit with each covariate (and with time)."""
     Rc = R - np.nanmedian(R, axis=0)
-    y = np.nanmean(Rc, axis=1)
+    has = np.isfinite(Rc).any(axis=1)  # held-out windows (and windows without a mode) have none
+    y = np.full(R.shape[0], np.nan)
+    y[has] = np.nanmean(Rc[has], axis=1)
     out = {}
     series = {**covs, "time": np.arange(R.shape[0], dtype=float)}
     for k, v in series.items():

@@ -9,9 +9,11 @@ import math
 import numpy as np
 
 from shm_ros.core.observations import ModalObservations
+from shm_ros.errors import NumericalFailure
 
 from .candidates.base import Candidate
 from .config import ExplainConfig
+from .failures import failed_result, numerical
 from .fit import Box, FitResult, evidence_check
 from .jobs import Job, fit_on_top, iso_time, result
 from .likelihood import CandidateLikelihood
@@ -51,9 +53,14 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
         for i, c in enumerate(pool):
             job0 = jobs[c.label][0]
             say(f"fit {c.label} on top of {len(fixed)} effect(s)", 0.9)
-            job, fr = fit_on_top(job0.cand, fixed, sur, lik, train, config.seed + 100 + i, config)
-            res = result(job, fr, r_all, train, epoch, z_all)
-            res.log_evidence_gain = float(fr.evidence.log_z - base_gain)
+            try:
+                with numerical(f"{c.label} on top of {len(fixed)} effect(s)"):
+                    job, fr = fit_on_top(job0.cand, fixed, sur, lik, train, config.seed + 100 + i, config)
+                    res = result(job, fr, r_all, train, epoch, z_all)
+            except NumericalFailure as exc:  # named numerical failures only: this refit failed
+                tried.append(failed_result(c.name, c.label, c.where, exc, c.explanation))
+                continue
+            res.log_evidence_gain = float(fr.evidence.log_z - base_gain - job.cand.look_elsewhere())
             res.extra.update({"on_top_of": [f[0].label for f in fixed], "gain_over_nominal": float(fr.evidence.log_z)})
             results.append((res, job, fr))
         results = _set_aside_same_course(results, fixed, best, tried, threshold)

@@ -38,6 +38,7 @@ from shm_ros.core.priors import JointPrior
 from shm_ros.core.response.batch import batch_responses
 
 from .candidates.base import Candidate
+from .failures import require_finite
 from .td_model import FactorModel, shape_logprior
 from .td_varying import node_steps, varying_responses
 
@@ -375,7 +376,8 @@ def laplace(post: EventPosterior, u: np.ndarray, f: float) -> Laplace:
     h[post.nb:] = np.minimum(h[post.nb:], 0.2)
     inner[post.nb:] = np.clip(u[post.nb:], 2.01 * h[post.nb:], 1 - 2.01 * h[post.nb:])  # every point in the box
     H = -hessian(post, inner, h)
-    if not np.all(np.isfinite(H)):  # a point fell outside the prior: keep the diagonal
+    require_finite("Laplace evidence: the Hessian's diagonal at the MAP", np.diag(H))
+    if not np.all(np.isfinite(H)):  # a corner point fell outside the prior: keep the diagonal
         H = np.diag(np.where(np.isfinite(np.diag(H)), np.diag(H), 1.0 / h ** 2))
     w, V = np.linalg.eigh(H)
     w = np.maximum(w, 1e-12 * max(float(np.max(np.abs(w))), 1e-300))
@@ -387,6 +389,7 @@ def laplace(post: EventPosterior, u: np.ndarray, f: float) -> Laplace:
     if at_bound:
         inner_ax = [j for j in range(d) if j not in at_bound]
         Hi = -hessian(post, u, h, inner_ax)
+        require_finite("Laplace evidence: the Hessian at the MAP (parameters inside their range)", Hi)
         wi = np.linalg.eigvalsh(Hi) if inner_ax else np.zeros(0)
         wi = np.maximum(wi, 1e-12 * max(float(np.max(np.abs(wi), initial=0.0)), 1e-300))
         log_z = f + 0.5 * len(inner_ax) * math.log(2 * math.pi) - 0.5 * float(np.sum(np.log(wi)))

@@ -36,6 +36,9 @@ from shm_ros.core.models.base import AffineModel, generalized_modes_batch
 from shm_ros.core.predict.config import Baseline
 from shm_ros.core.predict.record import EventRecord
 from shm_ros.core.predict.signals import baseline_correct, pre_event_end, strong_motion
+from shm_ros.errors import InputError, NoWindowsError
+
+from .fit_ratio import pre_event_noise_nrms
 
 FACTOR_NAMES = ("_stiffness_factor", "_damping_factor", "_added_damping")
 SHAPE_NAME = "_damping_shape"
@@ -132,6 +135,7 @@ class EventData:
     covariates: dict[str, np.ndarray]  # pga_m_s2, rms_accel_m_s2: (E,)
     start_ns: list[int] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    noise_nrms: np.ndarray | None = None  # (E,) NRMS (%) the pre-event noise alone gives; NaN: none recorded
 
 
 SEGMENT_S = 0.25  # within-event resolution: a fraction of a period of the modes that soften
@@ -155,6 +159,12 @@ def segment_amplitudes(records: list[AccelerationRecord], period_s: float,
     return amps, lens
 
 
+def _recorded(x: np.ndarray) -> bool:
+    """Whether a channel's samples hold a record: finite values that vary."""
+    x = x[np.isfinite(x)]
+    return x.size > 1 and float(np.ptp(x)) > 0.0
+
+
 def event_data(events: list[EventRecord], onset_arias: float = 0.001, min_pre_event_s: float = 1.0,
                baseline: Baseline | str = Baseline.MEAN) -> EventData:
     """Records for the joint likelihood (offsets removed as the prediction stage removes them,
@@ -162,13 +172,23 @@ def event_data(events: list[EventRecord], onset_arias: float = 0.001, min_pre_ev
     and the RMS of the measured outputs over the input's strong motion (5-95 % of its Arias
     intensity), averaged over channels in the mean-square sense (``rms_accel_m_s2``)."""
     if not events:
-        raise ValueError("explain (time domain): no event records")
+        raise NoWindowsError("explain (time domain): no event records")
     ids = events[0].channel_ids
-    recs, pga, rms, notes = [], [], [], []
+    recs, pga, rms, notes, noise = [], [], [], [], []
     for ev in events:
         if ev.channel_ids != ids:
-            raise ValueError(f"event {ev.window_id}: channels {ev.channel_ids} differ from the first event's {ids}")
-        y = np.asarray(ev.outputs, dtype=float)
+            raise InputError(f"event {ev.window_id}: channels {ev.channel_ids} differ from the first event's {ids}")
+    # a channel with no record in an event (no finite sample: a missing sensor; a constant value: a dead
+    # one) is left out of every event
+    empty = [c for c in range(len(ids)) if any(not _recorded(np.asarray(ev.outputs, float)[:, c]) for ev in events)]
+    keep = [c for c in range(len(ids)) if c not in empty]
+    if not keep:
+        raise NoWindowsError("explain (time domain): no output channel has a record in every event")
+    if empty:
+        notes.append(f"channel(s) {[ids[c] for c in empty]} left out: no record in at least one event")
+    ids = [ids[c] for c in keep]
+    for ev in events:
+        y = np.asarray(ev.outputs, dtype=float)[:, keep]
         if not np.all(np.isfinite(y)):
             keep = np.all(np.isfinite(y), axis=1)
             notes.append(f"event {ev.window_id}: {int(np.sum(~keep))} samples with missing outputs set to 0")
@@ -180,6 +200,7 @@ def event_data(events: list[EventRecord], onset_arias: float = 0.001, min_pre_ev
         s = strong_motion(u[0])
         pga.append(float(np.max(np.abs(u[0]))))
         rms.append(float(np.sqrt(np.mean(y[s] ** 2))))
+        noise.append(pre_event_noise_nrms(y, n_pre))
     return EventData([e.window_id for e in events], recs,
                      {"pga_m_s2": np.array(pga), "rms_accel_m_s2": np.array(rms)},
-                     [int(e.start_ns) for e in events], notes)
+                     [int(e.start_ns) for e in events], notes, np.array(noise))

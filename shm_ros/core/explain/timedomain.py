@@ -19,25 +19,32 @@ Input: the structure (a building with a declared base input, docs/interfaces.md 
 4. acceptance (:func:`.select.decide`): gain above the time-domain threshold (``threshold_timedomain.json``,
    calibrated on clean replicates), held-out NRMS improved, 95 % interval of the key parameter
    excluding its null value.
+
+As on the modal path, an explicit phase pipeline on one :class:`EventsRun`: ``_start`` (records,
+likelihood, held-out events), ``_nominal``, ``_fit``, ``_decide`` and ``_verdict``.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from shm_ros.core.bayes.records import JointTimeDomainLikelihood, RecordSet
 from shm_ros.core.config import option
 from shm_ros.core.models import build_model
+from shm_ros.core.models.base import AffineModel
 from shm_ros.core.predict.record import EventRecord
-from shm_ros.core.priors import priors_from_specs
+from shm_ros.core.priors import JointPrior, priors_from_specs
 from shm_ros.core.structure import StructureSpec
+from shm_ros.errors import NumericalFailure
 
 from .candidates._common import amplitude
 from .candidates.base import CANDIDATES, Context
+from .failures import failed_result, numerical
+from .fit_ratio import combined, events_fit_ratio
 from .select import decide, shipped_threshold
 from .td_fit import (
     EventPosterior,
@@ -49,10 +56,11 @@ from .td_fit import (
     newton_polish,
     spectral_starts,
 )
-from .td_model import SEGMENT_S, FactorModel, event_data, segment_amplitudes
+from .td_model import SEGMENT_S, EventData, FactorModel, event_data, segment_amplitudes
 from .types import CandidateResult, FitScores, Mismatch, Verdict
 
 THRESHOLD_FILE = "threshold_timedomain.json"
+MIN_EVENTS = 3  # a calibration set and at least one held-out event
 TD_CANDIDATES = ("amplitude_stiffness", "amplitude_damping", "amplitude_added_damping")
 
 
@@ -87,56 +95,113 @@ def _scores(nrms: np.ndarray) -> FitScores:
     return FitScores(nrms_pct=float(np.mean(nrms)) if nrms.size else None)
 
 
+@dataclass
+class EventsRun:
+    """One time-domain explain run: its inputs and what each phase adds (the phases below, in order)."""
+
+    cfg: TimeDomainConfig
+    say: Callable[[str], None]
+    model: AffineModel
+    data: EventData
+    lik: JointTimeDomainLikelihood
+    prior: JointPrior
+    rng: np.random.Generator
+    amp: np.ndarray
+    train: np.ndarray
+    test: np.ndarray
+    # the nominal model
+    nominal: EventPosterior = field(init=False)
+    u_n: np.ndarray = field(init=False)
+    lap_n: Laplace = field(init=False)
+    nominal_ar: list = field(init=False)
+    before: np.ndarray = field(init=False)
+    held_before: np.ndarray = field(init=False)
+    # candidates
+    results: list[CandidateResult] = field(default_factory=list)
+    failed: list[CandidateResult] = field(default_factory=list)
+    checks: dict[str, _Pending] = field(default_factory=dict)  # per label: what the evidence check needs
+    keys: dict[str, tuple[str, float | None]] = field(default_factory=dict)
+    accepted: list[CandidateResult] = field(default_factory=list)
+    thr: dict = field(default_factory=dict)
+
+    @property
+    def n_ev(self) -> int:
+        return len(self.data.records)
+
+    @property
+    def strongest(self) -> int:
+        return int(np.argmax(self.amp))  # the event the report draws
+
+
 def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeDomainConfig | None = None,
                    progress: Callable[[str], None] | None = None) -> Verdict:
-    cfg = config or TimeDomainConfig()
-    say = progress or (lambda _m: None)
+    """The time-domain verdict (module docstring): the phases in order on one :class:`EventsRun`."""
+    run = _start(events, spec, config or TimeDomainConfig(), progress or (lambda _m: None))
+    for phase in (_nominal, _fit, _decide):
+        phase(run)
+    return _verdict(run)
+
+
+def _start(events: list[EventRecord], spec: StructureSpec, cfg: TimeDomainConfig, say) -> EventsRun:
+    """The records, the joint likelihood, the held-out events."""
     model = build_model(spec)
     data = event_data(events)
     lik = JointTimeDomainLikelihood(FactorModel.of(model), RecordSet(data.records), ar_order=cfg.ar_order,
                                     error_guess=cfg.error_guess)
-    prior = priors_from_specs(spec.parameters)
-    rng = np.random.default_rng(cfg.seed)
-    n_ev = len(data.records)
-    every = np.arange(n_ev)
+    every = np.arange(len(data.records))
     amp = data.covariates[cfg.amplitude]
     held = held_out_events(amp, cfg.held_out_every)
-    train, test = every[~held], every[held]
+    return EventsRun(cfg, say, model, data, lik, priors_from_specs(spec.parameters), np.random.default_rng(cfg.seed),
+                     amp, every[~held], every[held])
 
-    say("calibrating the nominal parameters on every event")
-    nominal = EventPosterior(lik, prior, None)
-    u_w, _ = find_map(nominal, spectral_starts(nominal, rng))
+
+def _nominal(run: EventsRun) -> None:
+    """The nominal parameters calibrated on every event (its residual model fixed for every comparison)
+    and on the training events alone (the held-out score)."""
+    run.say("calibrating the nominal parameters on every event")
+    nominal = run.nominal = EventPosterior(run.lik, run.prior, None)
+    u_w, _ = find_map(nominal, spectral_starts(nominal, run.rng))
     nominal.fix_ar(u_w)  # the residual model of every comparison below
-    u_n, f_n = newton_polish(nominal, *find_map(nominal, [u_w]))
-    lap_n = laplace(nominal, u_n, f_n)
-    nominal_ar = nominal.ar_state()
-    before = nominal.nrms(u_n, every)
-    nom_tr = EventPosterior(lik, prior, None, train)
-    u_ntr, _ = find_map(nom_tr, [u_n])
-    held_before = nom_tr.nrms(u_ntr, test)
+    run.u_n, f_n = newton_polish(nominal, *find_map(nominal, [u_w]))
+    run.lap_n = laplace(nominal, run.u_n, f_n)
+    run.nominal_ar = nominal.ar_state()
+    run.before = nominal.nrms(run.u_n, np.arange(run.n_ev))
+    nom_tr = EventPosterior(run.lik, run.prior, None, run.train)
+    u_ntr, _ = find_map(nom_tr, [run.u_n])
+    run.held_before = nom_tr.nrms(u_ntr, run.test)
 
+
+def _fit(run: EventsRun) -> None:
+    """Every time-domain candidate at each resolution; a named numerical failure fails that fit only."""
+    cfg, data = run.cfg, run.data
     t0 = min(data.start_ns) if data.start_ns else 0
+    every = np.arange(run.n_ev)
     ctx = Context(times_s=(np.array(data.start_ns, float) - t0) / 1e9 if data.start_ns else every.astype(float),
                   covariates=dict(data.covariates), hints={"covariate": cfg.amplitude})
-    results: list[CandidateResult] = []
-    checks: dict[str, _Pending] = {}  # per label: what the evidence check needs, run once accepted
-    keys: dict[str, tuple[str, float | None]] = {}
-    strongest = int(np.argmax(amp))  # the event the report draws
-    period = 1.0 / float(model.modes(None, 1).frequencies_hz[0])
+    period = 1.0 / float(run.model.modes(None, 1).frequencies_hz[0])
     seg_amp, seg_len = segment_amplitudes(data.records, period, cfg.segment_s)
     segments = Segments(seg_len, [a.size for a in seg_amp], np.concatenate(seg_amp) ** 2)
     seg_t = np.concatenate([ctx.times_s[e] + np.arange(a.size) * seg_len[e] * data.records[e].dt
                             for e, a in enumerate(seg_amp)])
     ctx_in = Context(times_s=seg_t, covariates={"rms_accel_m_s2": np.concatenate(seg_amp)},
                      hints={"covariate": "rms_accel_m_s2"})
+    if run.n_ev < MIN_EVENTS:
+        run.say(f"{run.n_ev} event(s): too few to fit a candidate and score it on held-out events")
+        return
     for label in cfg.candidates:
         only = getattr(CANDIDATES.get(label), "resolutions", None)  # a candidate may need one resolution
         for res in (r for r in cfg.resolutions if only is None or r in only):
-            say(f"fitting {label} ({res.replace('_', ' ')})")
+            run.say(f"fitting {label} ({res.replace('_', ' ')})")
             within = res == "within_event"
             cand = CANDIDATES.get(label)("EI", ctx_in if within else ctx)
-            r, pending = _fit_candidate(cand, lik, prior, u_n, lap_n.log_z, train, test,
-                                        segments if within else None, strongest)
+            try:
+                with numerical(f"{cand.label} ({res.replace('_', ' ')})"):
+                    r, pending = _fit_candidate(cand, run.lik, run.prior, run.u_n, run.lap_n.log_z, run.train,
+                                                run.test, segments if within else None, run.strongest)
+            except NumericalFailure as exc:  # named numerical failures only: the candidate failed
+                run.failed.append(failed_result(cand.vocabulary, f"{cand.label}/{res}", cand.group, exc,
+                                                cand.explanation))
+                continue
             r.extra["nrms_per_event"] = r.extra.pop("_nrms").tolist()
             r.extra["resolution"] = res
             if within:
@@ -144,43 +209,62 @@ def explain_events(events: list[EventRecord], spec: StructureSpec, config: TimeD
                 r.extra.update(period_s=period, segment_s=cfg.segment_s)
                 r.form = (f"{r.form} within each event: a = RMS acceleration of the outputs over one period of "
                           f"the first mode ({period:.2f} s), per {cfg.segment_s:g} s")
-            results.append(r)
-            checks[r.label] = pending
-            spec0 = cand.params()[0]
-            keys[r.label] = (cand.key_parameter(), spec0.null)
-    thr = _threshold(cfg)
-    accepted = decide(results, keys, float(thr["log_bayes_factor"]), _scores(held_before), None, cfg.tie_nats)
-    if accepted:  # the second estimator, for the accepted candidates (as on the modal path)
-        say("checking the accepted candidates' evidence by importance sampling")
-        nominal.set_ar(nominal_ar)
-        chk_n = importance_log_z(nominal, lap_n, cfg.n_importance, rng)
-        for c in accepted:
-            _check(c, checks[c.label], chk_n, cfg.n_importance, rng)
-        nominal.set_ar(nominal_ar)
+            run.results.append(r)
+            run.checks[r.label] = pending
+            run.keys[r.label] = (cand.key_parameter(), cand.params()[0].null)
+
+
+def _decide(run: EventsRun) -> None:
+    """Acceptance, and the second estimator of the accepted candidates' evidence."""
+    cfg = run.cfg
+    run.thr = _threshold(cfg)
+    run.accepted = decide(run.results, run.keys, float(run.thr["log_bayes_factor"]), _scores(run.held_before), None,
+                          cfg.tie_nats)
+    if run.accepted:  # the second estimator, for the accepted candidates (as on the modal path)
+        run.say("checking the accepted candidates' evidence by importance sampling")
+        run.nominal.set_ar(run.nominal_ar)
+        chk_n = importance_log_z(run.nominal, run.lap_n, cfg.n_importance, run.rng)
+        for c in run.accepted:
+            _check(c, run.checks[c.label], chk_n, cfg.n_importance, run.rng)
+        run.nominal.set_ar(run.nominal_ar)
+
+
+def _verdict(run: EventsRun) -> Verdict:
+    """Scores before and after, the mismatch, the fit ratio, notes and the figures' numbers."""
+    cfg, data, accepted, before, n_ev = run.cfg, run.data, run.accepted, run.before, run.n_ev
     after = np.array(accepted[0].extra["nrms_per_event"]) if accepted else before
-    held_after = accepted[0].held_out_after if accepted and accepted[0].held_out_after else _scores(held_before)
-    corr = float(np.corrcoef(amp, before)[0, 1]) if n_ev > 2 and np.std(before) > 0 else 0.0
+    held_after = (accepted[0].held_out_after if accepted and accepted[0].held_out_after
+                  else _scores(run.held_before))
+    corr = float(np.corrcoef(run.amp, before)[0, 1]) if n_ev > 2 and np.std(before) > 0 else 0.0
     mismatch = Mismatch(modes=[], sensors=list(data.records[0].channel_ids), covariates={cfg.amplitude: corr},
                         summary=(f"nominal model calibrated on {n_ev} events: NRMS {np.mean(before):.1f} % "
                                  f"(per event {', '.join(f'{v:.1f}' for v in before)}); correlation of the "
                                  f"per-event NRMS with {cfg.amplitude}: {corr:+.2f}"))
-    theta = dict(zip(lik.model.parameter_names[:len(u_n)], map(float, u_n), strict=True))
-    examples = {r.label: r.extra.pop("_example") for r in results}
-    figures: dict = {"events": {"window_ids": data.window_ids, cfg.amplitude: amp.tolist(),
+    theta = dict(zip(run.lik.model.parameter_names[:len(run.u_n)], map(float, run.u_n), strict=True))
+    examples = {r.label: r.extra.pop("_example") for r in run.results}
+    ratio = combined(events_fit_ratio(after, data.noise_nrms if data.noise_nrms is not None
+                                      else np.full(n_ev, np.nan)))
+    notes = [*data.notes, f"time domain: {n_ev} events, held out {[int(i) for i in run.test]} (amplitude order), "
+             f"nominal parameters at the MAP: {theta}"]
+    if n_ev < MIN_EVENTS:
+        notes.append(f"{n_ev} event(s): no candidate was fitted (at least {MIN_EVENTS} are needed, a calibration "
+                     "set and a held-out event); the nominal model's fit is reported")
+    notes += [f"{c.label}: {c.reasons[0]}" for c in run.failed]
+    figures: dict = {"events": {"window_ids": data.window_ids, cfg.amplitude: run.amp.tolist(),
                                 "nrms_before": before.tolist(), "nrms_after": after.tolist(),
-                                "held_out": [int(i) for i in test], "nominal_parameters": theta}}
-    rec = data.records[strongest]
+                                "held_out": [int(i) for i in run.test], "nominal_parameters": theta}}
+    s = run.strongest
+    rec = data.records[s]
     figures["events"]["example"] = {
-        "window_id": data.window_ids[strongest], "channel": rec.channel_ids[-1], "dt": rec.dt,
-        "measured": rec.outputs[:, -1].tolist(), "before": nominal.predict(u_n, strongest)[:, -1].tolist(),
+        "window_id": data.window_ids[s], "channel": rec.channel_ids[-1], "dt": rec.dt,
+        "measured": rec.outputs[:, -1].tolist(), "before": run.nominal.predict(run.u_n, s)[:, -1].tolist(),
         "after": examples[accepted[0].label] if accepted else None}
     if accepted:
         figures["form"] = _form_curve(accepted[0])
-    return Verdict(mismatch=mismatch, missing_physics=accepted, tried=results, fit_before=_scores(before),
-                   fit_after=_scores(after), held_out_before=_scores(held_before), held_out_after=held_after,
-                   threshold=thr, notes=[*data.notes, f"time domain: {n_ev} events, held out {list(test)} "
-                                         f"(amplitude order), nominal parameters at the MAP: {theta}"],
-                   figures=figures)
+    return Verdict(mismatch=mismatch, missing_physics=accepted, tried=run.results + run.failed,
+                   fit_before=_scores(before), fit_after=_scores(after), held_out_before=_scores(run.held_before),
+                   held_out_after=held_after, threshold=run.thr, notes=notes, figures=figures, fit_ratio=ratio[0],
+                   fit_ratio_details=ratio[1])
 
 
 def _form_curve(c: CandidateResult) -> dict:

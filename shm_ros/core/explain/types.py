@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .fit_ratio import FIT_RATIO_LIMIT
 from .whiteness import Whiteness
 
 
@@ -56,13 +57,24 @@ class CandidateResult:
     held_out_after: FitScores | None = None
     tied_with: list[str] = field(default_factory=list)  # labels the data cannot tell apart from this one
     extra: dict[str, Any] = field(default_factory=dict)  # figures' data (fitted curve, ...)
+    # does the effect's functional form fit what it explains? False: structure left in its residual
+    # (the form flag, set by the candidate's check or by the whiteness of its residual); None: not judged
+    form_fits: bool | None = None
+    downgraded_by: str | None = None  # "catch_all" or "whiteness": weakened by what remains; None
+    failed: str | None = None  # a named numerical failure of its fit (the reason); None when it ran
+
+    @property
+    def confident(self) -> bool:
+        """Accepted, its form not seen to fail, not downgraded: a confident name."""
+        return self.accepted and self.form_fits is not False and self.downgraded_by is None
 
     def entry(self) -> dict[str, Any]:
         """The ``missing_physics`` entry of verdict.json."""
         out: dict[str, Any] = {"name": self.name, "form": self.form, "parameters": dict(self.parameters),
                                "log_evidence_gain": float(self.log_evidence_gain), "where": self.where,
                                "label": self.label, "explanation": self.explanation,
-                               "intervals": {k: [float(a), float(b)] for k, (a, b) in self.intervals.items()}}
+                               "intervals": {k: [float(a), float(b)] for k, (a, b) in self.intervals.items()},
+                               "form_fits": self.form_fits, "downgraded_by": self.downgraded_by}
         if self.time is not None:
             out["time"] = self.time
         if "change_window" in self.extra:
@@ -91,10 +103,32 @@ class Verdict:
     notes: list[str] = field(default_factory=list)
     figures: dict[str, Any] = field(default_factory=dict)  # numbers behind the report's figures
     whiteness: Whiteness | None = None  # per mode: is the misfit before / after noise? (modal tables)
+    status: str = "ok"  # "ok", or "no_windows": nothing to analyse (exit code 3)
+    # the fit ratio after the accepted effects (docs/interfaces.md §5) and its parts per path / mode
+    fit_ratio: float | None = None
+    fit_ratio_details: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def model_fits(self) -> bool | None:
+        """False when the fit ratio after the accepted effects reaches :data:`FIT_RATIO_LIMIT`; None
+        when it could not be computed (no windows)."""
+        if self.fit_ratio is None or not np.isfinite(self.fit_ratio):
+            return None
+        return bool(self.fit_ratio < FIT_RATIO_LIMIT)
+
+    @classmethod
+    def no_windows(cls, reason: str) -> Verdict:
+        """The verdict of an input without a single analysis window (``status: no_windows``)."""
+        empty = FitScores()
+        return cls(mismatch=Mismatch(modes=[], sensors=[], covariates={}, summary=f"no analysis window: {reason}"),
+                   missing_physics=[], tried=[], fit_before=empty, fit_after=empty, held_out_before=empty,
+                   held_out_after=empty, notes=[reason], status="no_windows")
 
     def to_dict(self) -> dict[str, Any]:
         m = self.mismatch
         out: dict[str, Any] = {
+            "status": self.status, "model_fits": self.model_fits,
+            "fit_ratio": None if self.fit_ratio is None or not np.isfinite(self.fit_ratio) else float(self.fit_ratio),
             "mismatch": {"modes": list(m.modes), "sensors": list(m.sensors),
                          "covariates": {k: float(v) for k, v in m.covariates.items()}, "summary": m.summary},
             "missing_physics": [c.entry() for c in self.missing_physics],
@@ -107,12 +141,15 @@ class Verdict:
                             "log_evidence_gain_err": c.log_evidence_gain_err,
                             "log_evidence_gain_check_err": c.extra.get("check_err"),
                             "check_agrees": c.extra.get("check_agrees"),
-                            "prior_sensitivity": dict(c.prior_sensitivity),
+                            "prior_sensitivity": dict(c.prior_sensitivity), "failed": c.failed,
                             **{k: float(c.extra[k]) for k in ("relative_support", "shape_log_likelihood")
                                if k in c.extra}} for c in self.tried],
             "threshold": dict(self.threshold),
             "notes": list(self.notes),
         }
+        if self.fit_ratio_details:
+            out["fit"]["fit_ratio"] = dict(self.fit_ratio_details)
+        out["unexplained_structure"] = None
         if self.whiteness is not None:
             out["fit"]["residual_whiteness"] = self.whiteness.to_dict()
         if self.unexplained is not None:

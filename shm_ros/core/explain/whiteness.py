@@ -37,8 +37,10 @@ def autocorrelation(r: np.ndarray, lags: int) -> np.ndarray:
 
 
 def ljung_box(r: np.ndarray, lags: int = LAGS) -> float:
-    """p-value of the Ljung-Box test that the series is white up to ``lags``."""
-    n = np.asarray(r).size
+    """p-value of the Ljung-Box test that the series is white up to ``lags`` (over its finite values:
+    windows where the mode was not found, or held out, are skipped, not read as NaN)."""
+    r = _finite(r)
+    n = r.size
     if n <= lags + 2:
         return 1.0
     rho = autocorrelation(r, lags)
@@ -55,6 +57,12 @@ class Whiteness:
     lag1_after: list[float]
     p_before: list[float]  # Ljung-Box p-values
     p_after: list[float]
+
+    def unexplained_course(self) -> list[int]:
+        """Modes with structure left whose lag-1 autocorrelation the accepted effects did not even
+        halve: the course in time there is not what they explain (the whiteness downgrade)."""
+        return [m for m in self.still_structured
+                if self.lag1_after[self.mode_numbers.index(m)] > 0.5 * self.lag1_before[self.mode_numbers.index(m)]]
 
     @property
     def still_structured(self) -> list[int]:
@@ -91,6 +99,12 @@ def residual_whiteness(before: np.ndarray, after: np.ndarray, mode_numbers: list
     b, a = np.asarray(before, float), np.asarray(after, float)
     cols = range(b.shape[1])
     return Whiteness([int(m) for m in mode_numbers],
-                     [float(autocorrelation(b[:, k], 1)[0]) for k in cols],
-                     [float(autocorrelation(a[:, k], 1)[0]) for k in cols],
+                     [float(autocorrelation(_finite(b[:, k]), 1)[0]) for k in cols],
+                     [float(autocorrelation(_finite(a[:, k]), 1)[0]) for k in cols],
                      [ljung_box(b[:, k], lags) for k in cols], [ljung_box(a[:, k], lags) for k in cols])
+
+
+def _finite(r: np.ndarray) -> np.ndarray:
+    """The finite values of a series, in order (missing windows skipped)."""
+    r = np.asarray(r, dtype=float)
+    return r[np.isfinite(r)]

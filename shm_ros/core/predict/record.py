@@ -8,6 +8,7 @@ import numpy as np
 
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.types import Window
+from shm_ros.errors import InputError
 
 
 @dataclass
@@ -41,7 +42,7 @@ def event_from_window(window: Window, model: AffineModel) -> EventRecord:
         raise ValueError(f"model {model.name!r}: prediction needs the structure's measured input(s) ('inputs')")
     missing = [s for s in ins if s not in window.channel_names]
     if missing:
-        raise ValueError(f"window {window.window_id}: no record of the input sensor(s) {missing}")
+        raise InputError(f"window {window.window_id}: no record of the input sensor(s) {missing}")
     outs = [s for s in window.channel_names if s in model.sensor_rows and s not in ins]
     col = {c: k for k, c in enumerate(window.channel_names)}
     u = np.asarray(window.samples[:, [col[s] for s in ins]], dtype=float).T
@@ -53,7 +54,7 @@ def event_from_window(window: Window, model: AffineModel) -> EventRecord:
         edges = np.flatnonzero(np.diff(np.concatenate([[0], good.astype(int), [0]]))).reshape(-1, 2)
         a, b = edges[np.argmax(edges[:, 1] - edges[:, 0])] if edges.size else (0, 0)
         if b - a < 2:
-            raise ValueError(f"window {window.window_id}: the input record has no clean stretch")
+            raise InputError(f"window {window.window_id}: the input record has no clean stretch")
         u, y = u[:, a:b], y[a:b]
         start_ns += int(round(a * 1e9 / window.sample_rate_hz))
         notes.append(f"input not finite everywhere: samples {a}..{b} used")

@@ -19,6 +19,12 @@ from shm_ros.core.tracking.novelty import alarm_episodes
 from shm_ros.core.tracking.online import TrackedRow, Tracker
 from shm_ros.core.tracking.reference import ReferenceMode
 from shm_ros.core.types import ModalEstimate
+from shm_ros.errors import InputError
+
+
+class NoTrackedModes(InputError):
+    """No mode is found in enough of the reference windows to be tracked (too few or too different
+    windows for the settings): a caller with a structure file may match the modes to its model."""
 
 if TYPE_CHECKING:
     from shm_ros.core.structure import StructureSpec
@@ -105,6 +111,6 @@ def track(estimates: list[ModalEstimate], config: TrackingConfig | None = None,
         rows += tracker.add(e)
     rows += tracker.flush()
     if not tracker.ready:
-        raise ValueError(f"track: no mode is found in {cfg.min_presence:.0%} of the first "
+        raise NoTrackedModes(f"track: no mode is found in {cfg.min_presence:.0%} of the first "
                          f"{min(cfg.reference_windows, len(estimates))} windows")
     return rows_to_result(rows, tracker, n_train)

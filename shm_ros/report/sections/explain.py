@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from shm_ros.core.explain.fit_ratio import fit_sentence
 from shm_ros.report.document import Figure, Section, Table
 from shm_ros.report.inputs import ReportInputs
 from shm_ros.report.sections._common import figure_json, plain, pyplot
@@ -77,16 +78,27 @@ def _tracked_covariate_figure(obs: Any, v: dict[str, Any], series: dict[str, Any
 
 def _paragraphs(v: dict[str, Any]) -> list[str]:
     out = [f"Mismatch: {v.get('mismatch', {}).get('summary', '–')}"]
+    if v.get("status", "ok") != "ok":
+        return [*out, f"Status: {v['status']} — nothing was analysed."]
+    out.append(fit_sentence(v).capitalize() + ".")
     found = v.get("missing_physics", [])
-    if not found:
+    if not found and v.get("model_fits"):
         out.append("Missing physics: none — the calibrated nominal model explains the recordings "
                    "within their scatter (no candidate cleared the acceptance threshold).")
+    elif not found:
+        out.append("Missing physics: none named — no candidate cleared the acceptance threshold, yet the "
+                   "model does not fit within the scatter (see the fit ratio): what is missing is not in the "
+                   "vocabulary, or the data are too few to tell.")
     for i, m in enumerate(found, 1):
         where = f" at {m['where']}" if m.get("where") else ""
         when = f", from {m['time']}" if m.get("time") else ""
         tied = f" (the data cannot tell it from: {', '.join(m['tied_with'])})" if m.get("tied_with") else ""
+        flags = "".join([" Its functional form does not fit what it explains (structure is left in its residual)."
+                         if m.get("form_fits") is False else "",
+                         f" Downgraded by the {str(m['downgraded_by']).replace('_', '-')}: not a confident name."
+                         if m.get("downgraded_by") else ""])
         out.append(f"{i}. {m['name']}{where}{when}: {m.get('form', '')}; log evidence gain "
-                   f"{m.get('log_evidence_gain', float('nan')):.1f} nats{tied}. {m.get('explanation', '')}")
+                   f"{m.get('log_evidence_gain', float('nan')):.1f} nats{tied}. {m.get('explanation', '')}{flags}")
     u = v.get("unexplained_structure")
     if u:
         out.append(f"Unexplained structure: a catch-all discrepancy beats every named candidate ({u}).")
@@ -120,12 +132,16 @@ def _whiteness_table(w: dict[str, Any]) -> Table:
 
 
 def _candidates_table(tried: list[dict[str, Any]]) -> Table:
+    def gain(c: dict[str, Any]) -> float:
+        g = c.get("log_evidence_gain")
+        return -np.inf if g is None or not np.isfinite(float(g)) else float(g)
+
     rows = [[c.get("name"), c.get("where"), c.get("form"), c.get("log_evidence_gain"),
-             c.get("log_evidence_gain_err"), c.get("log_evidence_gain_check"), c.get("accepted"),
-             "; ".join(c.get("reasons", []))] for c in sorted(
-                 tried, key=lambda c: -float(c.get("log_evidence_gain") or -np.inf))]
+             c.get("log_evidence_gain_err"), c.get("log_evidence_gain_check"),
+             "failed" if c.get("failed") else c.get("accepted"), c.get("form_fits"), c.get("downgraded_by"),
+             "; ".join(c.get("reasons", []))] for c in sorted(tried, key=lambda c: -gain(c))]
     return Table(["candidate", "where", "fitted form", "log evidence gain", "± (s.e.)", "second estimator",
-                  "accepted", "why"], rows, "Every candidate tried, most supported first")
+                  "accepted", "form fits", "downgraded by", "why"], rows, "Every candidate tried, most supported first")
 
 
 def _arr(series: dict[str, Any], key: str) -> np.ndarray | None:

@@ -89,6 +89,11 @@ class Candidate(ABC):
         """Seconds since the first window at which the effect starts, if it starts at a moment."""
         return None
 
+    def look_elsewhere(self) -> float:
+        """Nats taken off the evidence gain for a prior narrowed around a hint from locate (which read
+        the same data): ln of the full prior range over the narrowed one. 0 for a full prior."""
+        return 0.0
+
     def key_parameter(self) -> str:
         """The parameter whose interval must exclude its null value for the candidate to be accepted."""
         return self.params()[0].name

@@ -4,7 +4,9 @@ t0 is a grid parameter over the campaign (uniform between the 2nd and the second
 a step at either end cannot be told from an offset), or, when locate hints a change window (its
 exact search keeps the other regressors, e.g. a temperature knee, that a step fitted alone would
 partly imitate), over the windows within ``HINT_WINDOWS`` of it (as added mass and damper
-candidates take the hinted window itself); ``time`` reports it. ``size`` (null 0) is
+candidates take the hinted window itself), with the look-elsewhere correction ln(full range / hinted
+range) taken off its evidence gain, so that the hint does not buy evidence that locate's search over
+every window spent; ``time`` reports it. ``size`` (null 0) is
 the relative change of the group's stiffness, -60 % .. +40 %.
 """
 
@@ -24,15 +26,23 @@ class Step(Candidate):
                    "or retrofit (a rise).")
     default_groups = ("EI", "EI:*")
 
-    def params(self) -> list[ParamSpec]:
+    def _range(self, hinted: bool) -> tuple[float, float]:
         t = np.asarray(self.context.times_s, dtype=float)
         lo, hi = (float(t[1]), float(t[-2])) if t.size > 3 else (0.0, 1.0)
-        if "change_index" in self.context.hints and t.size > 3:
+        if hinted and "change_index" in self.context.hints and t.size > 3:
             i = int(self.context.hints["change_index"])
-            lo = float(t[min(max(i - HINT_WINDOWS, 1), t.size - 2)])
-            hi = float(t[min(max(i + HINT_WINDOWS, 1), t.size - 2)])
-        return [ParamSpec("size", -0.6, 0.4, null=0.0),
-                ParamSpec("t0_s", lo, max(hi, lo + 1.0), unit="s", grid=True)]
+            a, b = self.context.hints.get("change_span", (i, i))  # a change inside held-out windows: their span
+            lo = float(t[min(max(int(a) - HINT_WINDOWS, 1), t.size - 2)])
+            hi = float(t[min(max(int(b) + HINT_WINDOWS, 1), t.size - 2)])
+        return lo, max(hi, lo + 1.0)
+
+    def params(self) -> list[ParamSpec]:
+        lo, hi = self._range(True)
+        return [ParamSpec("size", -0.6, 0.4, null=0.0), ParamSpec("t0_s", lo, hi, unit="s", grid=True)]
+
+    def look_elsewhere(self) -> float:
+        (lo, hi), (a, b) = self._range(True), self._range(False)
+        return float(np.log((b - a) / (hi - lo)))
 
     def modify(self, theta: np.ndarray) -> Modification:
         th = np.atleast_2d(theta)
