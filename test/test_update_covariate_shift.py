@@ -25,9 +25,9 @@ from acceptance_seeds import acceptance_seeds
 from bayes_synth import FULL
 from model_form_synth import FREQ_SCATTER, N_MODES, _vertical, analysis_model
 
-from shm_ros.core.observations import ModalObservations
 from shm_ros.core.bayes.thermal_law import ThermalLaw, predicted_at, referred_by_law
 from shm_ros.core.bayes.update import UpdateConfig, build_likelihood, update
+from shm_ros.core.observations import ModalObservations
 from shm_ros.core.simulate.campaign import simulate_campaign
 from shm_ros.core.simulate.scenario import GIRDER_STRUCTURE, EffectRequest, named_scenario
 

@@ -24,8 +24,7 @@ import numpy as np
 from scipy.linalg import eigh
 
 from shm_ros.core.models.base import AffineModel
-
-from .observations import ModalObservations
+from shm_ros.core.observations import ModalObservations
 
 
 @dataclass(frozen=True)

@@ -30,8 +30,8 @@ from scipy.stats import norm
 
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import sensor_outputs
+from shm_ros.core.response.batch import batch_responses, single_blas_thread
 
-from .batch import batch_responses, single_blas_thread
 from .config import PredictConfig
 from .record import EventRecord
 from .signals import local_mean_square, prepare, strong_motion
