@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
@@ -32,9 +31,9 @@ from shm_ros.core.explain.config import ExplainConfig
 from shm_ros.core.explain.timedomain import TimeDomainConfig
 from shm_ros.ros import explain_worker, topics
 from shm_ros.ros.convert import tracked_row_from_msg, window_from_msg
-from shm_ros.ros.diagnostics import Diagnostics
-from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.params import load_config
+from shm_ros.ros.managed import ManagedNode
+from shm_ros.ros.node_main import spin
+from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
 from shm_ros.ros.worker_pool import WorkerPool
@@ -98,15 +97,16 @@ def verdict_to_msg(v: dict[str, Any]) -> Any:
     return msg
 
 
-class ExplainNode(Node):
+class ExplainNode(ManagedNode):
     """Parameters: every option of :class:`ExplainConfig` and of :class:`ExplainNodeConfig`."""
 
-    def __init__(self, name: str = "explain", parameters: dict[str, Any] | None = None) -> None:
-        super().__init__(name, parameter_overrides=overrides(parameters))
+    kind = "explain"
+
+    def setup(self) -> None:
         self.config = load_config(self, ExplainConfig)
         self.settings = load_config(self, ExplainNodeConfig)
         if not self.settings.structure:
-            raise SystemExit(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
+            raise ParameterError(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
         from shm_ros.core.models import build_model
         from shm_ros.io.structure import load_structure
 
@@ -114,7 +114,7 @@ class ExplainNode(Node):
         mode = self.settings.events
         self.with_events = explains_events(mode, bool(model.inputs))
         if mode == "on" and not model.inputs:
-            raise SystemExit(f"{self.get_name()}: events:=on needs a measured input in {self.settings.structure} "
+            raise ParameterError(f"{self.get_name()}: events:=on needs a measured input in {self.settings.structure} "
                              "('input'/'inputs')")
         self.events: dict[str, Any] = {}
         self.events_seen: set[str] = set()  # every event window id received (runs go on after the cap)
@@ -128,7 +128,7 @@ class ExplainNode(Node):
         self.started = 0.0
         self.last: dict[str, tuple[str, ...]] = {}  # the accepted physics of the last verdict of each kind
         self.runs = 0
-        self.diag = Diagnostics(self, "explain", summary=lambda: (
+        self.diag.summarize(lambda: (
             "ok", f"{len(self.rows)} windows received, {self.runs} runs"
             + (", explaining" if self.future is not None or self.event_future is not None else ", idle")
             + (f"; {len(self.events_seen)} event windows" if self.with_events else ""),
@@ -145,9 +145,8 @@ class ExplainNode(Node):
         self.workers = WorkerPool(explain_worker.init, (self.settings.structure,), explain_worker.ready)
         steady_timer(self, 0.25, self._poll)
 
-    def destroy_node(self) -> None:
+    def teardown(self) -> None:
         self.workers.shutdown()
-        super().destroy_node()
 
     def _on_row(self, msg: Any) -> None:
         try:
@@ -226,8 +225,8 @@ class ExplainNode(Node):
             self.get_logger().info(f"verdict from {count} {unit}: {text}")
         return accepted
 
-def make_node(name: str, parameters: dict[str, Any]) -> ExplainNode:
-    return ExplainNode(name, parameters)
+def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> ExplainNode:
+    return ExplainNode(name, parameters, namespace)
 
 
 def main(args: list[str] | None = None) -> int:
