@@ -141,7 +141,8 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
                          update: dict | None = None, predict: dict | None = None,
                          explain: dict | None = None, expected_predictions: int | None = None,
                          expected_events: int | None = None, timeout_s: float = 600.0,
-                         log: Callable[[str], None] = print, namespace: str = "") -> GraphRun:
+                         log: Callable[[str], None] = print, namespace: str = "",
+                         single_process: bool = False) -> GraphRun:
     """Start the analysis nodes and a recorder as processes, replay ``bag``, wait until every
     window is identified (and tracked, and in a posterior, and ``expected_predictions`` predicted,
     when those nodes run, and explained by the explain node: every window, or with ``expected_events``
@@ -150,7 +151,7 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
                            explain=explain)
     return run_graph(bag, nodes, workdir, expected_windows=expected_windows,
                      expected_predictions=expected_predictions, expected_events=expected_events,
-                     timeout_s=timeout_s, log=log, namespace=namespace)
+                     timeout_s=timeout_s, log=log, namespace=namespace, single_process=single_process)
 
 
 def _explains_events(node: NodeSpec) -> bool:
@@ -178,10 +179,10 @@ def for_replay(nodes: list[NodeSpec]) -> list[NodeSpec]:
 def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
               expected_windows: int | None = None, expected_predictions: int | None = None,
               expected_events: int | None = None, timeout_s: float = 600.0,
-              log: Callable[[str], None] = print, namespace: str = "") -> GraphRun:
-    """Start ``nodes`` and a recorder (in ``namespace``, e.g. ``/bridge_a``, when given), replay
-    ``bag`` into that namespace, wait until the graph is done with it (see
-    :func:`replay_through_graph`), stop, collect."""
+              log: Callable[[str], None] = print, namespace: str = "", single_process: bool = False) -> GraphRun:
+    """Start ``nodes`` and a recorder (in ``namespace``, e.g. ``/bridge_a``, when given; all in one
+    process with ``single_process``), replay ``bag`` into that namespace, wait until the graph is
+    done with it (see :func:`replay_through_graph`), stop, collect."""
     import threading
 
     import rclpy
@@ -201,7 +202,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         shutil.rmtree(out_bag)
     recorder = NodeSpec("recorder", "recorder", {"output": str(out_bag)})
     namespace = normal_namespace(namespace)
-    sup = Supervisor(GraphConfig(nodes=[*nodes, recorder], restart=False, namespace=namespace), log=log)
+    sup = Supervisor(GraphConfig(nodes=[*nodes, recorder], restart=False, namespace=namespace,
+                                 mode="single" if single_process else "processes"), log=log)
     t0 = time.monotonic()
     sup.start_all()
     rclpy.init()

@@ -98,8 +98,19 @@ class Supervisor:
         self.log(f"[supervisor] started {node.name} (pid {self.procs[node.name].pid})")
 
     def start_all(self) -> None:
+        if self.config.mode == "single":
+            self.procs["graph"] = subprocess.Popen(self.single_command(), env=dict(os.environ))
+            self.log(f"[supervisor] started the graph in one process (pid {self.procs['graph'].pid})")
+            return
         for node in self.plan.values():
             self.start(node)
+
+    def single_command(self) -> list[str]:
+        """``shm-ros run --single-process`` of the whole plan: every node in one process."""
+        path = Path(self._tmp.name) / "graph.yaml"
+        path.write_text(yaml.safe_dump({n.name: {"ros__parameters": n.parameters} for n in self.plan.values()}))
+        ns = ["--namespace", self.config.namespace] if self.config.namespace else []
+        return [sys.executable, "-m", "shm_ros.cli", "run", str(path), "--single-process", "--no-restart", *ns]
 
     def poll(self) -> None:
         """Respawn nodes that died while the graph is not being stopped."""
