@@ -1,19 +1,19 @@
 """explain: tracked modes in, verdicts on missing physics out (docs/explain.md, docs/interfaces.md §5).
 
-Accumulates the track node's ``/shm/tracked_modes`` (one row per window; a row sent again counts
+Accumulates the track node's ``shm/tracked_modes`` (one row per window; a row sent again counts
 once). Once ``min_windows`` rows have arrived, and again after every ``min_new_windows`` new rows or
-when a replay ends (``/shm/replay/done``), it explains all rows so far in a worker process
+when a replay ends (``shm/replay/done``), it explains all rows so far in a worker process
 (:mod:`shm_ros.ros.explain_worker`, the executor never waits) and publishes a ``Verdict`` on
-``/shm/verdict`` (latched) when it is the first or when the set of accepted physics changed, i.e.
+``shm/verdict`` (latched) when it is the first or when the set of accepted physics changed, i.e.
 when the support for a missing effect crossed its threshold. ``output_dir`` gets verdict.json, the
 figures' numbers and report.html after every run.
 
 **Event series** (docs/explain.md, Time domain): with a structure that declares a measured input, the
-node also keeps the event windows of ``/shm/windows`` (those ingest flags as events, docs/interfaces.md
+node also keeps the event windows of ``shm/windows`` (those ingest flags as events, docs/interfaces.md
 §1, the newest ``max_events``) and, once ``min_events`` have arrived and again after every new one,
 explains them in the time domain (amplitude-dependent stiffness and damping,
 :func:`shm_ros.core.explain.timedomain.explain_events`, options ``time_domain.*``) in the same worker;
-its verdicts go out on ``/shm/verdict`` too (``kind`` "events", NRMS fields set) when their accepted
+its verdicts go out on ``shm/verdict`` too (``kind`` "events", NRMS fields set) when their accepted
 physics changed, and into ``output_dir/events``.
 """
 

@@ -1,11 +1,11 @@
 """predict: windows in, response predictions out (docs/predict.md, docs/interfaces.md §7).
 
-Subscribes to ``/shm/windows`` and ``/shm/posterior``. Every window that ingest flags as an event,
-and any window named on ``/shm/predict_request`` (std_msgs/String: a window id among the last
+Subscribes to ``shm/windows`` and ``shm/posterior``. Every window that ingest flags as an event,
+and any window named on ``shm/predict_request`` (std_msgs/String: a window id among the last
 ``keep_windows`` received; no service type is used because std_srvs is not a dependency), is
-predicted with the posterior file ``posterior`` (re-read when it changes; a ``/shm/posterior``
+predicted with the posterior file ``posterior`` (re-read when it changes; a ``shm/posterior``
 message marks that it did) or the nominal model without one, scored and published as
-``ResponsePrediction`` on ``/shm/prediction``. With ``wait_for_posterior_s`` > 0 the queued windows
+``ResponsePrediction`` on ``shm/prediction``. With ``wait_for_posterior_s`` > 0 the queued windows
 wait until the update node has written the posterior (a graph that replays a recording delivers the
 event windows long before the first posterior exists). With ``output_dir`` the node also writes
 ``prediction.json`` (Table 3 rows, scores, summary) and ``prediction_series.json`` after every

@@ -1,7 +1,7 @@
 """Replay a rosbag2 bag through the running graph, in real time, xN, or as fast as it keeps up.
 
 Messages are published as the CDR bytes stored in the bag (no decode/re-encode). Flow control: the
-ingest node publishes how many recording messages it has taken (``/shm/ingest/received``); with
+ingest node publishes how many recording messages it has taken (``shm/ingest/received``); with
 ``rate=0`` the replayer keeps at most ``credit`` messages and ``credit_bytes`` bytes in flight, so
 neither the subscriber's history nor the transport's buffers overflow, and nothing is dropped even
 on best-effort (sensor-data) subscriptions. Publishing flat out with KEEP_LAST would drop

@@ -3,7 +3,7 @@
 Thin adapter over :class:`shm_ros.core.tracking.Tracker` and the history store
 (:mod:`shm_ros.io.store`, SQLite): each estimate is tracked and stored with its row in one
 transaction, then the row is published; a novelty alarm is also published on the latched
-``/shm/tracking_alarms`` (the alarm window's row, its ``mode_numbers`` the modes that moved) and
+``shm/tracking_alarms`` (the alarm window's row, its ``mode_numbers`` the modes that moved) and
 is a WARN diagnostic.
 
 Restart: the node resumes from the store (checkpoint + replay of the estimates stored after it).

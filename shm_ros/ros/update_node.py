@@ -1,12 +1,12 @@
 """update: tracked modes in, posterior summary out (re-run as new windows arrive).
 
-Accumulates the track node's ``/shm/tracked_modes`` (one row per window, mode identities kept
+Accumulates the track node's ``shm/tracked_modes`` (one row per window, mode identities kept
 across windows); on the first ``min_windows`` windows, and then whenever ``min_new_windows`` new
 ones have arrived, it builds one column per tracked mode and calls
 :func:`shm_ros.core.bayes.update.update` (which pairs the tracked modes with the model's modes
-once, behind the gate), warm-started from the last posterior; publishes ``/shm/posterior``
+once, behind the gate), warm-started from the last posterior; publishes ``shm/posterior``
 (latched) and writes ``posterior.json`` to ``output_dir`` when set. With ``input: estimates`` it
-runs without a track node: it takes ``/shm/modal_estimates`` and pairs every window's modes with
+runs without a track node: it takes ``shm/modal_estimates`` and pairs every window's modes with
 the prior-mean model instead (a spurious mode near a model frequency can then pass for a mode
 the window missed).
 
@@ -57,7 +57,7 @@ class UpdateNodeConfig:
 
     structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
     input: str = option("tracked", "what the node updates from: tracked (the track node's "
-                        "/shm/tracked_modes) or estimates (/shm/modal_estimates, without a track node)",
+                        "shm/tracked_modes) or estimates (shm/modal_estimates, without a track node)",
                         choices=UpdateInput)
     min_windows: int = option(10, "windows received before the first run")
     min_new_windows: int = option(10, "new windows received before the next run")
