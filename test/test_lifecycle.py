@@ -6,7 +6,7 @@
 * ``shm-ros run --no-autostart --namespace /lc`` starts ingest and a recorder unconfigured; driven by
   the services they come up (configure, activate: their topics appear, a replayed bag comes out as
   windows in the recorder's bag) and go down (deactivate: no more heartbeats; cleanup: their topics
-  are gone and the bag is closed), and come up again.
+  are gone and the bag is closed), and come up again (``shm-ros lifecycle up``).
 """
 
 from __future__ import annotations
@@ -120,7 +120,10 @@ def test_a_lifecycle_manager_brings_the_graph_up_and_down(tmp_path, probe):
         windows = [m for m in read_messages(out) if m.topic == "/lc/shm/windows"]  # closed by cleanup
         assert len(windows) == 6, len(windows)  # every window reached the recorder's bag
 
-        bring_up(probe, nodes[:1])  # and up again (ingest: the recorder's bag is written)
+        # and up again, by the command line's manager (ingest: the recorder's bag is written)
+        up = subprocess.run([sys.executable, "-m", "shm_ros.cli", "lifecycle", "up", "ingest", "--namespace", "/lc"],
+                            capture_output=True, text=True, timeout=120)
+        assert up.returncode == 0 and "/lc/ingest: active" in up.stdout, up.stdout + up.stderr
         assert clients[0].state() == "active"
         assert _spin_until(probe, lambda: probe.count_publishers("/lc/shm/windows") == 1)
     finally:

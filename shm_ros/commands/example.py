@@ -166,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
     # the Table 1 sweep on the girder's tracked modes runs beside the building's graph
     pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
     study: Future | None = None
-    if g["stage"].tracking is not None:
+    if g["stage"].tracking is not None and doc["girder"].get("study") is not False:  # `study: false`: no sweep
         _log("girder: the bridge paper's Table 1 sweep (shm-ros update --study) starts on the tracked modes")
         study = pool.submit(study_job, g["stage"].tracking.observations, str(g["files"].structure),
                             dict(doc["girder"].get("study") or {}), str(out / "girder" / "study"))

@@ -17,6 +17,7 @@ node configures and activates itself when it is made, as an unmanaged node would
 
 from __future__ import annotations
 
+import traceback
 from collections.abc import Callable
 from typing import Any
 
@@ -69,8 +70,11 @@ class ManagedNode(LifecycleNode):
         self._owning = True
         try:
             self.setup()
-        except (ShmError, OSError, ValueError) as exc:
-            self.config_error = f"{self.get_name()}: {exc}" if self.get_name() not in str(exc)[:80] else str(exc)
+        except Exception as exc:  # the transition fails with the reason; the node stays up
+            text = str(exc) if isinstance(exc, ShmError | OSError | ValueError) else f"configure failed: {exc!r}"
+            if not isinstance(exc, ShmError | OSError | ValueError):
+                self.get_logger().error(traceback.format_exc())
+            self.config_error = text if text.startswith(f"{self.get_name()}:") else f"{self.get_name()}: {text}"
             self._release()
             self.diag.report("error", self.config_error, "configure")
             self.diag.publish()
