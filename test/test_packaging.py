@@ -127,7 +127,8 @@ def test_wheel_has_a_console_script_for_every_node(dists):
 def test_wheel_ships_the_example_inputs_and_true_metadata(dists):
     """`shm-ros example` runs from an installed package: its inputs are package data; the package
     says the Python it needs (3.11: StrEnum, datetime.UTC)."""
-    assert any(n.endswith("shm_ros/examples_data/main_job.yaml") for n in dists["wheel"])
+    for kind in ("sdist", "wheel"):
+        assert any(n.endswith("shm_ros/examples_data/main_job.yaml") for n in dists[kind]), kind
     (meta,) = [b for n, b in dists["wheel"].items() if n.endswith(".dist-info/METADATA")]
     assert Parser().parsestr(meta.decode())["Requires-Python"] == ">=3.11"
 

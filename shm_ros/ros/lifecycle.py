@@ -9,6 +9,7 @@ A failed ``configure`` leaves the node unconfigured; its reason is on ``/diagnos
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import rclpy
@@ -26,6 +27,10 @@ _SHUTDOWN = {State.PRIMARY_STATE_UNCONFIGURED: Transition.TRANSITION_UNCONFIGURE
              State.PRIMARY_STATE_ACTIVE: Transition.TRANSITION_ACTIVE_SHUTDOWN}
 
 
+_GOALS = {"configure": "inactive", "activate": "active", "deactivate": "inactive", "cleanup": "unconfigured",
+          "shutdown": "finalized"}
+
+
 class LifecycleError(ShmError, RuntimeError):
     """A managed node did not answer, or refused a transition; the message names the node."""
 
@@ -38,14 +43,19 @@ class LifecycleClient:
         self._change: Any = node.create_client(ChangeState, f"{target}/change_state")
         self._get: Any = node.create_client(GetState, f"{target}/get_state")
 
-    def _call(self, client: Any, request: Any, timeout_s: float) -> Any:
+    def _call(self, client: Any, request: Any, timeout_s: float, resend_s: float = 2.0) -> Any:
+        """The answer to ``request``, sent again every ``resend_s`` (a request sent just after the
+        service was discovered can be lost: the server had not matched the client's reader yet)."""
+        end = time.monotonic() + timeout_s
         if not client.wait_for_service(timeout_sec=timeout_s):
             raise LifecycleError(f"{self.target}: no lifecycle service {client.srv_name} (is the node running?)")
-        future = client.call_async(request)
-        rclpy.spin_until_future_complete(self.node, future, timeout_sec=timeout_s)
-        if not future.done() or future.result() is None:
-            raise LifecycleError(f"{self.target}: {client.srv_name} did not answer within {timeout_s:g} s")
-        return future.result()
+        while time.monotonic() < end:
+            future = client.call_async(request)
+            rclpy.spin_until_future_complete(self.node, future, timeout_sec=min(resend_s, end - time.monotonic()))
+            if future.done() and future.result() is not None:
+                return future.result()
+            client.remove_pending_request(future)
+        raise LifecycleError(f"{self.target}: {client.srv_name} did not answer within {timeout_s:g} s")
 
     def state(self, timeout_s: float = 10.0) -> str:
         """The node's primary state: ``unconfigured``, ``inactive``, ``active`` or ``finalized``."""
@@ -53,9 +63,9 @@ class LifecycleClient:
 
     def transition(self, name: str, timeout_s: float = 60.0) -> bool:
         """Request ``name`` (configure, activate, deactivate, cleanup, shutdown); True when it succeeded."""
+        current = self._call(self._get, GetState.Request(), timeout_s).current_state
         if name == "shutdown":
-            current = self._call(self._get, GetState.Request(), timeout_s).current_state.id
-            transition_id = _SHUTDOWN.get(current)
+            transition_id = _SHUTDOWN.get(current.id)
             if transition_id is None:
                 return False
         elif name in TRANSITIONS:
@@ -63,7 +73,20 @@ class LifecycleClient:
         else:
             raise LifecycleError(f"unknown transition {name!r} (one of {', '.join([*TRANSITIONS, 'shutdown'])})")
         request = ChangeState.Request(transition=Transition(id=transition_id))
-        return bool(self._call(self._change, request, timeout_s).success)
+        end = time.monotonic() + timeout_s
+        future = self._change.call_async(request)
+        while time.monotonic() < end:
+            rclpy.spin_until_future_complete(self.node, future, timeout_sec=2.0)
+            if future.done() and future.result() is not None:
+                return bool(future.result().success)
+            # no answer yet: a transition still running, or a request (or its answer) lost
+            now = self._call(self._get, GetState.Request(), max(end - time.monotonic(), 1.0)).current_state
+            if now.label == _GOALS.get(name):
+                return True
+            if now.id == current.id:  # nothing happened: send it again
+                self._change.remove_pending_request(future)
+                future = self._change.call_async(request)
+        raise LifecycleError(f"{self.target}: {name} did not complete within {timeout_s:g} s")
 
 
 def _drive(node: Node, targets: list[str], steps: tuple[str, ...]) -> None:
