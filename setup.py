@@ -1,17 +1,21 @@
 """Packaging of shm_ros: a pip-installable Python package and an ament_python ROS 2 package.
 
-Console scripts: ``shm-ros`` (the command line) and ``shm-ros-<node>`` for every node module
-``shm_ros/ros/<node>_node.py``. pip puts them on the environment's ``bin/``; in a colcon workspace
-``setup.cfg`` puts them in ``lib/shm_ros``, where ``ros2 run`` looks; next to them the short names
-of ``executables/`` (``ros2 run shm_ros ingest``) start the same console scripts.
+Console scripts: ``shm-ros`` (the command line) and ``shm-ros-<node>`` for every node of the node
+registry (``shm_ros/ros/registry.py``, read here without importing the package). pip puts them on
+the environment's ``bin/``; in a colcon workspace ``setup.cfg`` puts them in ``lib/shm_ros``, where
+``ros2 run shm_ros shm-ros-ingest`` and the launch file look. The bundled example's inputs
+(``shm_ros/examples_data``) are package data, so ``shm-ros example`` runs from an installed package.
 Runtime dependencies are listed twice on purpose: here for pip, in ``package.xml`` as rosdep keys
 (``test/test_packaging.py`` checks that both cover every import).
 """
 
+import runpy
+from pathlib import Path
+
 from setuptools import find_packages, setup
 
 package_name = "shm_ros"
-NODES = ("ingest", "identify", "track", "update", "predict", "explain", "recorder")
+REGISTRY = runpy.run_path(str(Path(__file__).resolve().parent / "shm_ros" / "ros" / "registry.py"))
 
 setup(
     name=package_name,
@@ -22,10 +26,9 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", ["config/pipeline.yaml"]),
         ("share/" + package_name + "/launch", ["launch/pipeline.launch.py"]),
-        ("lib/" + package_name, [f"executables/{n}" for n in NODES]),
     ],
-    package_data={"shm_ros": ["py.typed", "core/explain/*.json"]},
-    python_requires=">=3.10",
+    package_data={"shm_ros": ["py.typed", "core/explain/*.json", "examples_data/*.yaml"]},
+    python_requires=">=3.11",
     install_requires=["numpy", "scipy", "PyYAML", "rosbags", "mcap", "zstandard", "lz4", "emcee",
                       "dynesty", "arviz", "matplotlib", "threadpoolctl", "obspy", "numba",
                       "dask[distributed]"],
@@ -36,8 +39,5 @@ setup(
     "structural model that says what physics it is missing.",
     license="Apache-2.0",
     extras_require={"test": ["pytest"], "opensees": ["openseespy<3.8"]},
-    entry_points={
-        "console_scripts": ["shm-ros = shm_ros.cli:main"]
-        + [f"shm-ros-{n} = shm_ros.ros.{n}_node:main" for n in NODES],
-    },
+    entry_points={"console_scripts": REGISTRY["entry_points"]()},
 )

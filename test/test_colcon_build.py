@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-COPY = ["package.xml", "setup.py", "setup.cfg", "executables", "resource", "config", "launch", "shm_ros", "msg_defs",
+COPY = ["package.xml", "setup.py", "setup.cfg", "resource", "config", "launch", "shm_ros", "msg_defs",
         "README.md", "LICENSE"]
 
 
@@ -37,7 +37,10 @@ def test_colcon_builds_both_packages_and_the_messages_import(tmp_path):
     assert "Finished <<< shm_interfaces" in build.stdout
     assert "Finished <<< shm_ros" in build.stdout
     lib = ws / "install" / "shm_ros" / "lib" / "shm_ros"  # where `ros2 run shm_ros <node>` looks
-    assert {"ingest", "shm-ros-ingest", "track", "shm-ros-track"} <= {p.name for p in lib.iterdir()}
+    # the console scripts of the node registry, where the launch file's executables are looked up
+    from shm_ros.ros.registry import NODES
+
+    assert {n.executable for n in NODES} <= {p.name for p in lib.iterdir()}
 
     check = (
         "import shm_interfaces.msg as m, rclpy\n"

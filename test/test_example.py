@@ -29,7 +29,7 @@ from browser import Images, artefact_dir, page_errors, run_chromium
 
 from shm_ros.report.document import section_anchor
 
-N_WINDOWS, WINDOW_S = 24, 60.0  # reduced size: the README's command runs examples/main_job.yaml (48 x 120 s)
+N_WINDOWS, WINDOW_S = 24, 60.0  # reduced size: the README's command runs the packaged main_job.yaml (48 x 120 s)
 SECTIONS = {"Data health (ingest)": "ingest", "Identification": "identify", "Tracking": "tracking",
             "Posterior (model updating)": "posterior", "Prediction": "prediction",
             "Explanation (missing physics)": "explain", "The papers' tables": "papers"}

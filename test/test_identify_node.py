@@ -1,5 +1,5 @@
-"""The identify node's parameters reach the identification configuration; a bad choice stops the
-node with a message naming the parameter (real rclpy, own process)."""
+"""The identify node's parameters reach the identification configuration; a bad choice fails its
+configure transition with a message naming the parameter (real rclpy, own process)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ from shm_ros.ros.identify_node import IdentifyNode
 rclpy.init()
 try:
     node = IdentifyNode(parameters={"method": "ssi-data", "weighting": sys.argv[1], "max_order": 40})
-    print("CONFIG", node.config.method, node.config.weighting, node.config.max_order)
+    if node.configured:
+        print("CONFIG", node.config.method, node.config.weighting, node.config.max_order)
+    else:
+        print("EXIT", node.config_error)
     node.destroy_node()
-except SystemExit as exc:
-    print("EXIT", exc)
 finally:
     rclpy.shutdown()
 """
@@ -42,10 +43,8 @@ rclpy.init()
 try:
     params = {"structure": sys.argv[1]} if sys.argv[1] != "-" else {}
     node = IdentifyNode(parameters=params)
-    print("BAND", node.config.nominal_frequencies_hz)
+    print("BAND", node.config.nominal_frequencies_hz) if node.configured else print("EXIT", node.config_error)
     node.destroy_node()
-except SystemExit as exc:
-    print("EXIT", exc)
 finally:
     rclpy.shutdown()
 """

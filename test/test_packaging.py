@@ -54,6 +54,7 @@ DEPENDENCIES: dict[str, tuple[str, str | None]] = {
     "rcl_interfaces": ("rcl_interfaces", None),
     "rosgraph_msgs": ("rosgraph_msgs", None),
     "shm_interfaces": ("shm_interfaces", None),
+    "lifecycle_msgs": ("lifecycle_msgs", None),
 }
 
 
@@ -115,8 +116,21 @@ def test_wheel_has_a_console_script_for_every_node(dists):
         assert scripts.get(f"shm-ros-{node}") == f"shm_ros.ros.{node}_node:main", node
         tree = ast.parse((ROOT / "shm_ros" / "ros" / f"{node}_node.py").read_text())
         assert any(isinstance(d, ast.FunctionDef) and d.name == "main" for d in tree.body), node
-        # `ros2 run shm_ros <node>` in a colcon workspace: a short-named executable in lib/shm_ros
-        assert any(n.endswith(f".data/data/lib/shm_ros/{node}") for n in dists["wheel"]), node
+    # every node module is in the node registry (which names the console scripts, the launch file's
+    # executables and the docs' table), and no shell wrapper travels as data
+    from shm_ros.ros.registry import KINDS
+
+    assert sorted(KINDS) == NODES
+    assert not [n for n in dists["wheel"] if "/data/lib/shm_ros/" in n]
+
+
+def test_wheel_ships_the_example_inputs_and_true_metadata(dists):
+    """`shm-ros example` runs from an installed package: its inputs are package data; the package
+    says the Python it needs (3.11: StrEnum, datetime.UTC)."""
+    for kind in ("sdist", "wheel"):
+        assert any(n.endswith("shm_ros/examples_data/main_job.yaml") for n in dists[kind]), kind
+    (meta,) = [b for n, b in dists["wheel"].items() if n.endswith(".dist-info/METADATA")]
+    assert Parser().parsestr(meta.decode())["Requires-Python"] == ">=3.11"
 
 
 def test_wheel_installs_the_ros_package_metadata(dists):

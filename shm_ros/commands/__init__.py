@@ -11,6 +11,7 @@ COMMANDS = [
     "import_",
     "replay",
     "run",
+    "lifecycle",
     "ingest",
     "identify",
     "event",

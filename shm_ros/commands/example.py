@@ -1,6 +1,8 @@
 """`shm-ros example --out DIR`: the bundled example, from recordings to verdict, in one report.
 
-Reads ``examples/main_job.yaml`` (or ``--config``): two simulated campaigns with a known truth.
+Reads the packaged ``main_job.yaml`` (``shm_ros/examples_data``, installed with the package; or
+``--config``): two simulated campaigns with a known truth. ``--quick`` merges the file's ``quick:``
+profile over it (a smoke-test size).
 
 * girder: one winter day of a three-span girder whose deck stiffens below 0 degC (a concealed
   effect the structure file does not mention), replayed through ingest -> identify -> track ->
@@ -30,14 +32,17 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
-CONFIG = Path(__file__).resolve().parents[2] / "examples" / "main_job.yaml"
+CONFIG = Path(__file__).resolve().parents[1] / "examples_data" / "main_job.yaml"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("example", help="run the bundled example end to end", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="out/example", help="output folder (default out/example)")
-    p.add_argument("--config", default=str(CONFIG), help="example file (default examples/main_job.yaml)")
+    p.add_argument("--config", default=str(CONFIG), help="example file (default: the packaged main_job.yaml, "
+                   "shm_ros/examples_data)")
+    p.add_argument("--quick", action="store_true",
+                   help="the file's quick profile: a small campaign and short samplers (a smoke test)")
     p.add_argument("--windows", type=int, help="girder windows (default: the file's; the day is kept)")
     p.add_argument("--window-s", type=float, help="girder window length in s (default: the file's)")
     p.add_argument("--seed", type=int, help="simulation seed of both parts (default: the file's)")
@@ -51,6 +56,11 @@ def load_example(args: argparse.Namespace) -> dict[str, Any]:
     import yaml
 
     doc = yaml.safe_load(Path(args.config).read_text())
+    quick = doc.pop("quick", None)
+    if getattr(args, "quick", False):
+        if not isinstance(quick, dict):
+            raise ValueError(f"{args.config}: --quick needs a 'quick:' section")
+        doc = merged(doc, quick)
     for part in ("girder", "building"):
         if not isinstance(doc.get(part), dict) or not isinstance(doc[part].get("scenario"), dict):
             raise ValueError(f"{args.config}: '{part}: scenario:' is required")
@@ -66,6 +76,14 @@ def load_example(args: argparse.Namespace) -> dict[str, Any]:
         for part in ("girder", "building"):
             doc[part]["scenario"]["seed"] = args.seed
     return doc
+
+
+def merged(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``over`` merged in: mappings key by key, anything else replaced."""
+    out = dict(base)
+    for key, value in over.items():
+        out[key] = merged(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
 
 
 def node_settings(part: dict[str, Any], n_windows: int, out: Path) -> dict[str, dict[str, Any]]:
@@ -148,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
     # the Table 1 sweep on the girder's tracked modes runs beside the building's graph
     pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
     study: Future | None = None
-    if g["stage"].tracking is not None:
+    if g["stage"].tracking is not None and doc["girder"].get("study") is not False:  # `study: false`: no sweep
         _log("girder: the bridge paper's Table 1 sweep (shm-ros update --study) starts on the tracked modes")
         study = pool.submit(study_job, g["stage"].tracking.observations, str(g["files"].structure),
                             dict(doc["girder"].get("study") or {}), str(out / "girder" / "study"))

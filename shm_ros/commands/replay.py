@@ -31,6 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clock-readers", type=int, default=0, metavar="N",
                    help="with --clock, wait (up to --wait s) until N nodes on sim time read /clock before "
                         "replaying (default: those found once the graph has been stable for 1 s)")
+    p.add_argument("--namespace", default="", metavar="NS",
+                   help="the graph's namespace (e.g. /bridge_a, as its nodes' __ns): the recording's topics "
+                        "and the flow control go under it (default: the root)")
     p.set_defaults(func=run)
 
 
@@ -45,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         result = replay_bag(args.bag, rate=args.rate, credit=args.credit, credit_bytes=args.credit_bytes,
                             wait_s=args.wait,
                             recording_only=not args.all_topics, progress=True, clock_hz=args.clock,
-                            clock_readers=args.clock_readers)
+                            clock_readers=args.clock_readers, namespace=args.namespace)
     except BagError as exc:
         print(f"shm-ros replay: {exc}", file=sys.stderr)
         return 2

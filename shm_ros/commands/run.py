@@ -1,4 +1,10 @@
-"""`shm-ros run CONFIG.yaml`: start the node graph (one process per node, or all in one)."""
+"""`shm-ros run CONFIG.yaml`: start the node graph (one process per node, or all in one).
+
+It starts what `ros2 launch shm_ros pipeline.launch.py params_file:=CONFIG.yaml` starts: the same
+nodes, executables, parameters and respawn policy (docs/deployment.md). Every node is a managed
+(lifecycle) node that configures and activates itself; `--no-autostart` leaves them unconfigured for
+a lifecycle manager. `--namespace /bridge_a` puts the whole graph (nodes, topics, services) under
+that namespace, so several structures can share one ROS domain."""
 
 from __future__ import annotations
 
@@ -12,6 +18,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--single-process", action="store_true",
                    help="run every node in this process (default: one process per node)")
     p.add_argument("--no-restart", action="store_true", help="do not restart a node that exits")
+    p.add_argument("--namespace", default=None, metavar="NS",
+                   help="namespace of every node, topic and service of the graph (e.g. /bridge_a; default: the root)")
+    p.add_argument("--no-autostart", action="store_true",
+                   help="leave every node unconfigured: a lifecycle manager brings them up through the "
+                        "lifecycle_msgs services")
     p.set_defaults(func=run)
 
 
@@ -20,10 +31,10 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         config = load_graph_config(args.config, mode="single" if args.single_process else None,
-                                   restart=False if args.no_restart else None)
+                                   restart=False if args.no_restart else None, namespace=args.namespace)
     except ConfigError as exc:
         print(f"shm-ros run: {exc}", file=sys.stderr)
         return 2
     if config.mode == "single":
-        return run_single_process(config)
-    return Supervisor(config, log=lambda s: print(s, flush=True)).run()
+        return run_single_process(config, autostart=not args.no_autostart)
+    return Supervisor(config, log=lambda s: print(s, flush=True), autostart=not args.no_autostart).run()

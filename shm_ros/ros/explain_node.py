@@ -1,19 +1,19 @@
 """explain: tracked modes in, verdicts on missing physics out (docs/explain.md, docs/interfaces.md §5).
 
-Accumulates the track node's ``/shm/tracked_modes`` (one row per window; a row sent again counts
+Accumulates the track node's ``shm/tracked_modes`` (one row per window; a row sent again counts
 once). Once ``min_windows`` rows have arrived, and again after every ``min_new_windows`` new rows or
-when a replay ends (``/shm/replay/done``), it explains all rows so far in a worker process
+when a replay ends (``shm/replay/done``), it explains all rows so far in a worker process
 (:mod:`shm_ros.ros.explain_worker`, the executor never waits) and publishes a ``Verdict`` on
-``/shm/verdict`` (latched) when it is the first or when the set of accepted physics or whether the
+``shm/verdict`` (latched) when it is the first or when the set of accepted physics or whether the
 model fits changed, i.e. when the support for a missing effect crossed its threshold. ``output_dir``
 gets verdict.json, the figures' numbers and report.html after every run.
 
 **Event series** (docs/explain.md, Time domain): with a structure that declares a measured input, the
-node also keeps the event windows of ``/shm/windows`` (those ingest flags as events, docs/interfaces.md
+node also keeps the event windows of ``shm/windows`` (those ingest flags as events, docs/interfaces.md
 §1, the newest ``max_events``) and, once ``min_events`` have arrived and again after every new one,
 explains them in the time domain (amplitude-dependent stiffness and damping,
 :func:`shm_ros.core.explain.timedomain.explain_events`, options ``time_domain.*``) in the same worker;
-its verdicts go out on ``/shm/verdict`` too (``kind`` "events", NRMS fields set) when their accepted
+its verdicts go out on ``shm/verdict`` too (``kind`` "events", NRMS fields set) when their accepted
 physics changed, and into ``output_dir/events``.
 """
 
@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
@@ -32,9 +31,9 @@ from shm_ros.core.explain.config import ExplainConfig
 from shm_ros.core.explain.timedomain import TimeDomainConfig
 from shm_ros.ros import explain_worker, topics
 from shm_ros.ros.convert import tracked_row_from_msg, window_from_msg
-from shm_ros.ros.diagnostics import Diagnostics
-from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.params import load_config
+from shm_ros.ros.managed import ManagedNode
+from shm_ros.ros.node_main import spin
+from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
 from shm_ros.ros.worker_pool import WorkerPool
@@ -104,15 +103,16 @@ def verdict_to_msg(v: dict[str, Any]) -> Any:
     return msg
 
 
-class ExplainNode(Node):
+class ExplainNode(ManagedNode):
     """Parameters: every option of :class:`ExplainConfig` and of :class:`ExplainNodeConfig`."""
 
-    def __init__(self, name: str = "explain", parameters: dict[str, Any] | None = None) -> None:
-        super().__init__(name, parameter_overrides=overrides(parameters))
+    kind = "explain"
+
+    def setup(self) -> None:
         self.config = load_config(self, ExplainConfig)
         self.settings = load_config(self, ExplainNodeConfig)
         if not self.settings.structure:
-            raise SystemExit(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
+            raise ParameterError(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
         from shm_ros.core.models import build_model
         from shm_ros.io.structure import load_structure
 
@@ -120,7 +120,7 @@ class ExplainNode(Node):
         mode = self.settings.events
         self.with_events = explains_events(mode, bool(model.inputs))
         if mode == "on" and not model.inputs:
-            raise SystemExit(f"{self.get_name()}: events:=on needs a measured input in {self.settings.structure} "
+            raise ParameterError(f"{self.get_name()}: events:=on needs a measured input in {self.settings.structure} "
                              "('input'/'inputs')")
         self.events: dict[str, Any] = {}
         self.events_seen: set[str] = set()  # every event window id received (runs go on after the cap)
@@ -135,7 +135,7 @@ class ExplainNode(Node):
         # the accepted physics (and whether the model fits) of the last verdict of each kind
         self.last: dict[str, tuple[str, ...]] = {}
         self.runs = 0
-        self.diag = Diagnostics(self, "explain", summary=lambda: (
+        self.diag.summarize(lambda: (
             "ok", f"{len(self.rows)} windows received, {self.runs} runs"
             + (", explaining" if self.future is not None or self.event_future is not None else ", idle")
             + (f"; {len(self.events_seen)} event windows" if self.with_events else ""),
@@ -152,9 +152,8 @@ class ExplainNode(Node):
         self.workers = WorkerPool(explain_worker.init, (self.settings.structure,), explain_worker.ready)
         steady_timer(self, 0.25, self._poll)
 
-    def destroy_node(self) -> None:
+    def teardown(self) -> None:
         self.workers.shutdown()
-        super().destroy_node()
 
     def _on_row(self, msg: Any) -> None:
         try:
@@ -237,8 +236,8 @@ class ExplainNode(Node):
             self.get_logger().info(f"verdict from {count} {unit}: {text}")
         return accepted
 
-def make_node(name: str, parameters: dict[str, Any]) -> ExplainNode:
-    return ExplainNode(name, parameters)
+def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> ExplainNode:
+    return ExplainNode(name, parameters, namespace)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -17,8 +17,9 @@ from typing import Any
 
 from shm_ros.core.progress import Progress
 from shm_ros.core.types import ModalEstimate, Window
+from shm_ros.ros.graph_config import GraphConfig, NodeSpec, normal_namespace
 from shm_ros.ros.replay import ReplayResult
-from shm_ros.ros.supervisor import GraphConfig, NodeSpec, Supervisor
+from shm_ros.ros.supervisor import Supervisor
 
 
 @dataclass
@@ -75,39 +76,45 @@ def verdict_record(msg: Any) -> dict[str, Any]:
             "model_fits": msg.model_fits if msg.model_fits_known else None}
 
 
-def read_pipeline_bag(path: Path) -> PipelineRecord:
-    """Everything the recorder node recorded, decoded."""
+def read_pipeline_bag(path: Path, namespace: str = "") -> PipelineRecord:
+    """Everything the recorder node of the graph in ``namespace`` recorded, decoded (of the global
+    ``/diagnostics``, the statuses of that graph's nodes)."""
     from rclpy.serialization import deserialize_message
 
     from shm_ros.io.bags import read_messages
     from shm_ros.ros import topics
     from shm_ros.ros.convert import estimate_from_msg, window_from_msg
+    from shm_ros.ros.diagnostics import status_prefix
 
     rec = PipelineRecord()
+    mine = status_prefix(namespace)
     for m in read_messages(path):
         cls = topics.message_class(m.msgtype)
         msg: Any = deserialize_message(m.data, cls)
-        if m.topic == topics.WINDOWS:
+        topic = topics.relative(m.topic, namespace)
+        if topic == topics.WINDOWS:
             rec.windows.append(window_from_msg(msg))
-        elif m.topic == topics.MODAL_ESTIMATES:
+        elif topic == topics.MODAL_ESTIMATES:
             rec.estimates.append(estimate_from_msg(msg))
-        elif m.topic == topics.TRACKED_MODES:
+        elif topic == topics.TRACKED_MODES:
             rec.tracked.append({"window_id": msg.window_id, "mode_numbers": list(msg.mode_numbers),
                                 "frequencies_hz": list(msg.frequencies_hz),
                                 "damping_ratios": list(msg.damping_ratios)})
-        elif m.topic == topics.POSTERIOR:
+        elif topic == topics.POSTERIOR:
             rec.posteriors.append({"n_windows": int(msg.n_windows), "converged": bool(msg.converged),
                                    "parameters": {p.name: {"mean": p.mean, "std": p.std} for p in msg.parameters}})
-        elif m.topic == topics.PREDICTION:
+        elif topic == topics.PREDICTION:
             rec.predictions.append({"window_id": msg.window_id, "channel_names": list(msg.channel_names),
                                     "measured": list(msg.measured), "nrms_pct": list(msg.nrms_pct),
                                     "n_samples": int(msg.n_samples), "predicted_mean": list(msg.predicted_mean),
                                     "predicted_std": list(msg.predicted_std)})
-        elif m.topic == topics.VERDICT:
+        elif topic == topics.VERDICT:
             rec.verdicts.append(verdict_record(msg))
-        elif m.topic == topics.DIAGNOSTICS:
-            rec.diagnostics += [f"{s.name}: {s.message}" for s in msg.status if s.level != 0]
-            for st in msg.status:
+        elif topic == topics.DIAGNOSTICS:
+            statuses = [st for st in msg.status if st.name.startswith(mine) and (
+                mine or "/" not in st.name.split(":")[0])]  # at the root: not a namespaced graph's
+            rec.diagnostics += [f"{s.name}: {s.message}" for s in statuses if s.level != 0]
+            for st in statuses:
                 values = {kv.key: kv.value for kv in st.values}
                 rec.diagnostic_rows.append({"level": int.from_bytes(st.level, "little") if isinstance(
                     st.level, bytes) else int(st.level), "source": st.name, "message": st.message,
@@ -138,7 +145,8 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
                          update: dict | None = None, predict: dict | None = None,
                          explain: dict | None = None, expected_predictions: int | None = None,
                          expected_events: int | None = None, timeout_s: float = 600.0,
-                         log: Callable[[str], None] = print) -> GraphRun:
+                         log: Callable[[str], None] = print, namespace: str = "",
+                         single_process: bool = False) -> GraphRun:
     """Start the analysis nodes and a recorder as processes, replay ``bag``, wait until every
     window is identified (and tracked, and in a posterior, and ``expected_predictions`` predicted,
     when those nodes run, and explained by the explain node: every window, or with ``expected_events``
@@ -147,7 +155,7 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
                            explain=explain)
     return run_graph(bag, nodes, workdir, expected_windows=expected_windows,
                      expected_predictions=expected_predictions, expected_events=expected_events,
-                     timeout_s=timeout_s, log=log)
+                     timeout_s=timeout_s, log=log, namespace=namespace, single_process=single_process)
 
 
 def _explains_events(node: NodeSpec) -> bool:
@@ -175,7 +183,10 @@ def for_replay(nodes: list[NodeSpec]) -> list[NodeSpec]:
 def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
               expected_windows: int | None = None, expected_predictions: int | None = None,
               expected_events: int | None = None, timeout_s: float = 600.0,
-              log: Callable[[str], None] = print) -> GraphRun:
+              log: Callable[[str], None] = print, namespace: str = "", single_process: bool = False) -> GraphRun:
+    """Start ``nodes`` and a recorder (in ``namespace``, e.g. ``/bridge_a``, when given; all in one
+    process with ``single_process``), replay ``bag`` into that namespace, wait until the graph is
+    done with it (see :func:`replay_through_graph`), stop, collect."""
     import threading
 
     import rclpy
@@ -183,6 +194,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
     from rclpy.node import Node
 
     from shm_ros.ros import topics
+    from shm_ros.ros.diagnostics import status_prefix
     from shm_ros.ros.qos import latched_qos, pipeline_qos, stream_qos
     from shm_ros.ros.replay import replay_bag
 
@@ -193,13 +205,16 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
     if out_bag.exists():
         shutil.rmtree(out_bag)
     recorder = NodeSpec("recorder", "recorder", {"output": str(out_bag)})
-    sup = Supervisor(GraphConfig(nodes=[*nodes, recorder], restart=False), log=log)
+    namespace = normal_namespace(namespace)
+    sup = Supervisor(GraphConfig(nodes=[*nodes, recorder], restart=False, namespace=namespace,
+                                 mode="single" if single_process else "processes"), log=log)
     t0 = time.monotonic()
     sup.start_all()
     rclpy.init()
     try:
         # Count results as they arrive, so we know when the graph is done with the recording.
-        watcher = Node("shm_graph_watch")
+        watcher = Node("shm_graph_watch", namespace=namespace or None)
+        mine = status_prefix(namespace)
         seen: dict[str, set[str]] = {"estimates": set(), "tracked": set(), "predicted": set()}
         posterior_windows = [0]
         explained_windows = [0]
@@ -225,11 +240,11 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         def on_diagnostics(m: Any) -> None:
             for st in m.status:
                 values = {kv.key: kv.value for kv in st.values}
-                if st.name == "ingest: status":
+                if st.name == f"{mine}ingest: status":
                     window_readers[0] = int(values.get("window_readers", 0))
-                elif st.name == "explain: verdict" and "windows" in values:
+                elif st.name == f"{mine}explain: verdict" and "windows" in values:
                     explained_windows[0] = max(explained_windows[0], int(values["windows"]))
-                elif st.name == "explain: events verdict" and "events" in values:
+                elif st.name == f"{mine}explain: events verdict" and "events" in values:
                     explained_events[0] = max(explained_events[0], int(values["events"]))
 
         from diagnostic_msgs.msg import DiagnosticArray
@@ -264,7 +279,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         executor.add_node(watcher)
         spinner = threading.Thread(target=executor.spin, name="graph-watch", daemon=True)
         spinner.start()
-        result = replay_bag(bag, rate=0.0, wait_s=60.0, progress=True)
+        result = replay_bag(bag, rate=0.0, wait_s=60.0, progress=True, namespace=namespace)
         log(f"replayed {result.published} messages, lost {result.lost}")
 
         def done() -> bool:
@@ -305,6 +320,6 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
     finally:
         rclpy.try_shutdown()
         code = sup.stop_all()
-    rec = read_pipeline_bag(out_bag)
+    rec = read_pipeline_bag(out_bag, namespace)
     return GraphRun(result, rec.windows, rec.estimates, rec.diagnostics, out_bag, code, rec.tracked,
                     rec.posteriors, time.monotonic() - t0, rec.diagnostic_rows, rec.predictions, rec.verdicts)

@@ -6,16 +6,15 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
 from shm_ros.core.identify import IdentifyConfig, identify_window
 from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_to_msg, window_from_msg
-from shm_ros.ros.diagnostics import Diagnostics
-from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.params import load_config
+from shm_ros.ros.managed import ManagedNode
+from shm_ros.ros.node_main import spin
+from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import stream_qos
 
 
@@ -29,18 +28,19 @@ class IdentifyNodeConfig:
                                    "the band comes from each window's spectrum")
 
 
-class IdentifyNode(Node):
+class IdentifyNode(ManagedNode):
     """Parameters: every option of :class:`IdentifyConfig` (``preprocess.*``, ``stability.*`` and
     ``picking.*`` for its nested configurations) and of :class:`IdentifyNodeConfig`."""
 
-    def __init__(self, name: str = "identify", parameters: dict[str, Any] | None = None) -> None:
-        super().__init__(name, parameter_overrides=overrides(parameters))
+    kind = "identify"
+
+    def setup(self) -> None:
         self.config = load_config(self, IdentifyConfig)
         settings = load_config(self, IdentifyNodeConfig)
         self.frame_id = settings.frame_id
         if settings.structure and not self.config.nominal_frequencies_hz:
             self._band_from(settings.structure)
-        self.diag = Diagnostics(self, "identify", summary=lambda: (
+        self.diag.summarize(lambda: (
             "ok", f"{self.count} windows identified", {"windows": self.count}))
         self.pub: Publisher[Any] = self.create_publisher(
             topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]), topics.MODAL_ESTIMATES,
@@ -59,7 +59,7 @@ class IdentifyNode(Node):
         try:
             spec = load_structure(path)
         except Exception as exc:  # StructureError names the file and field
-            raise SystemExit(f"identify: parameter 'structure': {exc}") from exc
+            raise ParameterError(f"{self.get_name()}: parameter 'structure': {exc}") from exc
         freqs, why_not = band_frequencies(spec, self.config.band, self.config.band_modes)
         self.config.nominal_frequencies_hz = freqs
         if why_not:
@@ -85,8 +85,8 @@ class IdentifyNode(Node):
         self.get_logger().info(f"window {msg.window_id}: modes at [{freqs}] Hz")
 
 
-def make_node(name: str, parameters: dict[str, Any]) -> IdentifyNode:
-    return IdentifyNode(name, parameters)
+def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> IdentifyNode:
+    return IdentifyNode(name, parameters, namespace)
 
 
 def main(args: list[str] | None = None) -> int:

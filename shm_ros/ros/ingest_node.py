@@ -3,9 +3,12 @@
 Subscribes (sensor-data QoS, deep history) to ``<prefix>/accel/<id>`` (sensor_msgs/Imu),
 ``<prefix>/accel_block`` (shm_interfaces/AccelBlock) and ``<prefix>/temperature/<id>``
 (sensor_msgs/Temperature) as they appear in the graph (ROS has no wildcard subscriptions, so the
-graph is polled); all science is in :class:`shm_ros.core.ingest.IngestCore`, which this node
-feeds with arrays (stamps in ns, accelerations per axis) decoded from the messages.
-Publishes ``/shm/windows``, ``/diagnostics`` and ``/shm/ingest/received`` (flow control for replay).
+graph is polled), those under the node's namespace when it has one; all science is in
+:class:`shm_ros.core.ingest.IngestCore`, which this node feeds with arrays (stamps in ns,
+accelerations per axis) decoded from the messages.
+Publishes ``shm/windows``, ``/diagnostics`` and ``shm/ingest/received`` (flow control for replay),
+relative to the node's namespace (docs/topics.md). A managed node (:mod:`shm_ros.ros.managed`):
+a bad structure file fails ``configure`` with the file and field.
 
 Sensors and topics that do not fit together are reported up front (a WARN diagnostic and a
 warning on the terminal): an accelerometer topic that feeds no structure sensor as soon as it is
@@ -23,7 +26,6 @@ from typing import Any
 
 import numpy as np
 from rclpy.duration import Duration
-from rclpy.node import Node
 from std_msgs.msg import String, UInt64
 
 from shm_ros.core.config import option
@@ -33,9 +35,9 @@ from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
 from shm_ros.io.imu_cdr import decode_imu_batch
 from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
-from shm_ros.ros.diagnostics import Diagnostics
-from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.params import load_config
+from shm_ros.ros.managed import ManagedNode
+from shm_ros.ros.node_main import spin
+from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import WINDOW_HISTORY, latched_qos, pipeline_qos, recording_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
 
@@ -60,11 +62,12 @@ class IngestNodeConfig:
     frame_id: str = option("", "frame_id in the header of the published windows")
 
 
-class IngestNode(Node):
+class IngestNode(ManagedNode):
     """Parameters: the options of :class:`IngestConfig` and of :class:`IngestNodeConfig`."""
 
-    def __init__(self, name: str = "ingest", parameters: dict[str, Any] | None = None) -> None:
-        super().__init__(name, parameter_overrides=overrides(parameters))
+    kind = "ingest"
+
+    def setup(self) -> None:
         config = load_config(self, IngestConfig)
         settings = load_config(self, IngestNodeConfig)
         self.core = IngestCore(self._channel_map(settings.structure), config)
@@ -73,7 +76,7 @@ class IngestNode(Node):
         self.reliable = settings.reliable_input
         # window_readers: subscriptions this node's window publisher has matched (a reader that the
         # graph shows but that is not matched yet would miss the first windows)
-        self.diag = Diagnostics(self, "ingest", summary=lambda: (
+        self.diag.summarize(lambda: (
             "ok", f"{self.received} messages received, {self.windows_out} windows published",
             {"messages": self.received, "windows": self.windows_out,
              "window_readers": self.window_pub.get_subscription_count()}))
@@ -109,7 +112,7 @@ class IngestNode(Node):
 
     def _channel_map(self, structure: str | None) -> ChannelMap:
         if not structure:
-            raise SystemExit("ingest: parameter 'structure' (path of the structure YAML) is required")
+            raise ParameterError(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
         from shm_ros.io.structure import load_structure
 
         return ChannelMap.from_structure(load_structure(structure))
@@ -117,8 +120,10 @@ class IngestNode(Node):
     # -- topics appear while the graph runs: subscribe to the recording topics ----------------------
     def _discover(self) -> None:
         qos = recording_qos(reliable=self.reliable)
+        # in a namespace, only the recording topics under it: another graph's are not this structure's
+        ns = self.get_namespace().rstrip("/")
         for topic, types in self.get_topic_names_and_types():
-            if topic in self.subscribed:
+            if topic in self.subscribed or not topic.startswith(ns + "/"):
                 continue
             for msgtype in types:
                 kind = topic_kind(topic, msgtype)
@@ -317,8 +322,8 @@ class IngestNode(Node):
             self.windows_out += 1
 
 
-def make_node(name: str, parameters: dict[str, Any]) -> IngestNode:
-    return IngestNode(name, parameters)
+def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> IngestNode:
+    return IngestNode(name, parameters, namespace)
 
 
 def _executor():

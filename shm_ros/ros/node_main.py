@@ -10,6 +10,8 @@ from typing import Any
 import rclpy
 from rclpy.parameter import Parameter
 
+from shm_ros.errors import ShmError
+
 
 def overrides(parameters: dict[str, Any] | None, prefix: str = "") -> list[Parameter]:
     """Parameter overrides from a dict (single-process graphs, tests). A nested mapping gives
@@ -48,6 +50,11 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None,
     code = 0
     try:
         node = factory()
+        if getattr(node, "autostart", False) and not getattr(node, "configured", True):
+            # a managed node that could not configure itself: say why and stop (a supervisor or
+            # launch respawns it, so a file fixed meanwhile is taken up)
+            print(node.config_error, file=sys.stderr)
+            return 2
         executor = (executor_factory or SingleThreadedExecutor)()
         executor.add_node(node)
         # Wake up regularly: a signal is only handled once control is back in Python.
@@ -55,14 +62,14 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None,
             executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except SystemExit as exc:  # configuration errors: message already says what is wrong
+    except ShmError as exc:  # configuration errors: the message says what is wrong
         print(exc, file=sys.stderr)
         code = 2
     finally:
         if node is not None:
             close = getattr(node, "close", None)
             try:
-                if close is not None and rclpy.ok():
+                if close is not None and rclpy.ok() and getattr(node, "configured", True):
                     close()
             except KeyboardInterrupt:
                 pass

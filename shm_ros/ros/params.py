@@ -17,8 +17,9 @@ default of its own: the dataclass is the one place that says what an option is.
   the additional constraints ("one of ssi-cov|ssi-data|ssi-io"). Parameters are read once, when the
   node starts, so they are read-only: changing one means restarting the node.
 * **Errors** (a value outside the choices, a wrong type, a value the dataclass's own checks refuse)
-  raise ``SystemExit`` with a message naming the node, the parameter and what is allowed;
-  ``shm_ros.ros.node_main.spin`` prints it and exits with code 2.
+  raise :class:`ParameterError` (a :class:`~shm_ros.errors.ShmError`) naming the node, the parameter
+  and what is allowed; it fails the node's ``configure`` transition (:mod:`shm_ros.ros.managed`).
+* A parameter already declared (a node configured again after ``cleanup``) is read, not declared twice.
 """
 
 from __future__ import annotations
@@ -31,8 +32,13 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from shm_ros.core.config import OptionSpec, format_value, nested_configs, option_specs
+from shm_ros.errors import InputError
 
-__all__ = ["declare_config", "config_from_node", "load_config", "ROS_TYPES"]
+__all__ = ["declare_config", "config_from_node", "load_config", "ROS_TYPES", "ParameterError"]
+
+
+class ParameterError(InputError):
+    """A node parameter cannot be used; the message names the node, the parameter and what is allowed."""
 
 T = TypeVar("T")
 
@@ -56,6 +62,8 @@ def _unset(spec: OptionSpec) -> bool:
 def declare_config(node: Node, cls: type, prefix: str = "") -> None:
     """Declare a parameter for every option of ``cls`` (and of its nested configurations)."""
     for name, spec in _ros_specs(cls, prefix):
+        if node.has_parameter(name):
+            continue
         constraints = f"one of {'|'.join(spec.choices)}" if spec.choices else ""
         if _unset(spec):
             constraints = "; ".join(c for c in (f"{_TYPE_NAMES[spec.value_type]}, or not set",
@@ -66,7 +74,7 @@ def declare_config(node: Node, cls: type, prefix: str = "") -> None:
         try:
             node.declare_parameter(name, None if _unset(spec) else spec.default, descriptor)
         except (ParameterException, TypeError, ValueError) as exc:
-            raise SystemExit(f"{node.get_name()}: parameter '{name}' must be a "
+            raise ParameterError(f"{node.get_name()}: parameter '{name}' must be a "
                              f"{_TYPE_NAMES[spec.value_type]} (default "
                              f"{format_value(spec.default)}): {exc}") from None
 
@@ -88,7 +96,7 @@ def config_from_node(node: Node, cls: type[T], prefix: str = "") -> T:
         if validate is not None:
             validate()
     except (TypeError, ValueError) as exc:
-        raise SystemExit(f"{node.get_name()}: {where}: {exc}") from None
+        raise ParameterError(f"{node.get_name()}: {where}: {exc}") from None
     return config
 
 
@@ -108,10 +116,10 @@ def _checked(node: Node, name: str, spec: OptionSpec, value: Any) -> Any:
           isinstance(value, str) if kind is str else
           isinstance(value, list | tuple) and all(isinstance(v, str) for v in value))
     if not ok:
-        raise SystemExit(f"{node.get_name()}: parameter '{name}' must be a {_TYPE_NAMES[kind]}, "
+        raise ParameterError(f"{node.get_name()}: parameter '{name}' must be a {_TYPE_NAMES[kind]}, "
                          f"got {value!r}")
     value = float(value) if kind is float else list(value) if kind is list else value
     if spec.choices and value not in spec.choices:
-        raise SystemExit(f"{node.get_name()}: parameter '{name}' must be one of "
+        raise ParameterError(f"{node.get_name()}: parameter '{name}' must be one of "
                          f"{'|'.join(spec.choices)}, got {value!r}")
     return value

@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 
 from shm_ros.core.config import OptionSpec, format_value, nested_configs, option_specs
+from shm_ros.ros.registry import node_table
 
 
 def _rows(cls: type, prefix: str = "") -> list[tuple[str, OptionSpec]]:
@@ -16,32 +17,19 @@ def _rows(cls: type, prefix: str = "") -> list[tuple[str, OptionSpec]]:
 
 
 def _nodes() -> list[tuple[str, str, list[type]]]:
-    from shm_ros.core.bayes.update import UpdateConfig
-    from shm_ros.core.explain.config import ExplainConfig
-    from shm_ros.core.identify import IdentifyConfig
-    from shm_ros.core.ingest import IngestConfig
-    from shm_ros.core.predict import PredictConfig
-    from shm_ros.core.tracking import TrackingConfig
-    from shm_ros.ros.explain_node import ExplainNodeConfig
-    from shm_ros.ros.identify_node import IdentifyNodeConfig
-    from shm_ros.ros.ingest_node import IngestNodeConfig
-    from shm_ros.ros.predict_node import PredictNodeConfig
-    from shm_ros.ros.recorder_node import RecorderNodeConfig
-    from shm_ros.ros.track_node import TrackNodeConfig
-    from shm_ros.ros.update_node import UpdateNodeConfig
+    """(kind, what it does, configuration classes) of every node of the registry."""
+    import importlib
 
-    return [
-        ("ingest", "recording topics in, validated and aligned windows out", [IngestNodeConfig, IngestConfig]),
-        ("identify", "windows in, modal estimates out", [IdentifyNodeConfig, IdentifyConfig]),
-        ("track", "modal estimates in, tracked modes and novelty out", [TrackNodeConfig, TrackingConfig]),
-        ("update", "tracked modes (or modal estimates) in, posterior out (sampling in a worker process)",
-         [UpdateNodeConfig, UpdateConfig]),
-        ("predict", "event windows in, response predictions out (a worker process)",
-         [PredictNodeConfig, PredictConfig]),
-        ("explain", "tracked modes (and event windows) in, verdicts on missing physics out (a worker process)",
-         [ExplainNodeConfig, ExplainConfig]),
-        ("recorder", "pipeline topics into a bag", [RecorderNodeConfig]),
-    ]
+    from shm_ros.ros.registry import NODES
+
+    out = []
+    for node in NODES:
+        classes = []
+        for ref in node.configs:
+            module, _, name = ref.partition(":")
+            classes.append(getattr(importlib.import_module(module), name))
+        out.append((node.kind, node.summary, classes))
+    return out
 
 
 def _cell(text: str) -> str:
@@ -58,10 +46,16 @@ def render() -> str:
            "file they may be nested (`preprocess: {lowpass_hz: 20.0}`). Parameters are read once at",
            "start (read-only); an unset option is declared without a value. Every node also has the",
            "standard `use_sim_time` (see `shm-ros replay --clock`). `ros2 param describe <node> <name>`",
-           "shows the same help on a running node.", ""]
+           "shows the same help on a running node.", "",
+           "## Nodes", "",
+           "The node registry (`shm_ros/ros/registry.py`): the console scripts, the launch file, `shm-ros run`",
+           "and this table come from it. Every node is a managed (lifecycle) node with the parameter",
+           "`autostart` (default true: it configures and activates itself; false: a lifecycle manager",
+           "drives it through the `lifecycle_msgs` services, docs/deployment.md).", "",
+           *node_table(), ""]
     for name, what, classes in _nodes():
         out += [f"## {name}", "", f"{what.capitalize()}; `shm_ros/ros/{name}_node.py`, "
-                f"console script `shm-ros-{name}`, `ros2 run shm_ros {name}`.", "",
+                f"console script `shm-ros-{name}`, `ros2 run shm_ros shm-ros-{name}`.", "",
                 "| parameter | type | default | choices | what it does |", "|---|---|---|---|---|"]
         for cls in classes:
             for pname, spec in _rows(cls):

@@ -1,11 +1,11 @@
 """predict: windows in, response predictions out (docs/predict.md, docs/interfaces.md §7).
 
-Subscribes to ``/shm/windows`` and ``/shm/posterior``. Every window that ingest flags as an event,
-and any window named on ``/shm/predict_request`` (std_msgs/String: a window id among the last
+Subscribes to ``shm/windows`` and ``shm/posterior``. Every window that ingest flags as an event,
+and any window named on ``shm/predict_request`` (std_msgs/String: a window id among the last
 ``keep_windows`` received; no service type is used because std_srvs is not a dependency), is
-predicted with the posterior file ``posterior`` (re-read when it changes; a ``/shm/posterior``
+predicted with the posterior file ``posterior`` (re-read when it changes; a ``shm/posterior``
 message marks that it did) or the nominal model without one, scored and published as
-``ResponsePrediction`` on ``/shm/prediction``. With ``wait_for_posterior_s`` > 0 the queued windows
+``ResponsePrediction`` on ``shm/prediction``. With ``wait_for_posterior_s`` > 0 the queued windows
 wait until the update node has written the posterior (a graph that replays a recording delivers the
 event windows long before the first posterior exists). With ``output_dir`` the node also writes
 ``prediction.json`` (Table 3 rows, scores, summary) and ``prediction_series.json`` after every
@@ -24,21 +24,20 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
 from shm_ros.core.predict import PredictConfig
 from shm_ros.ros import predict_worker, topics
 from shm_ros.ros.convert import ns_to_time, window_from_msg
-from shm_ros.ros.diagnostics import Diagnostics
-from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.params import load_config
+from shm_ros.ros.managed import ManagedNode
+from shm_ros.ros.node_main import spin
+from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
 from shm_ros.ros.worker_pool import WorkerPool
 
-REQUEST = "/shm/predict_request"  # std_msgs/msg/String: the id of a window to predict
+REQUEST = topics.PREDICT_REQUEST
 MAX_FILED = 100  # predictions kept for output_dir's files (the newest)
 
 
@@ -77,15 +76,16 @@ def prediction_to_msg(pred: Any) -> Any:
     return msg
 
 
-class PredictNode(Node):
+class PredictNode(ManagedNode):
     """Parameters: every option of :class:`PredictConfig` and of :class:`PredictNodeConfig`."""
 
-    def __init__(self, name: str = "predict", parameters: dict[str, Any] | None = None) -> None:
-        super().__init__(name, parameter_overrides=overrides(parameters))
+    kind = "predict"
+
+    def setup(self) -> None:
         self.config = load_config(self, PredictConfig).validate()
         self.settings = load_config(self, PredictNodeConfig)
         if not self.settings.structure:
-            raise SystemExit(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
+            raise ParameterError(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) is required")
         from shm_ros.core.models import build_model
         from shm_ros.io.structure import load_structure
 
@@ -102,7 +102,7 @@ class PredictNode(Node):
         self.future: Future | None = None
         self.future_model = "nominal"
         self.done = 0
-        self.diag = Diagnostics(self, "predict", summary=lambda: (
+        self.diag.summarize(lambda: (
             "ok", f"{self.done} predictions, {len(self.queue)} waiting" if self.enabled
             else "off: the structure declares no measured input", {"predicted": self.done}))
         self.pub: Publisher[Any] = self.create_publisher(topics.message_class(topics.TYPES[topics.PREDICTION]),
@@ -119,10 +119,9 @@ class PredictNode(Node):
                                            if self.enabled else None)
         steady_timer(self, 0.1, self._poll)
 
-    def destroy_node(self) -> None:
+    def teardown(self) -> None:
         if self.workers is not None:
             self.workers.shutdown()
-        super().destroy_node()
 
     def _on_window(self, msg: Any) -> None:
         if not self.enabled:
@@ -221,8 +220,8 @@ def _posterior_file(path: str) -> Path:
     return p / "posterior.json" if p.is_dir() or not p.suffix else p
 
 
-def make_node(name: str, parameters: dict[str, Any]) -> PredictNode:
-    return PredictNode(name, parameters)
+def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> PredictNode:
+    return PredictNode(name, parameters, namespace)
 
 
 def main(args: list[str] | None = None) -> int:

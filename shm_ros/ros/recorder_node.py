@@ -1,4 +1,5 @@
-"""recorder: writes pipeline topics (CDR as received) into an output bag."""
+"""recorder: writes pipeline topics (CDR as received) into an output bag, under their fully
+qualified names (the node's namespace resolves the relative ones)."""
 
 from __future__ import annotations
 
@@ -7,13 +8,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rclpy.node import Node
-
 from shm_ros.core.config import option
 from shm_ros.io.bags import BagWriter
 from shm_ros.ros import topics
-from shm_ros.ros.diagnostics import Diagnostics
-from shm_ros.ros.node_main import overrides, spin
+from shm_ros.ros.managed import ManagedNode
+from shm_ros.ros.node_main import spin
 from shm_ros.ros.params import load_config
 from shm_ros.ros.qos import latched_qos, pipeline_qos, stream_qos
 
@@ -35,27 +34,30 @@ class RecorderNodeConfig:
     storage: str = option(Storage.MCAP.value, "bag storage", choices=Storage)
 
 
-class RecorderNode(Node):
+class RecorderNode(ManagedNode):
     """Parameters: the options of :class:`RecorderNodeConfig`."""
 
-    def __init__(self, name: str = "recorder", parameters: dict[str, Any] | None = None) -> None:
-        super().__init__(name, parameter_overrides=overrides(parameters))
+    kind = "recorder"
+
+    def setup(self) -> None:
         settings = load_config(self, RecorderNodeConfig)
         out = Path(settings.output)
         self.writer = BagWriter(out, storage=settings.storage)
         self.writer.__enter__()
         self.count = 0
-        self.diag = Diagnostics(self, "recorder", summary=lambda: (
+        self.diag.summarize(lambda: (
             "ok", f"{self.count} messages recorded to {out}", {"messages": self.count, "output": out}))
         for topic in settings.topics:
-            msgtype = topics.TYPES.get(topic)
+            msgtype = topics.type_of(topic)
             if msgtype is None:
                 self.get_logger().error(f"parameter topics: no known type for {topic!r}; not recorded")
                 continue
-            qos = (latched_qos() if topic in LATCHED else
-                   stream_qos() if topic in STREAMS else pipeline_qos())
+            name = topics.relative(topic)
+            qos = (latched_qos() if name in LATCHED else
+                   stream_qos() if name in STREAMS else pipeline_qos())
+            # the bag holds the fully qualified name (/bridge_a/shm/windows), as `ros2 bag record` writes it
             self.create_subscription(topics.message_class(msgtype), topic,
-                                     self._writer_for(topic, msgtype), qos, raw=True)
+                                     self._writer_for(self.resolve_topic_name(topic), msgtype), qos, raw=True)
         self.get_logger().info(f"recording to {out}")
 
     def _writer_for(self, topic: str, msgtype: str):
@@ -64,13 +66,14 @@ class RecorderNode(Node):
             self.count += 1
         return write
 
-    def close(self) -> None:
+    def teardown(self) -> None:
+        """Close the bag (shutdown, cleanup): what was recorded stays readable."""
         self.writer.__exit__(None, None, None)
         self.get_logger().info(f"recorded {self.count} messages")
 
 
-def make_node(name: str, parameters: dict[str, Any]) -> RecorderNode:
-    return RecorderNode(name, parameters)
+def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> RecorderNode:
+    return RecorderNode(name, parameters, namespace)
 
 
 def main(args: list[str] | None = None) -> int:

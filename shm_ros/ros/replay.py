@@ -1,7 +1,7 @@
 """Replay a rosbag2 bag through the running graph, in real time, xN, or as fast as it keeps up.
 
 Messages are published as the CDR bytes stored in the bag (no decode/re-encode). Flow control: the
-ingest node publishes how many recording messages it has taken (``/shm/ingest/received``); with
+ingest node publishes how many recording messages it has taken (``shm/ingest/received``); with
 ``rate=0`` the replayer keeps at most ``credit`` messages and ``credit_bytes`` bytes in flight, so
 neither the subscriber's history nor the transport's buffers overflow, and nothing is dropped even
 on best-effort (sensor-data) subscriptions. Publishing flat out with KEEP_LAST would drop
@@ -45,8 +45,8 @@ class ReplayResult:
 
 
 class Replayer(Node):
-    def __init__(self, credit: int = 2000) -> None:
-        super().__init__("shm_replay")
+    def __init__(self, credit: int = 2000, namespace: str = "") -> None:
+        super().__init__("shm_replay", namespace=namespace or None)
         self.credit = credit
         self.acknowledged = 0
         self.ack_seen = False
@@ -65,7 +65,8 @@ class Replayer(Node):
             # Reliable, deep: matches best-effort (sensor-data) and reliable subscriptions.
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(self.credit, 10),
                              reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
-            pub = self.create_publisher(cls, topic, qos)
+            # relative: a replay in a namespace publishes the recording under it (/bridge_a/bridge/accel/s1)
+            pub = self.create_publisher(cls, topic.lstrip("/"), qos)
             self.pubs[topic] = pub
         return pub
 
@@ -86,7 +87,8 @@ def _open_bag(path: str | Path) -> tuple[dict[str, str], Callable[[list[str]], I
 def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
                drain_timeout_s: float = 300.0, stall_s: float = 30.0, recording_only: bool = True,
-               progress: bool = False, clock_hz: float = 0.0, clock_readers: int = 0) -> ReplayResult:
+               progress: bool = False, clock_hz: float = 0.0, clock_readers: int = 0,
+               namespace: str = "") -> ReplayResult:
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
 
     ``rate``: 1.0 = real time, N = N x real time, 0 = as fast as the graph acknowledges.
@@ -99,8 +101,9 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     ``clock_readers``: with a clock, wait (up to ``wait_s``) until this many /clock readers (nodes on
     sim time) have matched; 0 = those the graph shows once they have stayed matched for
     ``CLOCK_SETTLE_S`` (a node discovered later than that takes the clock only from then on).
+    ``namespace``: the graph's (``/bridge_a``); the recording's topics and the flow control go under it.
     """
-    node = Replayer(credit)
+    node = Replayer(credit, namespace)
     result = ReplayResult()
     try:
         # Publishers first (ingest discovers recording topics by polling the graph), then wait for

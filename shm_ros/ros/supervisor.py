@@ -1,15 +1,12 @@
-"""Start the node graph from a YAML config: one process per node (restarted if it crashes), or all
-nodes in one process. There is no ``ros2 launch`` here, so this plays its part.
+"""Start the node graph of a ROS 2 parameters file (:mod:`shm_ros.ros.graph_config`): one process
+per node, respawned when it dies, or all nodes in one process. It starts what
+``launch/pipeline.launch.py`` starts (:func:`~shm_ros.ros.graph_config.launch_plan`), for machines
+without ``ros2 launch``.
 
-Config::
-
-    graph: {mode: processes, restart: true, max_restarts: 5}
-    nodes:
-      ingest:   {parameters: {structure: bridge.yaml, window_s: 600.0}}
-      identify: {parameters: {method: ssi-cov}}
-
-Each node runs as ``python -m shm_ros.ros.<kind>_node --ros-args --params-file FILE``; ``kind``
-defaults to the key (``kind:`` overrides it, so two identify nodes can run side by side).
+Each node runs as ``python -m shm_ros.ros.<kind>_node --ros-args -r __node:=NAME [-r __ns:=NS]
+--params-file FILE``, FILE holding its parameters (``autostart: true`` among them: a managed node
+configures and activates itself; with ``autostart: false`` a lifecycle manager does it through the
+standard ``lifecycle_msgs`` services).
 """
 
 from __future__ import annotations
@@ -20,15 +17,21 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from shm_ros.errors import InputError
-
-NODE_KINDS = ("ingest", "identify", "track", "update", "predict", "explain", "recorder")
+from shm_ros.ros.graph_config import (  # noqa: F401 (re-exported: the graph's names live here too)
+    ConfigError,
+    GraphConfig,
+    NodeLaunch,
+    NodeSpec,
+    launch_plan,
+    load_graph_config,
+    node_kind,
+)
+from shm_ros.ros.registry import KINDS as NODE_KINDS  # noqa: F401
 
 
 def node_process(kind: str, params: dict[str, Any], name: str | None = None,
@@ -64,142 +67,74 @@ def stop_process(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, st
     return proc.returncode, out or ""
 
 
-class ConfigError(InputError):
-    """The graph config is invalid; the message names the file and the field."""
-
-
-@dataclass
-class NodeSpec:
-    name: str
-    kind: str
-    parameters: dict[str, Any] = field(default_factory=dict)
-
-
-@dataclass
-class GraphConfig:
-    nodes: list[NodeSpec]
-    mode: str = "processes"
-    restart: bool = True
-    max_restarts: int = 5
-    source: str = "<dict>"
-    # the ROS 2 parameters file the graph came from: every node process reads it itself
-    params_file: str | None = None
-
-
-def node_kind(name: str, source: str) -> str:
-    """The node kind a node name starts with: ``identify`` and ``identify_data`` are identify nodes."""
-    for kind in sorted(NODE_KINDS, key=len, reverse=True):
-        if name == kind or name.startswith(kind + "_"):
-            return kind
-    raise ConfigError(f"{source}: {name}: a node's name must start with its kind "
-                      f"({', '.join(NODE_KINDS)})")
-
-
-def load_graph_config(path_or_dict: str | Path | dict, *, mode: str | None = None,
-                      restart: bool | None = None) -> GraphConfig:
-    """The graph of a ROS 2 parameters file (``<node>: {ros__parameters: {...}}`` per node, what
-    ``--ros-args --params-file`` reads), or of the older layout (``graph: {mode, restart}``,
-    ``nodes: {<name>: {kind, parameters}}``)."""
-    if isinstance(path_or_dict, dict):
-        raw, source = path_or_dict, "<dict>"
-    else:
-        source = str(path_or_dict)
-        try:
-            raw = yaml.safe_load(Path(path_or_dict).read_text()) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise ConfigError(f"{source}: cannot read graph config: {exc}") from exc
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{source}: must be a mapping of node names")
-    if "nodes" in raw or "graph" in raw:
-        config = _legacy(raw, source)
-    else:
-        nodes = []
-        for name, spec in raw.items():
-            if name == "/**":
-                raise ConfigError(f"{source}: '/**' (parameters for every node) is not supported: "
-                                  "give each node its own section")
-            if not isinstance(spec, dict) or set(spec) != {"ros__parameters"}:
-                raise ConfigError(f"{source}: {name}: expected `ros__parameters:` (a ROS 2 parameters file)")
-            params = spec["ros__parameters"] or {}
-            if not isinstance(params, dict):
-                raise ConfigError(f"{source}: {name}.ros__parameters must be a mapping")
-            nodes.append(NodeSpec(str(name), node_kind(str(name), source), params))
-        if not nodes:
-            raise ConfigError(f"{source}: no nodes")
-        config = GraphConfig(nodes, source=source)
-        config.params_file = None if isinstance(path_or_dict, dict) else str(Path(path_or_dict).resolve())
-    if mode is not None:
-        config.mode = mode
-    if restart is not None:
-        config.restart = restart
-    if config.mode not in ("processes", "single"):
-        raise ConfigError(f"{source}: graph mode must be 'processes' or 'single', not {config.mode!r}")
-    return config
-
-
-def _legacy(raw: dict, source: str) -> GraphConfig:
-    graph = raw.get("graph", {}) or {}
-    nodes = []
-    for name, spec in (raw.get("nodes") or {}).items():
-        spec = spec or {}
-        kind = spec.get("kind", name)
-        if kind not in NODE_KINDS:
-            raise ConfigError(f"{source}: nodes.{name}.kind: unknown node kind {kind!r} "
-                              f"(known: {', '.join(NODE_KINDS)})")
-        params = spec.get("parameters", {}) or {}
-        if not isinstance(params, dict):
-            raise ConfigError(f"{source}: nodes.{name}.parameters must be a mapping")
-        nodes.append(NodeSpec(name, kind, params))
-    if not nodes:
-        raise ConfigError(f"{source}: no nodes")
-    return GraphConfig(nodes, graph.get("mode", "processes"), bool(graph.get("restart", True)),
-                       int(graph.get("max_restarts", 5)), source)
-
-
 class Supervisor:
-    """Runs each node as a child process; restarts a crashed one; SIGINT stops all cleanly."""
+    """Runs each node of the plan as a child process; respawns one that dies (after the registry's
+    delay, at most ``max_restarts`` times); SIGINT stops all cleanly."""
 
-    def __init__(self, config: GraphConfig, log=print) -> None:
+    def __init__(self, config: GraphConfig, log=print, autostart: bool = True) -> None:
         self.config = config
         self.log = log
+        self.plan = {n.name: n for n in launch_plan(config, autostart)}
         self.procs: dict[str, subprocess.Popen] = {}
         self.restarts: dict[str, int] = {n.name: 0 for n in config.nodes}
+        self._due: dict[str, float] = {}  # node -> when it is respawned
         self._stopping = False
         self._tmp = tempfile.TemporaryDirectory(prefix="shm-ros-graph-")
 
-    def _params_file(self, node: NodeSpec) -> Path:
+    def _params_file(self, node: NodeLaunch) -> Path:
+        """The node's parameters under its fully qualified name (what ``--params-file`` matches)."""
         path = Path(self._tmp.name) / f"{node.name}.yaml"
-        path.write_text(yaml.safe_dump({node.name: {"ros__parameters": node.parameters}}))
+        path.write_text(yaml.safe_dump({f"{node.namespace}/{node.name}": {"ros__parameters": node.parameters}}))
         return path
 
-    def command(self, node: NodeSpec) -> list[str]:
-        params = self.config.params_file or str(self._params_file(node))
-        return [sys.executable, "-m", f"shm_ros.ros.{node.kind}_node", "--ros-args",
-                "-r", f"__node:={node.name}", "--params-file", params]
+    def command(self, node: NodeSpec | NodeLaunch) -> list[str]:
+        launch = self.plan[node.name]
+        ns = ["-r", f"__ns:={launch.namespace}"] if launch.namespace else []
+        return [sys.executable, "-m", launch.module, "--ros-args", "-r", f"__node:={launch.name}", *ns,
+                "--params-file", str(self._params_file(launch))]
 
-    def start(self, node: NodeSpec) -> None:
+    def start(self, node: NodeSpec | NodeLaunch) -> None:
         self.procs[node.name] = subprocess.Popen(self.command(node), env=dict(os.environ))
         self.log(f"[supervisor] started {node.name} (pid {self.procs[node.name].pid})")
 
     def start_all(self) -> None:
-        for node in self.config.nodes:
+        if self.config.mode == "single":
+            self.procs["graph"] = subprocess.Popen(self.single_command(), env=dict(os.environ))
+            self.log(f"[supervisor] started the graph in one process (pid {self.procs['graph'].pid})")
+            return
+        for node in self.plan.values():
             self.start(node)
 
+    def single_command(self) -> list[str]:
+        """``shm-ros run --single-process`` of the whole plan: every node in one process."""
+        path = Path(self._tmp.name) / "graph.yaml"
+        path.write_text(yaml.safe_dump({n.name: {"ros__parameters": n.parameters} for n in self.plan.values()}))
+        ns = ["--namespace", self.config.namespace] if self.config.namespace else []
+        return [sys.executable, "-m", "shm_ros.cli", "run", str(path), "--single-process", "--no-restart", *ns]
+
     def poll(self) -> None:
-        """Restart nodes that died while the graph is not being stopped."""
-        for node in self.config.nodes:
-            proc = self.procs.get(node.name)
-            if proc is None or proc.poll() is None or self._stopping:
+        """Respawn nodes that died while the graph is not being stopped."""
+        now = time.monotonic()
+        for name, node in self.plan.items():
+            if self._stopping:
+                return
+            if name in self._due:
+                if now >= self._due[name]:
+                    del self._due[name]
+                    self.start(node)
+                continue
+            proc = self.procs.get(name)
+            if proc is None or proc.poll() is None:
                 continue
             code = proc.returncode
-            if self.config.restart and self.restarts[node.name] < self.config.max_restarts:
-                self.restarts[node.name] += 1
-                self.log(f"[supervisor] {node.name} exited with {code}; restarting "
-                         f"({self.restarts[node.name]}/{self.config.max_restarts})")
-                self.start(node)
+            if node.respawn and self.restarts[name] < self.config.max_restarts:
+                self.restarts[name] += 1
+                self.log(f"[supervisor] {name} exited with {code}; restarting in {node.respawn_delay_s:g} s "
+                         f"({self.restarts[name]}/{self.config.max_restarts})")
+                self._due[name] = now + node.respawn_delay_s
             else:
-                self.log(f"[supervisor] {node.name} exited with {code}; not restarting")
-                self.procs.pop(node.name)
+                self.log(f"[supervisor] {name} exited with {code}; not restarting")
+                self.procs.pop(name)
 
     def stop_all(self, timeout: float = 10.0) -> int:
         """SIGINT every child, wait, escalate; 0 when all stopped cleanly."""
@@ -248,8 +183,9 @@ class Supervisor:
         return code
 
 
-def run_single_process(config: GraphConfig) -> int:
-    """All nodes in one process and one executor (small deployments)."""
+def run_single_process(config: GraphConfig, autostart: bool = True) -> int:
+    """All nodes in one process and one executor (small deployments); a node that cannot configure
+    itself stops the graph (exit code 2, the reason on stderr)."""
     import importlib
 
     import rclpy
@@ -259,10 +195,12 @@ def run_single_process(config: GraphConfig) -> int:
     executor = SingleThreadedExecutor()
     nodes = []
     try:
-        for spec in config.nodes:
-            module = importlib.import_module(f"shm_ros.ros.{spec.kind}_node")
-            node = module.make_node(spec.name, spec.parameters)
+        for launch in launch_plan(config, autostart):
+            node = importlib.import_module(launch.module).make_node(launch.name, launch.parameters, launch.namespace)
             nodes.append(node)
+            if autostart and not node.configured:
+                print(node.config_error, file=sys.stderr)
+                return 2
             executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -3,7 +3,7 @@
 Thin adapter over :class:`shm_ros.core.tracking.Tracker` and the history store
 (:mod:`shm_ros.io.store`, SQLite): each estimate is tracked and stored with its row in one
 transaction, then the row is published; a novelty alarm is also published on the latched
-``/shm/tracking_alarms`` (the alarm window's row, its ``mode_numbers`` the modes that moved) and
+``shm/tracking_alarms`` (the alarm window's row, its ``mode_numbers`` the modes that moved) and
 is a WARN diagnostic.
 
 Restart: the node resumes from the store (checkpoint + replay of the estimates stored after it).
@@ -21,16 +21,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
 from shm_ros.core.tracking import Tracker, TrackingConfig
 from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_from_msg, tracked_row_to_msg
-from shm_ros.ros.diagnostics import Diagnostics
-from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.params import load_config
+from shm_ros.ros.managed import ManagedNode
+from shm_ros.ros.node_main import spin
+from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 
 ALARM_HISTORY = 20  # latched alarms a late joiner receives
@@ -58,12 +57,13 @@ def default_store() -> Path:
     return Path(os.environ.get("ROS_HOME", Path.home() / ".ros")) / "shm_ros" / "track.sqlite"
 
 
-class TrackNode(Node):
+class TrackNode(ManagedNode):
     """Parameters: the options of :class:`TrackingConfig` offered to nodes and of
     :class:`TrackNodeConfig`."""
 
-    def __init__(self, name: str = "track", parameters: dict[str, Any] | None = None) -> None:
-        super().__init__(name, parameter_overrides=overrides(parameters))
+    kind = "track"
+
+    def setup(self) -> None:
         cfg = load_config(self, TrackingConfig)
         settings = load_config(self, TrackNodeConfig)
         self.store = None
@@ -87,11 +87,11 @@ class TrackNode(Node):
                                         checkpoint_every=settings.checkpoint_every)
                 self.tracker, replayed = resume(self.store, fresh)
         except (ValueError, OSError, RuntimeError) as exc:
-            raise SystemExit(f"{self.get_name()}: parameter error: {exc}") from exc
+            raise ParameterError(f"{self.get_name()}: parameter error: {exc}") from exc
         self.frame_id = settings.frame_id
         self.published = self.store.count("rows") if self.store is not None else 0
         self.duplicates = 0
-        self.diag = Diagnostics(self, "track", summary=lambda: (
+        self.diag.summarize(lambda: (
             "ok", f"{self.published} windows tracked", {"windows": self.published,
                                                         "duplicates_skipped": self.duplicates}))
         msg_type = topics.message_class(topics.TYPES[topics.TRACKED_MODES])
@@ -154,14 +154,13 @@ class TrackNode(Node):
                 freqs = ", ".join(f"{r.frequency_hz:.3f}" for r in self.tracker.reference)
                 self.get_logger().info(f"tracked modes at [{freqs}] Hz")
 
-    def destroy_node(self) -> None:
+    def teardown(self) -> None:
         if self.store is not None:
             self.store.close()
-        super().destroy_node()
 
 
-def make_node(name: str, parameters: dict[str, Any]) -> TrackNode:
-    return TrackNode(name, parameters)
+def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> TrackNode:
+    return TrackNode(name, parameters, namespace)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,12 +1,12 @@
 """update: tracked modes in, posterior summary out (re-run as new windows arrive).
 
-Accumulates the track node's ``/shm/tracked_modes`` (one row per window, mode identities kept
+Accumulates the track node's ``shm/tracked_modes`` (one row per window, mode identities kept
 across windows); on the first ``min_windows`` windows, and then whenever ``min_new_windows`` new
 ones have arrived, it builds one column per tracked mode and calls
 :func:`shm_ros.core.bayes.update.update` (which pairs the tracked modes with the model's modes
-once, behind the gate), warm-started from the last posterior; publishes ``/shm/posterior``
+once, behind the gate), warm-started from the last posterior; publishes ``shm/posterior``
 (latched) and writes ``posterior.json`` to ``output_dir`` when set. With ``input: estimates`` it
-runs without a track node: it takes ``/shm/modal_estimates`` and pairs every window's modes with
+runs without a track node: it takes ``shm/modal_estimates`` and pairs every window's modes with
 the prior-mean model instead (a spurious mode near a model frequency can then pass for a mode
 the window missed).
 
@@ -30,16 +30,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from rclpy.node import Node
 from rclpy.publisher import Publisher
 
 from shm_ros.core.bayes.update import Posterior, UpdateConfig
 from shm_ros.core.config import option
 from shm_ros.ros import topics, update_worker
 from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg, tracked_row_from_msg
-from shm_ros.ros.diagnostics import Diagnostics
-from shm_ros.ros.node_main import overrides, spin
-from shm_ros.ros.params import load_config
+from shm_ros.ros.managed import ManagedNode
+from shm_ros.ros.node_main import spin
+from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
 from shm_ros.ros.worker_pool import WorkerPool
@@ -58,7 +57,7 @@ class UpdateNodeConfig:
 
     structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
     input: str = option("tracked", "what the node updates from: tracked (the track node's "
-                        "/shm/tracked_modes) or estimates (/shm/modal_estimates, without a track node)",
+                        "shm/tracked_modes) or estimates (shm/modal_estimates, without a track node)",
                         choices=UpdateInput)
     min_windows: int = option(10, "windows received before the first run")
     min_new_windows: int = option(10, "new windows received before the next run")
@@ -66,15 +65,16 @@ class UpdateNodeConfig:
                                     "(unset: not written)")
 
 
-class UpdateNode(Node):
+class UpdateNode(ManagedNode):
     """Parameters: every option of :class:`UpdateConfig` and of :class:`UpdateNodeConfig`."""
 
-    def __init__(self, name: str = "update", parameters: dict[str, Any] | None = None) -> None:
-        super().__init__(name, parameter_overrides=overrides(parameters))
+    kind = "update"
+
+    def setup(self) -> None:
         self.config = load_config(self, UpdateConfig)
         self.settings = load_config(self, UpdateNodeConfig)
         if not self.settings.structure:
-            raise SystemExit(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) "
+            raise ParameterError(f"{self.get_name()}: parameter 'structure' (path of the structure YAML) "
                              "is required")
         self.structure: str = self.settings.structure
         from shm_ros.core.models import build_model
@@ -87,7 +87,7 @@ class UpdateNode(Node):
         try:
             self.input = UpdateInput(self.settings.input)
         except ValueError:
-            raise SystemExit(f"{self.get_name()}: parameter 'input' must be one of "
+            raise ParameterError(f"{self.get_name()}: parameter 'input' must be one of "
                              f"{[i.value for i in UpdateInput]}, got {self.settings.input!r}") from None
         # window id -> tracked row or estimate: a row sent again (a restarted track node) counts once
         self.windows: dict[str, Any] = {}
@@ -97,7 +97,7 @@ class UpdateNode(Node):
         self.run_windows = 0
         self.run_started = 0.0  # time.time() of the start of the current run
         self._progress_at = 0.0
-        self.diag = Diagnostics(self, "update", summary=lambda: (
+        self.diag.summarize(lambda: (
             "ok", f"{len(self.windows)} windows received"
             + (f", sampling {self.run_windows} of them" if self.future is not None else ", idle"),
             {"received": len(self.windows), "sampling": self.future is not None}))
@@ -109,10 +109,9 @@ class UpdateNode(Node):
         self.workers = WorkerPool(update_worker.init, (self.structure,), update_worker.ready)
         steady_timer(self, 0.25, self._poll)
 
-    def destroy_node(self) -> None:
+    def teardown(self) -> None:
         """Stop a run in progress: the worker process is terminated, not waited for."""
         self.workers.shutdown()
-        super().destroy_node()
 
     # runs -------------------------------------------------------------------------------------
 
@@ -185,8 +184,8 @@ class UpdateNode(Node):
         self._progress_at = time.time()
 
 
-def make_node(name: str, parameters: dict[str, Any]) -> UpdateNode:
-    return UpdateNode(name, parameters)
+def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> UpdateNode:
+    return UpdateNode(name, parameters, namespace)
 
 
 def main(args: list[str] | None = None) -> int:

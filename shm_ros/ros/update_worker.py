@@ -25,6 +25,17 @@ def init(structure: str) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     spec = load_structure(structure)
     _state.update(spec=spec, model=build_model(spec))
+    _warm_up()
+
+
+def _warm_up() -> None:
+    """Pay the chain diagnostics' one-off start (ArviZ's import and compiled kernels, about 1-10 s)
+    now, while the graph starts, rather than after the window that triggers the first run."""
+    import numpy as np
+
+    from shm_ros.core.bayes.diagnostics import chain_diagnostics
+
+    chain_diagnostics(np.random.default_rng(0).standard_normal((4, 20, 1)))
 
 
 def ready() -> bool:
