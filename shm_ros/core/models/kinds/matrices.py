@@ -61,6 +61,9 @@ class Matrices(ModelKind):
     def parse_section(self, r: FieldReader, value: Any, arrays: Mapping[str, np.ndarray] | None) -> MatricesSpec:
         return _parse_matrices(r, value, arrays)
 
+    def n_dof(self, section: MatricesSpec) -> int:
+        return section.n_dof
+
     def section_to_dict(self, section: MatricesSpec) -> dict[str, Any]:
         m = section
         md: dict[str, Any] = {"file": m.file, "mass": m.mass, "stiffness": m.stiffness}
