@@ -18,9 +18,11 @@ from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, min_float
     from shm_ros.commands.options import add_options
     from shm_ros.core.explain.config import ExplainConfig
     from shm_ros.core.explain.timedomain import TimeDomainConfig
+    from shm_ros.core.ingest.config import MIN_WINDOW_S
 
     p = sub.add_parser("explain", help="locate the mismatch, name the missing physics, show the fit improve",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -30,8 +32,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--bag", help="recording (rosbag2); identified and tracked first")
     src.add_argument("--events", help="recording (rosbag2) of earthquake events with the structure's measured "
                      "input: explained in the time domain (docs/explain.md, Time domain)")
-    p.add_argument("--window", type=float, default=None, help="--bag/--events: window length, s (default 600)")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--window", type=min_float(MIN_WINDOW_S), default=600.0,
+                   help="--bag/--events: window length, s (default 600)")
+    p.add_argument("--out", required=True, help="output directory (new or empty; see --overwrite)")
+    add_overwrite(p)
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     add_options(p.add_argument_group("explain (ExplainConfig; the explain node's parameters of the same names)"),
                 ExplainConfig)
@@ -43,48 +47,56 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import asdict
 
+    from shm_ros.commands.checks import Outputs, input_file, input_path, output_dir
     from shm_ros.commands.options import config_from_args
     from shm_ros.core.explain.config import ExplainConfig
     from shm_ros.core.explain.explain import explain
     from shm_ros.core.models import build_model
     from shm_ros.core.progress import Progress
+    from shm_ros.errors import InputError
     from shm_ros.io.structure import load_structure
     from shm_ros.io.verdict_files import write_verdict
 
+    input_file(args.structure, "--structure")
+    input_file(args.modes, "--modes")
+    input_path(args.bag, "--bag")
+    input_path(args.events, "--events")
+    output_dir(args.out, "--out", args.overwrite)
     out = Path(args.out)
     try:
         config = config_from_args(ExplainConfig, args)
-        spec = load_structure(args.structure)
-        if args.events:
-            verdict = _events_verdict(args, spec, config)
-        elif args.modes:
-            from shm_ros.io.tables import read_tracked_modes
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"explain options: {exc}") from None
+    spec = load_structure(args.structure)
+    if args.events:
+        verdict = _events_verdict(args, spec, config)
+    elif args.modes:
+        from shm_ros.io.tables import read_tracked_modes
 
-            obs = read_tracked_modes(args.modes)
-        else:
-            from shm_ros.io.tracked_source import tracked_observations_from_bag
+        obs = read_tracked_modes(args.modes)
+    else:
+        from shm_ros.io.tracked_source import tracked_observations_from_bag
 
-            model = build_model(spec)
-            observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
-            obs = tracked_observations_from_bag(
-                args.bag, spec, observed, args.window,
-                lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))
-        if not args.events:
-            bar = Progress("explain", every_s=2.0)  # explain reports (stage, fraction done)
-            verdict = explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
-    except Exception as exc:  # file, table, structure and model errors name their source
-        print(f"shm-ros explain: error: {exc}", file=sys.stderr)
-        return 2
+        model = build_model(spec)
+        observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
+        obs = tracked_observations_from_bag(
+            args.bag, spec, observed, args.window,
+            lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))
+    if not args.events:
+        bar = Progress("explain", every_s=2.0)  # explain reports (stage, fraction done)
+        verdict = explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
     cfg = asdict(config) | {"structure": args.structure, "modes": args.modes, "bag": args.bag, "events": args.events}
-    path = write_verdict(out, verdict, cfg, getattr(config, "seed", None))
-    if not args.no_report:
-        from shm_ros.report.build import build_report
-        from shm_ros.report.inputs import ExplainInputs, ReportInputs
+    with Outputs(out) as stage:
+        write_verdict(stage, verdict, cfg, getattr(config, "seed", None))
+        if not args.no_report:
+            from shm_ros.report.build import build_report
+            from shm_ros.report.inputs import ExplainInputs, ReportInputs
 
-        inputs = ReportInputs(title=f"shm_ros explain: {spec.name}")
-        inputs.explain = ExplainInputs.from_files(out)
-        inputs.facts["structure"] = args.structure
-        build_report(inputs, out)
+            inputs = ReportInputs(title=f"shm_ros explain: {spec.name}")
+            inputs.explain = ExplainInputs.from_files(stage)
+            inputs.facts["structure"] = args.structure
+            build_report(inputs, stage)
+    path = out / "verdict.json"
     print(format_verdict(verdict.to_dict()))
     print(f"wrote {path}")
     return 0
@@ -102,15 +114,16 @@ def _events_verdict(args: argparse.Namespace, spec, config):
     from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
     from shm_ros.core.models import build_model
     from shm_ros.core.predict import event_from_window
+    from shm_ros.errors import InputError
     from shm_ros.io.recording import windows_from_bag
 
     if not spec.input_sensor_ids():
-        raise ValueError(f"{args.structure}: --events needs a measured input (`input: {{sensor: ...}}`), and "
+        raise InputError(f"{args.structure}: --events needs a measured input (`input: {{sensor: ...}}`), and "
                          "the structure declares none")
     windows, _ = windows_from_bag(args.events, spec, args.window)
     events = [w for w in windows if w.is_event]
     if len(events) < MIN_EVENTS:
-        raise ValueError(f"{args.events}: {len(events)} event window(s) among {len(windows)}; the time-domain "
+        raise InputError(f"{args.events}: {len(events)} event window(s) among {len(windows)}; the time-domain "
                          f"path needs at least {MIN_EVENTS}")
     model = build_model(spec)
     cfg = config_from_args(TimeDomainConfig, args, "time_domain.",

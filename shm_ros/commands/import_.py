@@ -11,21 +11,23 @@ AccelBlock messages (default) or per-sample sensor_msgs/Imu (--layout imu).
 from __future__ import annotations
 
 import argparse
-import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, finite_float, positive_float
+
     p = sub.add_parser("import", help="convert CSV/NPY/V2/MiniSEED recordings into a bag (docs/interfaces.md §1)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("files", nargs="+", help="input files (all go into one bag)")
-    p.add_argument("--out", required=True, help="bag to create (a new directory)")
+    p.add_argument("--out", required=True, help="bag to create (a new directory; see --overwrite)")
+    add_overwrite(p)
     p.add_argument("--format", choices=("csv", "npy", "v2", "miniseed"), help="input format (default: by name)")
-    p.add_argument("--rate", type=float, help="sample rate, Hz (CSV without time column, NPY)")
+    p.add_argument("--rate", type=positive_float, help="sample rate, Hz (CSV without time column, NPY)")
     p.add_argument("--channels", help="comma-separated channel names (CSV columns to keep / NPY columns)")
     p.add_argument("--time-column", help="CSV column with sample times in s (epoch s when > 1e8)")
     p.add_argument("--start", help="time of the first sample: ISO 8601 UTC or epoch seconds (CSV, NPY)")
     p.add_argument("--units", default="m/s^2", help="units of the values: m/s^2 (default), g, cm/s^2, mm/s^2")
-    p.add_argument("--scale", type=float, help="MiniSEED: multiply samples by this (e.g. 1/sensitivity)")
+    p.add_argument("--scale", type=finite_float, help="MiniSEED: multiply samples by this (e.g. 1/sensitivity)")
     p.add_argument("--v2-names", help="V2: channel names, e.g. '1=g0,5=f1' (default chan<n>)")
     p.add_argument("--layout", choices=("block", "imu"), default="block",
                    help="AccelBlock messages (default) or one sensor_msgs/Imu per sample and channel")
@@ -33,14 +35,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--prefix", default="", help="topic prefix, e.g. /site1")
     p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     p.add_argument("--no-compress", action="store_true", help="do not zstd-compress MCAP chunks")
-    p.add_argument("--block-s", type=float, default=1.0, help="seconds per AccelBlock message (default 1)")
+    p.add_argument("--block-s", type=positive_float, default=1.0, help="seconds per AccelBlock message (default 1)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from shm_ros.commands.checks import input_file, output_new
     from shm_ros.core.timeutil import ns_to_iso as iso_utc
-    from shm_ros.io.importers import ImportFileError, read_any, write_bag
+    from shm_ros.errors import InputError
+    from shm_ros.io.importers import parse_time, read_any, write_bag
 
+    for f in args.files:
+        input_file(f, "FILE")
+    output_new(args.out, "--out", args.overwrite)
+    if args.scale == 0:
+        raise InputError("--scale must not be 0")
+    parse_time(args.start, "--start")
     channels = [c.strip() for c in args.channels.split(",")] if args.channels else None
     v2_names = None
     try:
@@ -50,20 +60,15 @@ def run(args: argparse.Namespace) -> int:
                 k, _, v = item.partition("=")
                 v2_names[int(k)] = v.strip()
     except ValueError:
-        print(f"shm-ros import: --v2-names: expected e.g. '1=g0,5=f1', got {args.v2_names!r}", file=sys.stderr)
-        return 2
+        raise InputError(f"--v2-names: expected e.g. '1=g0,5=f1', got {args.v2_names!r}") from None
     records = []
-    try:
-        for f in args.files:
-            records += read_any(f, args.format, sample_rate_hz=args.rate, channels=channels,
-                                time_column=args.time_column, start=args.start, units=args.units,
-                                scale=args.scale, v2_channels=v2_names)
-        summary = write_bag(records, args.out, layout=args.layout, prefix=args.prefix,
-                            storage=args.storage, compress=not args.no_compress, block_s=args.block_s,
-                            axis=args.axis)
-    except ImportFileError as exc:
-        print(f"shm-ros import: {exc}", file=sys.stderr)
-        return 2
+    for f in args.files:
+        records += read_any(f, args.format, sample_rate_hz=args.rate, channels=channels,
+                            time_column=args.time_column, start=args.start, units=args.units,
+                            scale=args.scale, v2_channels=v2_names)
+    summary = write_bag(records, args.out, layout=args.layout, prefix=args.prefix,
+                        storage=args.storage, compress=not args.no_compress, block_s=args.block_s,
+                        axis=args.axis, overwrite=args.overwrite)
     print(f"{summary['bag']}: {summary['messages']} messages on {', '.join(summary['topics'])}; "
           f"channels {', '.join(summary['channels'])}; {summary['samples']} samples from "
           f"{iso_utc(summary['start_ns'])} to {iso_utc(summary['last_ns'])}")

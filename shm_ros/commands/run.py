@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -16,14 +15,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from shm_ros.ros.supervisor import ConfigError, Supervisor, load_graph_config, run_single_process
+    from shm_ros.commands.checks import input_file
+    from shm_ros.ros.supervisor import Supervisor, load_graph_config, run_single_process
 
-    try:
-        config = load_graph_config(args.config, mode="single" if args.single_process else None,
-                                   restart=False if args.no_restart else None)
-    except ConfigError as exc:
-        print(f"shm-ros run: {exc}", file=sys.stderr)
-        return 2
+    input_file(args.config, "CONFIG")
+    config = load_graph_config(args.config, mode="single" if args.single_process else None,
+                               restart=False if args.no_restart else None)
     if config.mode == "single":
         return run_single_process(config)
     return Supervisor(config, log=lambda s: print(s, flush=True)).run()

@@ -397,11 +397,13 @@ def read_miniseed(path: str | Path, *, units: str = "m/s^2", scale: float = 1.0,
         import obspy
     except ImportError:  # pragma: no cover - obspy is a runtime dependency
         raise ImportFileError("MiniSEED needs ObsPy (pip install obspy)") from None
+    from obspy.core.util.obspy_types import ObsPyException
+
     path = Path(path)
     try:
         st = obspy.read(str(path), format="MSEED")
-    except Exception as exc:
-        raise ImportFileError(f"{path}: cannot read as MiniSEED: {exc}") from None
+    except (ObsPyException, OSError, ValueError, TypeError, IndexError, KeyError, AssertionError) as exc:
+        raise ImportFileError(f"{path}: cannot read as MiniSEED: {type(exc).__name__}: {exc}") from None
     f = _factor(units, str(path)) * float(scale)
     out = []
     for tr in st:

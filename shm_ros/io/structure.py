@@ -60,7 +60,7 @@ class StructureLimits:
 _SafeBase: type = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's parser when built with it
 
 
-class _UniqueKeyLoader(_SafeBase):  # type: ignore[misc, valid-type]
+class _UniqueKeyLoader(_SafeBase):
     """SafeLoader that refuses a key given twice in one mapping (PyYAML keeps the last silently)."""
 
 
