@@ -22,6 +22,7 @@ from __future__ import annotations
 import csv
 import math
 import re
+import tokenize
 import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -208,13 +209,7 @@ def read_npy(path: str | Path, *, sample_rate_hz: float, channels: Sequence[str]
              start: str | None = None, units: str = "m/s^2") -> ImportedRecord:
     """An ``.npy`` array (n_samples, n_channels) (a 1-D array is one channel)."""
     path = Path(path)
-    try:
-        a = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        raise ImportFileError(f"{path}: cannot read as .npy: {exc}") from None
-    if not isinstance(a, np.ndarray):
-        a.close()
-        raise ImportFileError(f"{path}: an .npz archive, expected one .npy array")
+    a = _load_npy(path)
     if a.ndim == 1:
         a = a[:, None]
     if a.ndim != 2 or a.dtype.kind not in "iuf" or a.shape[0] == 0:
@@ -227,6 +222,27 @@ def read_npy(path: str | Path, *, sample_rate_hz: float, channels: Sequence[str]
         raise ImportFileError(f"{path}: give the sample rate")
     return ImportedRecord(names, a.astype(np.float64) * _factor(units, str(path)), float(sample_rate_hz),
                           parse_time(start, f"{path}: start"), None, str(path), {"format": "npy"})
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    """The array of an ``.npy`` file; its header is checked (numeric or boolean dtype, data that
+    fits the file) before any data is read, and any damage is an ImportFileError."""
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+            size = path.stat().st_size - fh.tell()
+            if dtype.hasobject or math.prod(shape) * dtype.itemsize > size:
+                raise ImportFileError(f"{path}: header announces {dtype} {shape}, which the file does not hold")
+            a = np.fromfile(fh, dtype=dtype, count=math.prod(shape))
+    except ImportFileError:
+        raise
+    except (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError, UnicodeDecodeError, TypeError) as exc:
+        raise ImportFileError(f"{path}: cannot read as .npy: {type(exc).__name__}: {exc}") from None
+    return a.reshape(shape, order="F" if fortran else "C")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -397,12 +413,16 @@ def read_miniseed(path: str | Path, *, units: str = "m/s^2", scale: float = 1.0,
         import obspy
     except ImportError:  # pragma: no cover - obspy is a runtime dependency
         raise ImportFileError("MiniSEED needs ObsPy (pip install obspy)") from None
-    from obspy.core.util.obspy_types import ObsPyException
+    from obspy.io.mseed.core import _is_mseed
 
     path = Path(path)
     try:
+        if not _is_mseed(str(path)):
+            raise ImportFileError(f"{path}: not a MiniSEED file")
         st = obspy.read(str(path), format="MSEED")
-    except (ObsPyException, OSError, ValueError, TypeError, IndexError, KeyError, AssertionError) as exc:
+    except ImportFileError:
+        raise
+    except Exception as exc:  # ObsPy raises plain Exception for unreadable records, besides its own errors
         raise ImportFileError(f"{path}: cannot read as MiniSEED: {type(exc).__name__}: {exc}") from None
     f = _factor(units, str(path)) * float(scale)
     out = []

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import re
+import tokenize
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -180,7 +181,8 @@ def load_matrices(npz_path: str | Path, source: str, field_path: str = "matrices
             return {k: np.asarray(z[k], dtype=float) for k in z.files}
     except StructureError:
         raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zipfile.LargeZipFile) as exc:
+    except (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError, UnicodeDecodeError, TypeError,
+            zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError) as exc:
         raise StructureError(f"cannot read matrix file {str(p)!r}: {exc}", source, field_path) from None
 
 
