@@ -282,3 +282,16 @@ def test_quiet_keeps_errors(inputs, tmp_path, capsys):
           "--window", "600"])
     captured = capsys.readouterr()
     assert "zz1" in captured.err  # the misspelt sensor is named even with --quiet
+
+
+def test_report_markdown_escapes_input_text(tmp_path, capsys):
+    """Text from the inputs (here the title) cannot put HTML or links into report.md."""
+    title = "<svg onload=alert(1)> [x](javascript:alert(1)) | a"
+    assert main(["report", "--out", str(tmp_path / "r"), "--title", title]) == 0
+    md = (tmp_path / "r" / "report.md").read_text()
+    import re
+
+    assert "<svg" not in md and "&lt;svg onload=alert(1)&gt;" in md
+    assert not re.search(r"(?<!\\)\]\(javascript", md) and "\\[x\\](javascript" in md  # no link
+    html = (tmp_path / "r" / "report.html").read_text()
+    assert "<svg onload" not in html

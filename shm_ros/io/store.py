@@ -67,6 +67,10 @@ CREATE TABLE IF NOT EXISTS checkpoint (id INTEGER PRIMARY KEY CHECK (id = 1), se
 """
 
 
+_COUNTS = {"rows": "SELECT COUNT(*) FROM rows", "estimates": "SELECT COUNT(*) FROM estimates",
+           "alarms": "SELECT COUNT(*) FROM alarms", "models": "SELECT COUNT(*) FROM models"}
+
+
 class StoreError(ShmError, RuntimeError):
     """The store cannot be opened (another writer, a newer schema); the message names the file."""
 
@@ -190,8 +194,9 @@ class TrackStore:
         return None if got is None else row_from_record(json.loads(got[0]))
 
     def count(self, table: str = "rows") -> int:
-        assert table in ("rows", "estimates", "alarms", "models")
-        return int(self.db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0])
+        if table not in _COUNTS:
+            raise ValueError(f"no table {table!r} (one of {', '.join(_COUNTS)})")
+        return int(self.db.execute(_COUNTS[table]).fetchone()[0])
 
     def rows(self, start_ns: int | None = None, end_ns: int | None = None) -> list[dict[str, Any]]:
         """Tracked rows with ``start_ns <= window start < end_ns``, in time order."""
@@ -204,7 +209,8 @@ class TrackStore:
                 for w, t, s, th, m in self.db.execute("SELECT * FROM alarms ORDER BY start_ns")]
 
     def models(self, kind: str | None = None) -> list[dict[str, Any]]:
-        q = "SELECT kind, after_seq, record FROM models" + (" WHERE kind = ?" if kind else "") + " ORDER BY id"
+        q = ("SELECT kind, after_seq, record FROM models WHERE kind = ? ORDER BY id" if kind else
+             "SELECT kind, after_seq, record FROM models ORDER BY id")
         return [{"kind": k, "after_seq": s, **json.loads(r)} for k, s, r in self.db.execute(q, (kind,) if kind else ())]
 
     def estimates_after(self, seq: int) -> list[tuple[int, ModalEstimate]]:
