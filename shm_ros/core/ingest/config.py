@@ -65,7 +65,7 @@ class IngestConfig:
                                      cli=False)
     rate_tolerance: float = option(0.01, "relative difference of a channel's rate from the grid's that is reported")
     implausible_m_s2: float = option(
-        20 * 9.80665, "|a| above this (20 g) is implausible for a structure: the sample becomes NaN and is "
+        196.133, "|a| above this (20 g = 196.133 m/s^2) is implausible for a structure: the sample becomes NaN and is "
         "reported")
     clock_jump_s: float = option(86400.0, "stamps that step forward by more than this, s (or back at all) "
                                  "are reported as a clock jump")
