@@ -377,13 +377,15 @@ _EXPONENT_NUMBER = re.compile(r"^[-+]?[0-9]+(?:\.[0-9]*)?[eE][-+]?[0-9]+$")
 
 
 def short(v: Any, limit: int = 60) -> str:
-    """``repr(v)`` cut to ``limit`` characters (an error message never echoes a whole input);
-    text and booleans are named as such."""
-    kind = "text " if isinstance(v, str) else "boolean " if isinstance(v, bool) else ""
+    """``repr(v)`` cut to ``limit`` characters: an error message never echoes a whole input."""
     if isinstance(v, (list, dict)):
         return f"a {type(v).__name__} of {len(v)} entries"
     text = repr(v)
-    return kind + (text if len(text) <= limit else text[:limit] + "...")
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def _kind_of(v: Any) -> str:
+    return "text " if isinstance(v, str) else "a boolean, " if isinstance(v, (bool, np.bool_)) else ""
 
 
 class FieldReader:
@@ -411,7 +413,7 @@ class FieldReader:
         if isinstance(v, str) and _EXPONENT_NUMBER.match(v):
             v = float(v)
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
-            raise self.err(f"must be a number, got {short(v)}", fld)
+            raise self.err(f"must be a number, got {_kind_of(v)}{short(v)}", fld)
         v = float(v)
         if not math.isfinite(v):
             raise self.err(f"must be finite, got {v!r}", fld)
@@ -424,7 +426,7 @@ class FieldReader:
     def integer(self, v: Any, fld: str, minimum: int | None = None) -> int:
         integral = isinstance(v, (int, np.integer)) or (isinstance(v, float) and v.is_integer())
         if isinstance(v, bool) or not integral:
-            raise self.err(f"must be an integer, got {short(v)}", fld)
+            raise self.err(f"must be an integer, got {_kind_of(v)}{short(v)}", fld)
         v = int(v)
         if minimum is not None and v < minimum:
             raise self.err(f"must be >= {minimum}, got {v}", fld)
