@@ -16,10 +16,12 @@ text PyYAML's YAML 1.1 rules make of it); a field that needs a number refuses te
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import tokenize
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -139,9 +141,11 @@ def read_yaml(text: str, source: str, limits: StructureLimits | None = None):
         raise StructureError("the YAML nests too deeply", source) from None
 
 
-def _npz_shapes(z: zipfile.ZipFile, p: Path, source: str, field_path: str) -> dict[str, tuple[int, ...]]:
-    """Each array's shape from its ``.npy`` header, read before any data."""
-    shapes: dict[str, tuple[int, ...]] = {}
+def _npz_shapes(z: zipfile.ZipFile, p: Path, source: str, field_path: str
+                ) -> dict[str, tuple[tuple[int, ...], bool]]:
+    """Each array's shape from its ``.npy`` header, read before any data, and whether the member
+    holds the data the header announces."""
+    shapes: dict[str, tuple[tuple[int, ...], bool]] = {}
     for name in z.namelist():
         if not name.endswith(".npy"):
             continue
@@ -151,10 +155,12 @@ def _npz_shapes(z: zipfile.ZipFile, p: Path, source: str, field_path: str) -> di
                 shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
             else:
                 shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            header = fh.tell()
         if dtype.hasobject:
             raise StructureError(f"array {name[:-4]!r} in {str(p)!r} holds Python objects; refused", source,
                                  field_path)
-        shapes[name[:-4]] = tuple(int(n) for n in shape)
+        shapes[name[:-4]] = (tuple(int(n) for n in shape),
+                             math.prod(shape) * dtype.itemsize <= z.getinfo(name).file_size - header)
     return shapes
 
 
@@ -172,17 +178,20 @@ def load_matrices(npz_path: str | Path, source: str, field_path: str = "matrices
         if len(shapes) > limits.max_arrays:
             raise StructureError(f"{str(p)!r} holds {len(shapes)} arrays, more than {limits.max_arrays}", source,
                                  field_path)
-        for name, shape in shapes.items():
+        for name, (shape, fits) in shapes.items():
             if any(n > limits.max_dof for n in shape) or len(shape) > 2:
                 raise StructureError(
                     f"array {name!r} in {str(p)!r} has shape {shape}: more than the limit of {limits.max_dof} "
                     "degrees of freedom (raise it with SHM_ROS_MAX_DOF)", source, field_path)
+            if not fits:
+                raise StructureError(f"array {name!r} in {str(p)!r}: its header announces more data than the "
+                                     "file holds", source, field_path)
         with np.load(p, allow_pickle=False) as z:
             return {k: np.asarray(z[k], dtype=float) for k in z.files}
     except StructureError:
         raise
     except (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError, UnicodeDecodeError, TypeError,
-            zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError) as exc:
+            zipfile.BadZipFile, zipfile.LargeZipFile, NotImplementedError, zlib.error) as exc:
         raise StructureError(f"cannot read matrix file {str(p)!r}: {exc}", source, field_path) from None
 
 
