@@ -36,7 +36,9 @@ EXAMPLES = ROOT / "examples"
 FULL = os.environ.get("SHM_FULL", "") not in ("", "0")
 CASES = 1500 if FULL else 100  # per parser; the ROS parameter nodes take ~0.1 s each (fewer at full size)
 CASE_LIMIT_S = 20.0
-COUNTS: dict[str, int] = {}
+COUNTS: dict[str, int] = {}  # cases run per parser (hypothesis's shrinking included)
+UNCAUGHT: dict[str, int] = {}  # cases that ended with anything but a ShmError
+HANGS: dict[str, int] = {}  # cases stopped by the time limit
 
 SETTINGS = settings(max_examples=CASES, deadline=None, derandomize=not FULL, database=None,
                     suppress_health_check=list(HealthCheck))
@@ -57,14 +59,21 @@ def time_limit(what: str):
 
 
 def case(parser: str, fn, *args, **kwargs):
-    """Run one case: a result, or a ShmError; anything else (and a hang) propagates."""
+    """Run one case: a result, or a ShmError; anything else (and a hang) is counted and propagates."""
     COUNTS[parser] = COUNTS.get(parser, 0) + 1
-    with time_limit(parser):
-        try:
-            return fn(*args, **kwargs)
-        except ShmError as exc:
-            assert str(exc).strip(), f"{parser}: an error without a message"
-            return exc
+    try:
+        with time_limit(parser):
+            try:
+                return fn(*args, **kwargs)
+            except ShmError as exc:
+                assert str(exc).strip(), f"{parser}: an error without a message"
+                return exc
+    except TimeoutError:
+        HANGS[parser] = HANGS.get(parser, 0) + 1
+        raise
+    except BaseException:
+        UNCAUGHT[parser] = UNCAUGHT.get(parser, 0) + 1
+        raise
 
 
 @pytest.fixture(autouse=True)
@@ -73,7 +82,8 @@ def _report_count(request):
     yield
     for k, n in COUNTS.items():
         if n != before.get(k, 0):
-            print(f"\nfuzz {k}: {n - before.get(k, 0)} cases, 0 uncaught exceptions, 0 hangs")
+            print(f"\nfuzz {k}: {n - before.get(k, 0)} cases, {UNCAUGHT.get(k, 0)} uncaught exceptions, "
+                  f"{HANGS.get(k, 0)} hangs")
 
 
 def _workdir(tmp_path_factory, name: str) -> Path:
