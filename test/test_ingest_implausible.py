@@ -85,3 +85,20 @@ def test_no_diagnostic_on_a_clean_stream():
 def test_windows_too_short_or_not_finite_are_refused(window):
     with pytest.raises(ValueError, match="window_s must be at least 1 s"):
         IngestConfig(window_s=window)
+
+
+def test_stamps_too_dense_for_an_accelerometer_ask_for_no_vast_grid():
+    """Hostile stamps 1 ns apart (a rate of 1 GHz) or an AccelBlock claiming 1 GHz would make a
+    window's grid billions of rows: refused (the fastest rate is 100 kHz), quickly."""
+    import time
+
+    core = _core()
+    t0 = time.perf_counter()
+    t = T0 + np.arange(200)  # 1 ns apart
+    core.add_accel("a", np.concatenate([t, t + 3_000_000_000]), _xyz(np.zeros(400)))
+    core.add_block(T0, 1e9, ["a"], np.zeros((50, 1)))
+    core.flush()
+    assert time.perf_counter() - t0 < 5.0
+    assert any(d.code == "rejected" and "at most 100000" in d.message for d in core.diagnostics)
+    with pytest.raises(ValueError, match="sample_rate_hz"):
+        IngestConfig(sample_rate_hz=1e9)

@@ -29,7 +29,7 @@ from shm_ros.core.ingest.buffers import ChannelBuffer
 from shm_ros.core.ingest.channels import ChannelMap
 from shm_ros.core.ingest.config import IngestConfig
 from shm_ros.core.ingest.diagnostics import DiagnosticLog
-from shm_ros.core.ingest.grid import Grid, estimate_rate, fit_clock, follow_clock
+from shm_ros.core.ingest.grid import MAX_RATE_HZ, Grid, estimate_rate, fit_clock, follow_clock
 from shm_ros.core.ingest.rates import BlockRates, stamps_rate
 from shm_ros.core.ingest.results import DroppedSpan, IngestStats
 from shm_ros.core.ingest.segment import Bursts
@@ -191,8 +191,8 @@ class IngestCore:
                 x = x.reshape(-1, len(names))
             if x.ndim != 2 or x.shape[1] != len(names):
                 raise ValueError(f"samples shape {x.shape} does not match {len(names)} channel names")
-            if not (math.isfinite(rate) and rate > 0):
-                raise ValueError(f"sample_rate_hz = {rate}")
+            if not (math.isfinite(rate) and 0 < rate <= MAX_RATE_HZ):
+                raise ValueError(f"sample_rate_hz = {rate} (at most {MAX_RATE_HZ:g})")
             t0 = int(stamp_ns)
         except (TypeError, ValueError, OverflowError) as exc:
             self._reject(f"{topic}", f"malformed AccelBlock: {exc}", None)
