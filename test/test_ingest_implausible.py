@@ -55,7 +55,7 @@ def test_the_limit_is_configurable_and_defaults_to_20_g():
 
 
 @pytest.mark.parametrize("step_s, direction", [(365 * 86400.0, "forward"), (-30.0, "back"),
-                                               (60 * 365 * 86400.0, "into the future")])
+                                               (12 * 365 * 86400.0, "into the future")])
 def test_clock_jumps_are_reported(step_s, direction):
     """A step back or into the future is a warning; a long step forward is reported (it may be a
     pause between the records of an event catalogue)."""

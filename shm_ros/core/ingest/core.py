@@ -42,6 +42,8 @@ _PENDING_MAX = 4096  # per-sample input consolidated into arrays after this many
 _PENDING_RATE = 256  # ... or this many while the rate is still unknown
 
 
+MAX_STAMP_NS = (2**31 - 1) * 1_000_000_000  # builtin_interfaces/Time.sec is an int32
+
 class IngestCore:
     """Streaming validation, alignment and windowing.
 
@@ -146,6 +148,13 @@ class IngestCore:
             return
         if t.size == 0:
             return
+        bad = (t < 0) | (t > MAX_STAMP_NS)
+        if bad.any():
+            self._reject(self._topic(topic_id), f"{int(bad.sum())} stamp(s) outside 1970-01-01 .. 2038-01-19 "
+                         "(what a ROS time holds): not used")
+            t, a = t[~bad], a[~bad]
+            if t.size == 0:
+                return
         self._probe_rate(topic_id, t)
         if topic_id not in self._gravity_checked and t.size >= 64:
             self._check_gravity(topic_id, a, label)
@@ -194,6 +203,8 @@ class IngestCore:
             if not (math.isfinite(rate) and 0 < rate <= MAX_RATE_HZ):
                 raise ValueError(f"sample_rate_hz = {rate} (at most {MAX_RATE_HZ:g})")
             t0 = int(stamp_ns)
+            if not 0 <= t0 <= MAX_STAMP_NS - x.shape[0] * 1e9 / rate:
+                raise ValueError(f"stamp {t0} ns is outside 1970-01-01 .. 2038-01-19 (what a ROS time holds)")
         except (TypeError, ValueError, OverflowError) as exc:
             self._reject(f"{topic}", f"malformed AccelBlock: {exc}", None)
             return
@@ -242,6 +253,8 @@ class IngestCore:
         source = source or f"temperature/{sensor_id}"
         try:
             t, v = int(stamp_ns), float(value_c)
+            if not 0 <= t <= MAX_STAMP_NS:
+                raise ValueError(f"stamp {t} ns is outside 1970-01-01 .. 2038-01-19")
         except (TypeError, ValueError, OverflowError) as exc:
             self._reject(source, f"malformed temperature: {exc}")
             return
