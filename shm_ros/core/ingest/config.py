@@ -84,8 +84,8 @@ class IngestConfig:
             raise ValueError(f"snap_tolerance must be in (0, 0.5], got {self.snap_tolerance}")
         check_choice("ingest", "event_detector", self.event_detector, EventDetector)
         self.event_detector = EventDetector(self.event_detector)
-        if self.sample_rate_hz is not None and not 0 < self.sample_rate_hz <= 100_000.0:
-            raise ValueError(f"sample_rate_hz must be in (0, 100000], got {self.sample_rate_hz}")
+        if self.sample_rate_hz is not None and not 0.1 <= self.sample_rate_hz <= 100_000.0:
+            raise ValueError(f"sample_rate_hz must be in [0.1, 100000], got {self.sample_rate_hz}")
         if self.settle_s is not None and not self.settle_s >= 0:
             raise ValueError(f"settle_s must be >= 0, got {self.settle_s}")
         if not self.max_latency_s >= 0:

@@ -29,7 +29,7 @@ from shm_ros.core.ingest.buffers import ChannelBuffer
 from shm_ros.core.ingest.channels import ChannelMap
 from shm_ros.core.ingest.config import IngestConfig
 from shm_ros.core.ingest.diagnostics import DiagnosticLog
-from shm_ros.core.ingest.grid import MAX_RATE_HZ, Grid, estimate_rate, fit_clock, follow_clock
+from shm_ros.core.ingest.grid import MAX_RATE_HZ, MIN_RATE_HZ, Grid, estimate_rate, fit_clock, follow_clock
 from shm_ros.core.ingest.rates import BlockRates, stamps_rate
 from shm_ros.core.ingest.results import DroppedSpan, IngestStats
 from shm_ros.core.ingest.segment import Bursts
@@ -200,8 +200,8 @@ class IngestCore:
                 x = x.reshape(-1, len(names))
             if x.ndim != 2 or x.shape[1] != len(names):
                 raise ValueError(f"samples shape {x.shape} does not match {len(names)} channel names")
-            if not (math.isfinite(rate) and 0 < rate <= MAX_RATE_HZ):
-                raise ValueError(f"sample_rate_hz = {rate} (at most {MAX_RATE_HZ:g})")
+            if not (math.isfinite(rate) and MIN_RATE_HZ <= rate <= MAX_RATE_HZ):
+                raise ValueError(f"sample_rate_hz = {rate} (from {MIN_RATE_HZ:g} to at most {MAX_RATE_HZ:g})")
             t0 = int(stamp_ns)
             if not 0 <= t0 <= MAX_STAMP_NS - x.shape[0] * 1e9 / rate:
                 raise ValueError(f"stamp {t0} ns is outside 1970-01-01 .. 2038-01-19 (what a ROS time holds)")

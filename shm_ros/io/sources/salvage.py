@@ -25,11 +25,12 @@ def mcap_damage_errors() -> tuple[type[BaseException], ...]:
     ``McapError`` (``EndOfFile``, bad magic, oversized record), ``ValueError`` (bad CRC,
     undecodable strings), ``struct.error`` (a record cut short), zstd's error (a damaged
     chunk; the package decompresses with ``zstandard``) and ``MemoryError`` (a damaged length
-    field announcing gigabytes: the reader asks for them at once and gets nothing)."""
+    field announcing gigabytes: the reader asks for them at once and gets nothing) or ``OverflowError``
+    (one beyond what an index holds)."""
     import zstandard
     from mcap.exceptions import McapError
 
-    return (McapError, ValueError, struct.error, zstandard.ZstdError, MemoryError)
+    return (McapError, ValueError, struct.error, zstandard.ZstdError, MemoryError, OverflowError)
 
 
 class McapRecordSource:
