@@ -427,6 +427,8 @@ def read_miniseed(path: str | Path, *, units: str = "m/s^2", scale: float = 1.0,
     f = _factor(units, str(path)) * float(scale)
     out = []
     for tr in st:
+        if np.asarray(tr.data).dtype.kind not in "iuf":
+            raise ImportFileError(f"{path}: trace {tr.id} holds {np.asarray(tr.data).dtype} data, not samples")
         sid = tr.id
         name = (channels or {}).get(sid, sid)
         start_ns = int(tr.stats.starttime.ns)
