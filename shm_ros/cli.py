@@ -6,14 +6,22 @@ import argparse
 import importlib
 import importlib.util
 import sys
+from typing import NoReturn
 
 from shm_ros import __version__
 from shm_ros.commands import COMMANDS
 from shm_ros.errors import ShmError
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (``shm-ros CMD: error: ...``), exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="shm-ros",
         description="Structural health monitoring on ROS 2: recordings -> windows -> modes -> "
         "tracked modes -> calibrated model -> predictions -> missing physics.",

@@ -188,5 +188,6 @@ def test_cli_ingest_writes_json_and_npz(tmp_path):
     w1 = load_window(out / doc["windows"][1]["file"])
     assert np.array_equal(w1.samples, x[2000:]) and w1.channel_names == ["s1", "s2"]
     assert w1.start_ns == T0 + 10_000_000_000 and w1.temperature_c is None
+    # a missing bag is a bad option: refused before any work, nothing written
     assert main(["ingest", str(tmp_path / "nobag"), "--structure", str(tmp_path / "s.yaml"), "--out",
-                 str(tmp_path / "o2"), "--quiet"]) == 1
+                 str(tmp_path / "o2"), "--quiet"]) == 2 and not (tmp_path / "o2").exists()

@@ -18,34 +18,37 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, min_float, positive_int
+
     p = sub.add_parser("batch", help="re-process an archive of bags (Dask)", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("archive", nargs="+", help="bags, or folders holding bags")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, help="output folder (new or empty; see --overwrite)")
+    add_overwrite(p)
     p.add_argument("--structure", help="structure file of every bag (default: structure.yaml next to each bag)")
     p.add_argument("--engine", choices=("dask", "serial"), default="dask",
                    help="dask (default: a local cluster, or --scheduler) or serial (this process)")
     p.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786")
-    p.add_argument("--workers", type=int, default=2, help="local cluster: worker processes (default 2)")
-    p.add_argument("--window", type=float, default=None, help="window length in s (default 600)")
+    p.add_argument("--workers", type=positive_int, default=2, help="local cluster: worker processes (default 2)")
+    p.add_argument("--window", type=min_float(1.0), default=None, help="window length in s (default 600)")
     p.add_argument("--config", help="YAML with sections identify, track, update")
     p.add_argument("--no-update", action="store_true", help="stop after tracking")
     p.set_defaults(func=run)
 
 
 def settings_from(args: argparse.Namespace):
-    import yaml
-
     from shm_ros.batch.jobs import BatchSettings
 
     doc: dict[str, Any] = {}
     if args.config:
-        with open(args.config) as fh:
-            doc = yaml.safe_load(fh) or {}
+        from shm_ros.io.structure import read_yaml
+
+        doc = read_yaml(Path(args.config).read_text(encoding="utf-8"), args.config) or {}
         if not isinstance(doc, dict):
             raise ValueError(f"{args.config}: must be a mapping with sections identify/track/update")
         unknown = set(doc) - {"identify", "track", "update", "window_s"}
@@ -72,13 +75,19 @@ def run(args: argparse.Namespace) -> int:
     from shm_ros.batch.archive import archive
     from shm_ros.batch.engines import make_engine
     from shm_ros.batch.run import run_batch
+    from shm_ros.commands.checks import input_file, input_path, output_dir
+    from shm_ros.errors import InputError
 
+    for a in args.archive:
+        input_path(a, "ARCHIVE")
+    input_file(args.structure, "--structure")
+    input_file(args.config, "--config")
+    output_dir(args.out, "--out", args.overwrite)
     try:
         settings = settings_from(args)
         bags = archive(args.archive, args.structure)
     except (OSError, ValueError) as exc:
-        print(f"shm-ros batch: {exc}", file=sys.stderr)
-        return 2
+        raise InputError(str(exc)) from None
     engine = make_engine(args.engine, args.scheduler, args.workers)
     try:
         summary = run_batch(bags, settings, engine, args.out, log=lambda s: print(f"[batch] {s}", flush=True))

@@ -29,6 +29,7 @@ import shutil
 import sys
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
@@ -36,16 +37,20 @@ CONFIG = Path(__file__).resolve().parents[1] / "examples_data" / "main_job.yaml"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, min_float, nonneg_int, positive_int
+
     p = sub.add_parser("example", help="run the bundled example end to end", description=__doc__,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", default="out/example", help="output folder (default out/example)")
+    p.add_argument("--out", default="out/example", help="output folder (default out/example; new or empty, see "
+                   "--overwrite)")
+    add_overwrite(p)
     p.add_argument("--config", default=str(CONFIG), help="example file (default: the packaged main_job.yaml, "
                    "shm_ros/examples_data)")
     p.add_argument("--quick", action="store_true",
                    help="the file's quick profile: a small campaign and short samplers (a smoke test)")
-    p.add_argument("--windows", type=int, help="girder windows (default: the file's; the day is kept)")
-    p.add_argument("--window-s", type=float, help="girder window length in s (default: the file's)")
-    p.add_argument("--seed", type=int, help="simulation seed of both parts (default: the file's)")
+    p.add_argument("--windows", type=positive_int, help="girder windows (default: the file's; the day is kept)")
+    p.add_argument("--window-s", type=min_float(1.0), help="girder window length in s (default: the file's)")
+    p.add_argument("--seed", type=nonneg_int, help="simulation seed of both parts (default: the file's)")
     p.set_defaults(func=run)
 
 
@@ -53,9 +58,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def load_example(args: argparse.Namespace) -> dict[str, Any]:
     """The example file with the command line's overrides applied (the girder keeps its day)."""
-    import yaml
+    from shm_ros.io.structure import read_yaml
 
-    doc = yaml.safe_load(Path(args.config).read_text())
+    doc = read_yaml(Path(args.config).read_text(encoding="utf-8"), args.config)
+    if not isinstance(doc, dict):
+        raise ValueError(f"{args.config}: must be a YAML mapping")
     quick = doc.pop("quick", None)
     if getattr(args, "quick", False):
         if not isinstance(quick, dict):
@@ -139,16 +146,18 @@ def run_part(name: str, files: Any, sc: Any, settings: dict[str, dict[str, Any]]
 
 
 def run(args: argparse.Namespace) -> int:
+    from shm_ros.commands.checks import input_file, output_dir
     from shm_ros.commands.example_outputs import study_job, write_report, write_stage_files
+    from shm_ros.errors import InputError, ShmError
 
+    input_file(args.config, "--config")
+    output_dir(args.out, "--out", args.overwrite)
     try:
         doc = load_example(args)
     except (OSError, ValueError) as exc:
-        print(f"shm-ros example: {exc}", file=sys.stderr)
-        return 2
+        raise InputError(str(exc)) from None
     if int(doc["girder"]["scenario"].get("n_windows", 3)) < 6:
-        print("shm-ros example: the girder needs at least 6 windows (tracking's reference period)", file=sys.stderr)
-        return 2
+        raise InputError("the girder needs at least 6 windows (tracking's reference period)")
     out = Path(args.out)
     for old in ("girder", "building", "figures"):
         if (out / old).exists():
@@ -177,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     if study is not None:
         try:
             study_rows = study.result()
-        except Exception as exc:  # the report says what is missing instead of stopping
+        except (ShmError, ArithmeticError, ValueError, BrokenProcessPool) as exc:  # the report says it is missing
             print(f"[example] Table 1 sweep failed: {exc}", file=sys.stderr)
     pool.shutdown()
     report, facts, ok = write_report(out, parts, study_rows, t0)

@@ -18,9 +18,11 @@ from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, min_float
     from shm_ros.commands.options import add_options
     from shm_ros.core.explain.config import ExplainConfig
     from shm_ros.core.explain.timedomain import TimeDomainConfig
+    from shm_ros.core.ingest.config import MIN_WINDOW_S
 
     p = sub.add_parser("explain", help="locate the mismatch, name the missing physics, show the fit improve",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -30,10 +32,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--bag", help="recording (rosbag2); identified and tracked first")
     src.add_argument("--events", help="recording (rosbag2) of earthquake events with the structure's measured "
                      "input: explained in the time domain (docs/explain.md, Time domain)")
-    p.add_argument("--window", type=float, default=None,
+    p.add_argument("--window", type=min_float(MIN_WINDOW_S), default=None,
                    help="--bag/--events: window length, s (default: the ingest default, 600; an event shorter "
                    "than it is one window of its own length)")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", required=True, help="output directory (new or empty; see --overwrite)")
+    add_overwrite(p)
     p.add_argument("--no-report", action="store_true", help="skip report.html")
     add_options(p.add_argument_group("explain (ExplainConfig; the explain node's parameters of the same names)"),
                 ExplainConfig)
@@ -45,15 +48,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import asdict
 
+    from shm_ros.commands.checks import Outputs, input_file, input_path, output_dir
     from shm_ros.commands.options import config_from_args
     from shm_ros.core.explain.config import ExplainConfig
     from shm_ros.core.explain.types import Verdict
-    from shm_ros.errors import NoWindowsError
+    from shm_ros.errors import InputError, NoWindowsError
     from shm_ros.io.structure import load_structure
     from shm_ros.io.verdict_files import write_verdict
 
+    input_file(args.structure, "--structure")
+    input_file(args.modes, "--modes")
+    input_path(args.bag, "--bag")
+    input_path(args.events, "--events")
+    output_dir(args.out, "--out", args.overwrite)
     out = Path(args.out)
-    config = config_from_args(ExplainConfig, args)
+    try:
+        config = config_from_args(ExplainConfig, args)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"explain options: {exc}") from None
     spec = load_structure(args.structure)
     status = 0
     try:
@@ -61,15 +73,17 @@ def run(args: argparse.Namespace) -> int:
     except NoWindowsError as exc:  # nothing to analyse: a verdict that says so, exit code 3
         verdict, status = Verdict.no_windows(str(exc)), exc.exit_code
     cfg = asdict(config) | {"structure": args.structure, "modes": args.modes, "bag": args.bag, "events": args.events}
-    path = write_verdict(out, verdict, cfg, getattr(config, "seed", None))
-    if not args.no_report:
-        from shm_ros.report.build import build_report
-        from shm_ros.report.inputs import ExplainInputs, ReportInputs
+    with Outputs(out) as stage:
+        write_verdict(stage, verdict, cfg, getattr(config, "seed", None))
+        if not args.no_report:
+            from shm_ros.report.build import build_report
+            from shm_ros.report.inputs import ExplainInputs, ReportInputs
 
-        inputs = ReportInputs(title=f"shm_ros explain: {spec.name}")
-        inputs.explain = ExplainInputs.from_files(out)
-        inputs.facts["structure"] = args.structure
-        build_report(inputs, out)
+            inputs = ReportInputs(title=f"shm_ros explain: {spec.name}")
+            inputs.explain = ExplainInputs.from_files(stage)
+            inputs.facts["structure"] = args.structure
+            build_report(inputs, stage)
+    path = out / "verdict.json"
     print(format_verdict(verdict.to_dict()))
     print(f"wrote {path}")
     return status

@@ -30,16 +30,20 @@ ALIASES = {"reference_channels": ["--references"], "preprocess.lowpass_hz": ["--
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, min_float
     from shm_ros.commands.options import add_options
     from shm_ros.core.identify import IdentifyConfig
+    from shm_ros.core.ingest.config import MIN_WINDOW_S
 
     p = sub.add_parser("identify", help="identify modes of every window of a recording (SSI)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("bag", help="rosbag2 bag (MCAP or sqlite3 directory)")
     p.add_argument("--structure", required=True, help="structure YAML (sensors, optional input)")
-    p.add_argument("--out", required=True, help="output JSON file (modes per window)")
-    p.add_argument("--window", type=float, default=600.0, help="window length, s (default 600)")
-    p.add_argument("--plots", default=None, help="directory for stabilization diagrams (PNG)")
+    p.add_argument("--out", required=True, help="output JSON file (modes per window; see --overwrite)")
+    add_overwrite(p)
+    p.add_argument("--window", type=min_float(MIN_WINDOW_S), default=600.0,
+                   help="window length, s (default 600)")
+    p.add_argument("--plots", default=None, help="directory for stabilization diagrams (PNG; new or empty)")
     p.add_argument("--config", default=None,
                    help="YAML/JSON file with IdentifyConfig fields (options given here override it)")
     add_options(p.add_argument_group("identification (IdentifyConfig; the identify node's "
@@ -50,22 +54,24 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def build_config(args: argparse.Namespace):
     from shm_ros.commands.options import config_from_args
     from shm_ros.core.identify import IdentifyConfig
+    from shm_ros.errors import InputError
 
     base: dict[str, Any] = {}
     if args.config:
-        import yaml
+        from shm_ros.io.structure import read_yaml
 
         try:
-            base = yaml.safe_load(Path(args.config).read_text()) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise ValueError(f"{args.config}: cannot read identify configuration: {exc}") from exc
+            text = Path(args.config).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise InputError(f"{args.config}: cannot read identify configuration: {exc}") from None
+        base = read_yaml(text, args.config) or {}
         if not isinstance(base, dict):
-            raise ValueError(f"{args.config}: identify configuration must be a mapping")
+            raise InputError(f"{args.config}: identify configuration must be a mapping")
     try:
         cfg = config_from_args(IdentifyConfig, args, base=IdentifyConfig.from_dict(base))
         return cfg.validate()
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{args.config or 'identify'}: {exc}") from exc
+        raise InputError(f"{args.config or 'identify'}: {exc}") from None
 
 
 def _num(x: float | None) -> float | None:
@@ -80,53 +86,76 @@ def _methods_line(requested: str, used: dict[str, int], input_sensor: str | None
 
 
 def run(args: argparse.Namespace) -> int:
+    from contextlib import ExitStack
     from dataclasses import asdict
 
-    import numpy as np
-
-    from shm_ros.core.identify import identify_window_detailed
-    from shm_ros.core.progress import Progress
+    from shm_ros.commands.checks import Outputs, input_file, input_path, output_dir, output_file
     from shm_ros.core.provenance import stamp_output
-    from shm_ros.core.timeutil import ns_to_iso as iso_utc
-    from shm_ros.io.modes_json import dump, estimate_record
+    from shm_ros.errors import InputError, NoWindowsError
+    from shm_ros.io.modes_json import dump
     from shm_ros.io.recording import ingest_bag
     from shm_ros.io.structure import load_structure
 
-    try:
-        spec = load_structure(args.structure)
-        cfg = build_config(args)
-    except Exception as exc:  # StructureError / ValueError name the file and field
-        print(f"shm-ros identify: {exc}", file=sys.stderr)
-        return 2
+    input_path(args.bag, "BAG")
+    input_file(args.structure, "--structure")
+    input_file(args.config, "--config")
+    output_file(args.out, "--out", args.overwrite)
+    if args.plots:
+        output_dir(args.plots, "--plots", args.overwrite)
+    spec = load_structure(args.structure)
+    cfg = build_config(args)
     if spec.roving:  # a robot's roving sensors: setups from tf, merged (docs/interfaces.md section 8)
         from shm_ros.commands.roving import identify as identify_roving
 
         return identify_roving(args, spec, cfg)
     if cfg.method == "ssi-io" and getattr(spec, "input_sensor", None) is None:
-        print(f"shm-ros identify: {args.structure}: --method ssi-io needs `input: {{sensor: ...}}` "
-              "in the structure file", file=sys.stderr)
-        return 2
+        raise InputError(f"{args.structure}: --method ssi-io needs `input: {{sensor: ...}}` in the structure file")
     res = ingest_bag(args.bag, spec, window_s=args.window)
     for d in res.mismatches:  # a misspelt topic or sensor id: say so before anything else
         print(f"shm-ros identify: {args.bag}: warning: {d.message}", file=sys.stderr)
     for d in res.diagnostics:
         if d.level >= 2:
             print(str(d), file=sys.stderr)
+    if not res.windows:
+        raise NoWindowsError(f"{args.bag}: no window found (shm-ros ingest lists the diagnostics)")
     if not cfg.nominal_frequencies_hz:  # the band of interest from the nominal model (docs/identify.md)
         from shm_ros.core.band import band_frequencies
 
         cfg.nominal_frequencies_hz, why_not = band_frequencies(spec, cfg.band, cfg.band_modes)
         if why_not:
             print(f"shm-ros identify: {args.structure}: {why_not}", file=sys.stderr)
-    plots = Path(args.plots) if args.plots else None
+    with ExitStack() as staged:  # the diagrams appear in --plots when every window is done
+        plots = staged.enter_context(Outputs(args.plots)) if args.plots else None
+        records, n_ok, used, bands = _identify_all(res.windows, cfg, plots, args.plots)
+    config = {"identify": asdict(cfg), "methods_used": used, "bands_used": bands, "window_s": args.window,
+              "bag": str(args.bag), "structure": str(args.structure)}
+    out = dump(stamp_output({"windows": records}, config), args.out)
+    n_modes = sum(len(r["modes"]) for r in records)
+    print(_methods_line(cfg.method, used, cfg.input_channel or getattr(spec, "input_sensor", None)))
+    for text, n in bands.items():
+        print(f"{text} in {n} window{'s' * (n != 1)}")
+    print(f"{len(records)} windows ({n_ok} identified), {n_modes} modes -> {out}")
+    return 0 if n_ok else 1
+
+
+def _identify_all(windows: list, cfg: Any, plots: Path | None, plots_name: str | None
+                  ) -> tuple[list[dict[str, Any]], int, dict[str, int], dict[str, int]]:
+    """Every window identified: its records, how many succeeded, methods and bands used."""
+    import numpy as np
+
+    from shm_ros.core.identify import identify_window_detailed
+    from shm_ros.core.progress import Progress
+    from shm_ros.core.timeutil import ns_to_iso as iso_utc
+    from shm_ros.io.modes_json import estimate_record
+
     cfg.spectrum = plots is not None
     records: list[dict[str, Any]] = []
     n_ok = 0
     used: dict[str, int] = {}  # method actually run (auto resolved) -> windows
     bands: dict[str, int] = {}  # band choice (describe()) -> windows
     progress = Progress("windows identified", every_s=2.0)
-    for k, w in enumerate(res.windows):
-        progress(k, len(res.windows))
+    for k, w in enumerate(windows):
+        progress(k, len(windows))
         try:
             result = identify_window_detailed(w, cfg)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
@@ -152,14 +181,6 @@ def run(args: argparse.Namespace) -> int:
             name = f"stabilization_{len(records) - 1:05d}.png"
             plot_stabilization(result.diagram, plots / name,
                                f"{rec['start']}  {result.estimate.method}  ({len(rec['modes'])} modes)")
-            rec["plot"] = str(plots / name)
-    progress(len(res.windows), len(res.windows))
-    config = {"identify": asdict(cfg), "methods_used": used, "bands_used": bands, "window_s": args.window,
-              "bag": str(args.bag), "structure": str(args.structure)}
-    out = dump(stamp_output({"windows": records}, config), args.out)
-    n_modes = sum(len(r["modes"]) for r in records)
-    print(_methods_line(cfg.method, used, cfg.input_channel or getattr(spec, "input_sensor", None)))
-    for text, n in bands.items():
-        print(f"{text} in {n} window{'s' * (n != 1)}")
-    print(f"{len(records)} windows ({n_ok} identified), {n_modes} modes -> {out}")
-    return 0 if (n_ok or not res.windows) else 1
+            rec["plot"] = str(Path(str(plots_name)) / name)
+    progress(len(windows), len(windows))
+    return records, n_ok, used, bands

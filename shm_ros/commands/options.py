@@ -3,7 +3,8 @@
 ``add_options(parser, IdentifyConfig)`` adds one option per field: ``max_order`` becomes
 ``--max-order``, with the field's type, its choices and its help followed by the default; a bool
 becomes ``--uncertainty`` / ``--no-uncertainty``; a list of strings is given comma-separated
-(``--reference-channels f3,f8``). The options of a nested configuration carry its field name:
+(``--reference-channels f3,f8``); a number must be finite (``nan`` and ``inf`` are refused). The
+options of a nested configuration carry its field name:
 ``IdentifyConfig.preprocess.lowpass_hz`` is ``--preprocess.lowpass-hz`` (the same name as the
 node parameter ``preprocess.lowpass_hz``).
 
@@ -19,6 +20,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any, TypeVar
 
+from shm_ros.commands.checks import finite_float
 from shm_ros.core.config import OptionSpec, nested_configs, option_specs
 
 __all__ = ["add_options", "config_from_args", "flag", "given"]
@@ -77,7 +79,7 @@ def add_options(parser: argparse.ArgumentParser | argparse._ArgumentGroup, cls: 
         if spec.value_type is bool:
             parser.add_argument(*names, dest=dest, action=_Switch, default=spec.default, help=text)
             continue
-        kind: Any = _comma_list if spec.value_type is list else spec.value_type
+        kind: Any = {list: _comma_list, float: finite_float}.get(spec.value_type, spec.value_type)
         metavar = "A,B,..." if spec.value_type is list else None if spec.choices else spec.name.upper()
         parser.add_argument(*names, dest=dest, action=_Store, type=kind, default=spec.default,
                             choices=list(spec.choices) if spec.choices else None, metavar=metavar,

@@ -20,7 +20,9 @@ from typing import Any
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, min_float
     from shm_ros.commands.options import add_options
+    from shm_ros.core.ingest.config import MIN_WINDOW_S
     from shm_ros.core.predict import PredictConfig
 
     p = sub.add_parser("predict", help="predict events' responses with the (updated) model",
@@ -30,12 +32,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--bag", help="recording (rosbag2); windowed as `shm-ros ingest` does")
     src.add_argument("--windows", nargs="+", help="window files (.npz, as `shm-ros ingest --windows` writes)")
-    p.add_argument("--window", type=float, default=600.0, help="--bag: window length, s (default 600)")
+    p.add_argument("--window", type=min_float(MIN_WINDOW_S), default=600.0,
+                   help="--bag: window length, s (default 600)")
     p.add_argument("--all-windows", action="store_true", help="predict every window, not only events")
     p.add_argument("--calibration-windows", nargs="+", default=None,
                    help="window files (.npz) of the events the posterior was calibrated on (two or more): the "
                         "model error is learnt from them out of sample (leave one event out)")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", required=True, help="output directory (new or empty; see --overwrite)")
+    add_overwrite(p)
     p.add_argument("--no-plots", action="store_true", help="skip the figures")
     add_options(p.add_argument_group("prediction (PredictConfig; the predict node's parameters of the same "
                                      "names)"), PredictConfig)
@@ -89,42 +93,50 @@ def predict_windows(model: Any, windows: list, posterior: Any, config: Any, cali
 def run(args: argparse.Namespace) -> int:
     from dataclasses import asdict
 
+    from shm_ros.commands.checks import Outputs, input_file, input_path, output_dir
     from shm_ros.commands.options import config_from_args
     from shm_ros.core.models import build_model
     from shm_ros.core.predict import PredictConfig, event_json, format_table3, summary_json, table3_row
     from shm_ros.core.provenance import stamp_output
+    from shm_ros.errors import InputError, NoWindowsError
     from shm_ros.io import jsonio
     from shm_ros.io.structure import load_structure
 
+    input_file(args.structure, "--structure")
+    input_path(args.posterior, "--posterior")
+    input_path(args.bag, "--bag")
+    for w in args.windows or []:
+        input_file(w, "--windows")
+    output_dir(args.out, "--out", args.overwrite)
     out = Path(args.out)
     try:
         config = config_from_args(PredictConfig, args).validate()
-        spec = load_structure(args.structure)
-        model = build_model(spec)
-        posterior = None
-        if args.posterior:
-            from shm_ros.report.load import load_posterior
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"prediction options: {exc}") from None
+    spec = load_structure(args.structure)
+    model = build_model(spec)
+    posterior = None
+    if args.posterior:
+        from shm_ros.report.load import load_posterior
 
-            posterior = load_posterior(args.posterior)
-        windows = load_windows(args, spec)
-        from shm_ros.io.window_files import load_window
+        posterior = load_posterior(args.posterior)
+    windows = load_windows(args, spec)
+    if not windows:
+        raise NoWindowsError(f"{args.bag}: no window found (shm-ros ingest lists the diagnostics)")
+    from shm_ros.io.window_files import load_window
 
-        calibration = [load_window(p) for p in args.calibration_windows or []]
-        if len(calibration) == 1:
-            raise ValueError("--calibration-windows: give two or more events (one is left out at a time)")
-    except Exception as exc:  # file, structure and posterior errors name their source
-        print(f"shm-ros predict: error: {exc}", file=sys.stderr)
-        return 2
+    for p in args.calibration_windows or []:
+        input_file(p, "--calibration-windows")
+    calibration = [load_window(p) for p in args.calibration_windows or []]
+    if len(calibration) == 1:
+        raise InputError("--calibration-windows: give two or more events (one is left out at a time)")
     chosen = windows if args.all_windows else [w for w in windows if w.is_event]
     if not chosen:
-        print(f"shm-ros predict: no event among {len(windows)} windows (--all-windows predicts every one)",
-              file=sys.stderr)
-        return 1
+        raise NoWindowsError(f"no event among {len(windows)} windows (--all-windows predicts every one)")
     try:
         preds, errors = predict_windows(model, chosen, posterior, config, calibration, spec.drift_limits)
     except ValueError as exc:
-        print(f"shm-ros predict: error: {exc}", file=sys.stderr)
-        return 2
+        raise InputError(str(exc)) from None
     for e in errors:
         print(f"shm-ros predict: {e}", file=sys.stderr)
     rows = [table3_row(model, p) for p in preds]
@@ -132,16 +144,17 @@ def run(args: argparse.Namespace) -> int:
                "events": [event_json(p) for p in preds], "table3": rows, "summary": summary_json(preds),
                "errors": errors}
     cfg = asdict(config) | {"structure": args.structure, "posterior": args.posterior, "bag": args.bag}
-    out.mkdir(parents=True, exist_ok=True)
-    doc = jsonio.dump(stamp_output(payload, cfg, config.seed), out / "prediction.json", indent=2)
     from shm_ros.io.prediction_files import write_prediction_series
 
-    write_prediction_series(out, preds)  # the report's predicted-vs-measured figures
-    if not args.no_plots:
-        from shm_ros.report.prediction import plot_event
+    with Outputs(out) as stage:
+        jsonio.dump(stamp_output(payload, cfg, config.seed), stage / "prediction.json", indent=2)
+        write_prediction_series(stage, preds)  # the report's predicted-vs-measured figures
+        if not args.no_plots:
+            from shm_ros.report.prediction import plot_event
 
-        for p in preds:
-            plot_event(p, out / f"prediction_{p.window_id}.png")
+            for p in preds:
+                plot_event(p, stage / f"prediction_{p.window_id}.png")
+    doc = out / "prediction.json"
     print(format_table3(rows))
     print(f"{len(preds)} events predicted -> {doc}")
     return 0 if preds else 1

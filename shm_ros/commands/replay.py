@@ -12,23 +12,25 @@ import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import nonneg_float, nonneg_int, positive_int
+
     p = sub.add_parser("replay", help="publish a bag through the running graph (flow-controlled)",
                        description=__doc__)
     p.add_argument("bag", help="rosbag2 folder (MCAP or sqlite3)")
-    p.add_argument("--rate", type=float, default=0.0,
+    p.add_argument("--rate", type=nonneg_float, default=0.0,
                    help="1 = real time, N = N x real time, 0 = as fast as the graph keeps up (default)")
-    p.add_argument("--credit", type=int, default=256,
+    p.add_argument("--credit", type=positive_int, default=256,
                    help="messages in flight at most when flow-controlled (default 256; the shared-memory "
                         "transport queues 512 per reader)")
-    p.add_argument("--credit-bytes", type=int, default=192 * 1024,
+    p.add_argument("--credit-bytes", type=positive_int, default=192 * 1024,
                    help="bytes in flight at most when flow-controlled (default 192 KiB)")
     p.add_argument("--all-topics", action="store_true",
                    help="also replay topics that are not recording topics")
-    p.add_argument("--wait", type=float, default=15.0, help="seconds to wait for the graph")
-    p.add_argument("--clock", type=float, nargs="?", const=40.0, default=0.0, metavar="HZ",
+    p.add_argument("--wait", type=nonneg_float, default=15.0, help="seconds to wait for the graph")
+    p.add_argument("--clock", type=nonneg_float, nargs="?", const=40.0, default=0.0, metavar="HZ",
                    help="publish /clock with the recording's time (every 1/HZ s of it, default 40), for "
                         "nodes started with use_sim_time:=true, as `ros2 bag play --clock` does")
-    p.add_argument("--clock-readers", type=int, default=0, metavar="N",
+    p.add_argument("--clock-readers", type=nonneg_int, default=0, metavar="N",
                    help="with --clock, wait (up to --wait s) until N nodes on sim time read /clock before "
                         "replaying (default: those found once the graph has been stable for 1 s)")
     p.add_argument("--namespace", default="", metavar="NS",
@@ -38,9 +40,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from shm_ros.commands.checks import input_path
+
+    input_path(args.bag, "BAG")
     import rclpy
 
-    from shm_ros.io.bags import BagError
     from shm_ros.ros.replay import replay_bag
 
     rclpy.init()
@@ -49,9 +53,6 @@ def run(args: argparse.Namespace) -> int:
                             wait_s=args.wait,
                             recording_only=not args.all_topics, progress=True, clock_hz=args.clock,
                             clock_readers=args.clock_readers, namespace=args.namespace)
-    except BagError as exc:
-        print(f"shm-ros replay: {exc}", file=sys.stderr)
-        return 2
     finally:
         rclpy.try_shutdown()
     for topic, why in sorted(result.skipped_topics.items()):

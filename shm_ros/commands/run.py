@@ -9,7 +9,6 @@ that namespace, so several structures can share one ROS domain."""
 from __future__ import annotations
 
 import argparse
-import sys
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -27,14 +26,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from shm_ros.ros.supervisor import ConfigError, Supervisor, load_graph_config, run_single_process
+    from shm_ros.commands.checks import input_file
+    from shm_ros.ros.supervisor import Supervisor, load_graph_config, run_single_process
 
-    try:
-        config = load_graph_config(args.config, mode="single" if args.single_process else None,
-                                   restart=False if args.no_restart else None, namespace=args.namespace)
-    except ConfigError as exc:
-        print(f"shm-ros run: {exc}", file=sys.stderr)
-        return 2
+    input_file(args.config, "CONFIG")
+    config = load_graph_config(args.config, mode="single" if args.single_process else None,
+                               restart=False if args.no_restart else None, namespace=args.namespace)
     if config.mode == "single":
         return run_single_process(config, autostart=not args.no_autostart)
     return Supervisor(config, log=lambda s: print(s, flush=True), autostart=not args.no_autostart).run()

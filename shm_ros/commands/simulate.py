@@ -10,26 +10,31 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
+from pathlib import Path
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, min_float, positive_float, positive_int
+
     p = sub.add_parser("simulate", help="simulate a monitoring campaign with known truth",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", default=None,
                    help="girder | building | building-earthquake | girder-roving (a robot with a roving sensor, "
                         "docs/roving.md) (default: girder, or the scenario file's)")
-    p.add_argument("--out", required=True, help="output directory (bag/, structure.yaml, truth.json, truth_modes.csv)")
+    p.add_argument("--out", required=True, help="output directory (bag/, structure.yaml, truth.json, truth_modes.csv; "
+                   "new or empty, see --overwrite)")
+    add_overwrite(p)
     p.add_argument("--scenario-file",
                    help="YAML scenario: {scenario: NAME, <option>: value, effects: [...], faults: [...]}")
-    p.add_argument("--windows", type=int, help="number of windows (bursts)")
-    p.add_argument("--duration", type=float,
+    p.add_argument("--windows", type=positive_int, help="number of windows (bursts)")
+    p.add_argument("--duration", type=positive_float,
                    help="total recorded seconds: one window of that length if shorter than --window-s, "
                         "else that many seconds' worth of windows")
-    p.add_argument("--window-s", type=float, help="length of each burst, s (girder/building 600, earthquake 300)")
-    p.add_argument("--pause-s", type=float, help="pause between bursts, s (default 2; must exceed 1)")
-    p.add_argument("--fs", type=float, help="sample rate, Hz (default 100)")
-    p.add_argument("--floors", type=int, help="building scenarios: number of stories (default 8)")
+    p.add_argument("--window-s", type=min_float(1.0),
+                   help="length of each burst, s (girder/building 600, earthquake 300)")
+    p.add_argument("--pause-s", type=min_float(1.0), help="pause between bursts, s (default 2; must exceed 1)")
+    p.add_argument("--fs", type=positive_float, help="sample rate, Hz (default 100)")
+    p.add_argument("--floors", type=positive_int, help="building scenarios: number of stories (default 8)")
     p.add_argument("--start",
                    help="start time, ISO 8601 UTC (girder 2024-03-01T00:00:00Z, building 2024-05-01T00:00:00Z)")
     p.add_argument("--effects", default="",
@@ -47,7 +52,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--unrelated-topics", action="store_true",
                    help="also record a std_msgs/String status topic that the pipeline must ignore")
     p.add_argument("--seed", type=int, help="random seed (default 0); the same seed gives byte-identical bags")
-    p.add_argument("--workers", type=int, default=1, help="processes computing windows (default 1)")
+    p.add_argument("--workers", type=positive_int, default=1, help="processes computing windows (default 1)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.set_defaults(func=run)
 
@@ -56,13 +61,13 @@ def build_scenario(args: argparse.Namespace):
     from shm_ros.core.simulate import EffectRequest, named_scenario, parse_effects, parse_faults, scenario_from_dict
 
     if args.scenario_file:
-        import yaml
+        from shm_ros.io.structure import read_yaml
 
         try:
-            with open(args.scenario_file, encoding="utf-8") as fh:
-                data = yaml.safe_load(fh) or {}
-        except (OSError, yaml.YAMLError) as exc:
+            text = Path(args.scenario_file).read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
             raise ValueError(f"{args.scenario_file}: cannot read scenario file: {exc}") from None
+        data = read_yaml(text, args.scenario_file) or {}
         if not isinstance(data, dict):
             raise ValueError(f"{args.scenario_file}: a scenario file must be a YAML mapping")
         if args.scenario:
@@ -98,11 +103,13 @@ def build_scenario(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from shm_ros.core.simulate import EffectError, simulate_campaign
-    from shm_ros.core.structure import StructureError
-    from shm_ros.io.bags import BagError
+    from shm_ros.commands.checks import input_file, output_dir
+    from shm_ros.core.simulate import simulate_campaign
+    from shm_ros.errors import InputError
     from shm_ros.io.campaign import print_progress, write_campaign
 
+    input_file(args.scenario_file, "--scenario-file")
+    output_dir(args.out, "--out", args.overwrite)
     if args.scenario == "girder-roving":
         from shm_ros.commands.roving import simulate as simulate_roving
 
@@ -110,13 +117,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         sc = build_scenario(args)
         campaign = simulate_campaign(sc)
-        every = max(1, campaign.n_windows // 50)
-        files = write_campaign(campaign, args.out, workers=args.workers,
-                               progress=None if args.quiet else print_progress(every),
-                               command_config={"effects": args.effects, "faults": args.faults})
-    except (ValueError, EffectError, StructureError, BagError, FileExistsError) as exc:
-        print(f"shm-ros simulate: {exc}", file=sys.stderr)
-        return 2
+    except ValueError as exc:  # the scenario's own checks name the option or field
+        raise InputError(str(exc)) from None
+    every = max(1, campaign.n_windows // 50)
+    files = write_campaign(campaign, args.out, workers=args.workers,
+                           progress=None if args.quiet else print_progress(every),
+                           command_config={"effects": args.effects, "faults": args.faults}, overwrite=args.overwrite)
     print(f"wrote {files.n_windows} windows: {files.bag} ({files.bag_bytes / 1e6:.1f} MB), "
           f"{files.structure}, {files.truth} in {files.seconds:.1f} s")
     return 0

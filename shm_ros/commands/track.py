@@ -15,21 +15,21 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
-import sys
 from pathlib import Path
 from typing import Any
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite
     from shm_ros.commands.options import add_options
     from shm_ros.core.tracking import TrackingConfig
 
     p = sub.add_parser("track", help="track modes across windows (identities, temperature, novelty)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("modes", nargs="?", help="modes JSON of `shm-ros identify`")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", required=True, help="output directory (new or empty; see --overwrite)")
+    add_overwrite(p)
     p.add_argument("--store", help="history store (SQLite) to export from (without MODES.json)")
     p.add_argument("--from", dest="t_from", help="export windows starting at or after this time (ISO 8601)")
     p.add_argument("--to", dest="t_to", help="export windows starting before this time (ISO 8601)")
@@ -48,64 +48,78 @@ def _num(v: float) -> float | None:
 def _ns(text: str | None) -> int | None:
     if text is None:
         return None
+    from shm_ros.errors import InputError
     from shm_ros.io.tables import parse_time
 
-    return int(round(parse_time(text) * 1e9))
+    try:
+        return int(round(parse_time(text) * 1e9))
+    except (ValueError, OverflowError) as exc:
+        raise InputError(f"--from/--to {text!r}: {exc}") from None
 
 
 def export_store(args: argparse.Namespace) -> int:
+    from shm_ros.commands.checks import Outputs
+    from shm_ros.errors import InputError
     from shm_ros.io import jsonio
-    from shm_ros.io.store import StoreError, TrackStore
+    from shm_ros.io.store import TrackStore
     from shm_ros.io.tables import write_tracked_modes
 
-    try:
-        lo, hi = _ns(args.t_from), _ns(args.t_to)
-        with TrackStore(args.store, writer=False) as store:
+    lo, hi = _ns(args.t_from), _ns(args.t_to)
+    with TrackStore(args.store, writer=False) as store:
+        try:
             obs = store.observations(lo, hi)
             norm = store.observations(lo, hi, normalised=True)
-            alarms = [a for a in store.alarms() if (lo is None or a["start_ns"] >= lo)
-                      and (hi is None or a["start_ns"] < hi)]
-    except (StoreError, ValueError, OSError) as exc:
-        print(f"shm-ros track: {args.store}: {exc}", file=sys.stderr)
-        return 2
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        alarms = [a for a in store.alarms() if (lo is None or a["start_ns"] >= lo)
+                  and (hi is None or a["start_ns"] < hi)]
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_tracked_modes(out / "tracked_modes.csv", obs)
-    write_tracked_modes(out / "normalised_modes.csv", norm)
-    jsonio.dump({"store": str(args.store), "alarms": alarms}, out / "alarms.json")
+    with Outputs(out) as stage:
+        write_tracked_modes(stage / "tracked_modes.csv", obs)
+        write_tracked_modes(stage / "normalised_modes.csv", norm)
+        jsonio.dump({"store": str(args.store), "alarms": alarms}, stage / "alarms.json")
     print(f"{obs.n_windows} windows, {obs.n_modes} tracked modes, {len(alarms)} alarms from {args.store} -> {out}")
     return 0
 
 
 def run(args: argparse.Namespace) -> int:
+    from shm_ros.commands.checks import Outputs, input_file, output_dir
     from shm_ros.commands.options import config_from_args
     from shm_ros.core.provenance import stamp_output
     from shm_ros.core.tracking import TrackingConfig, track
+    from shm_ros.errors import InputError, NoWindowsError
     from shm_ros.io import jsonio
     from shm_ros.io.modes_json import read_modes_json
     from shm_ros.io.tables import write_tracked_modes
 
+    if args.modes is None and not args.store:
+        raise InputError("give MODES.json, or --store DB to export")
+    input_file(args.modes, "MODES")
+    input_file(args.store, "--store", "store")
+    input_file(args.structure, "--structure")
+    output_dir(args.out, "--out", args.overwrite)
     if args.modes is None:
-        if not args.store:
-            print("shm-ros track: give MODES.json, or --store DB to export", file=sys.stderr)
-            return 2
         return export_store(args)
     try:
         cfg = config_from_args(TrackingConfig, args)
-        estimates = read_modes_json(args.modes)
-        spec = None
-        if args.structure:
-            from shm_ros.io.structure import load_structure
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"tracking options: {exc}") from None
+    spec = None
+    if args.structure:
+        from shm_ros.io.structure import load_structure
 
-            spec = load_structure(args.structure)
+        spec = load_structure(args.structure)
+    try:
+        estimates = read_modes_json(args.modes)
+    except (OSError, KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise InputError(f"{args.modes}: not a modes file of shm-ros identify: {type(exc).__name__}: {exc}") from None
+    if not estimates:
+        raise NoWindowsError(f"{args.modes}: holds no window")
+    try:
         res = track(estimates, cfg, structure=spec)
-    except (OSError, KeyError, ValueError, json.JSONDecodeError) as exc:
-        print(f"shm-ros track: {args.modes}: {exc}", file=sys.stderr)
-        return 2
+    except ValueError as exc:
+        raise InputError(f"{args.modes}: {exc}") from None
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_tracked_modes(out / "tracked_modes.csv", res.observations)
-    write_tracked_modes(out / "normalised_modes.csv", res.normalised_observations())
     obs = res.observations
     payload: dict[str, Any] = {
         "reference_modes": [{"mode": r.number, "frequency_hz": r.frequency_hz,
@@ -129,11 +143,14 @@ def run(args: argparse.Namespace) -> int:
         "notes": res.notes,
     }
     doc = stamp_output(payload, {"track": dataclasses.asdict(cfg), "modes": str(args.modes)})
-    jsonio.dump(doc, out / "tracking.json")
-    if not args.no_plot:
-        from shm_ros.report.tracking import plot_tracking
+    with Outputs(out) as stage:
+        write_tracked_modes(stage / "tracked_modes.csv", res.observations)
+        write_tracked_modes(stage / "normalised_modes.csv", res.normalised_observations())
+        jsonio.dump(doc, stage / "tracking.json")
+        if not args.no_plot:
+            from shm_ros.report.tracking import plot_tracking
 
-        plot_tracking(res, out / "tracking.png", cfg.covariate)
+            plot_tracking(res, stage / "tracking.png", cfg.covariate)
     found = ", ".join(f"mode {n} {100 * v:.0f} %" for n, v in payload["found_fraction"].items())
     print(f"{obs.n_windows} windows, {obs.n_modes} tracked modes ({found}); "
           f"{int(res.novelty_alarm.sum())} novelty alarms -> {out}")

@@ -24,8 +24,10 @@ ALIASES = {"n_chains": ["--chains"], "n_steps": ["--steps"], "rhat_target": ["--
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import add_overwrite, min_float
     from shm_ros.commands.options import add_options
     from shm_ros.core.bayes.update import UpdateConfig
+    from shm_ros.core.ingest.config import MIN_WINDOW_S
 
     p = sub.add_parser("update", help="Bayesian updating of the structure's parameters",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -33,13 +35,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--modes", help="tracked-modes table (CSV, docs/interfaces.md §4)")
     src.add_argument("--bag", help="recording (rosbag2); identified and tracked first")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--out", required=True, help="output directory (new or empty; see --overwrite)")
+    add_overwrite(p)
     p.add_argument("--study", action="store_true",
                    help="run the prior x (alpha, beta) sweep and print the RMSE/MAC table")
     p.add_argument("--refer-to", metavar="COVARIATE[=VALUE]", default=None,
                    help="remove a linear dependence of the frequencies on a covariate column "
                         "(e.g. temperature_c=10) before updating")
-    p.add_argument("--window", type=float, default=None, help="--bag: window length, s")
+    p.add_argument("--window", type=min_float(MIN_WINDOW_S), default=None, help="--bag: window length, s")
     p.add_argument("--no-plots", action="store_true", help="skip corner and trace plots")
     # defaults are declared once, in the core's config
     add_options(p.add_argument_group("updating (UpdateConfig; the update node's parameters of the "
@@ -76,7 +79,9 @@ def _from_bag(args: argparse.Namespace, spec: Any, model: Any):
     if args.likelihood == "time":
         windows, _ = windows_from_bag(args.bag, spec, args.window or 600.0)
         if not windows:
-            raise ValueError(f"{args.bag}: no usable window in the recording")
+            from shm_ros.errors import NoWindowsError
+
+            raise NoWindowsError(f"{args.bag}: no usable window in the recording")
         return _acceleration_record(args, [i.sensor for i in model.inputs], windows, observed)
     from shm_ros.io.tracked_source import tracked_observations_from_bag
 
@@ -118,44 +123,59 @@ def _acceleration_record(args, inputs, windows, observed):
 
 
 def run(args: argparse.Namespace) -> int:
+    from shm_ros.commands.checks import Outputs, input_file, input_path, output_dir
     from shm_ros.core.models import build_model
-    from shm_ros.core.priors import PriorError
-    from shm_ros.core.structure import StructureError
+    from shm_ros.errors import InputError
     from shm_ros.io.posterior_files import write_posterior
     from shm_ros.io.structure import load_structure
-    from shm_ros.io.tables import TableError
 
-    out = Path(args.out)
+    input_file(args.structure, "--structure")
+    input_file(args.modes, "--modes")
+    input_path(args.bag, "--bag")
+    output_dir(args.out, "--out", args.overwrite)
+    refer = None
+    if args.refer_to:
+        name, _, value = args.refer_to.partition("=")
+        try:
+            refer = (name, float(value) if value else None)
+        except ValueError:
+            raise InputError(f"--refer-to {args.refer_to!r}: expected COVARIATE or COVARIATE=NUMBER") from None
     try:
-        spec = load_structure(args.structure)
-        if not spec.parameters:
-            raise ValueError(f"{args.structure}: field 'parameters': nothing to update")
-        model = build_model(spec)
-        obs = _observations(args, spec, model)
-        if args.refer_to:
-            name, _, value = args.refer_to.partition("=")
-            obs = obs.referred_to(name, float(value) if value else None)
-        for note in getattr(obs, "notes", []):
-            print(f"shm-ros update: note: {note}", file=sys.stderr)
         config = _config(args)
-        out.mkdir(parents=True, exist_ok=True)
+        config.validate()
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"update options: {exc}") from None
+    spec = load_structure(args.structure)
+    if not spec.parameters:
+        raise InputError(f"{args.structure}: field 'parameters': nothing to update")
+    model = build_model(spec)
+    try:  # a table or recording that does not fit the structure names what does not fit
+        obs = _observations(args, spec, model)
+        if refer is not None:
+            obs = obs.referred_to(*refer)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    for note in getattr(obs, "notes", []):
+        print(f"shm-ros update: note: {note}", file=sys.stderr)
+    out = Path(args.out)
+    with Outputs(out) as stage:
         if args.study:
-            return _run_study(args, spec, model, obs, config, out)
+            return _run_study(args, spec, model, obs, config, stage)
         from shm_ros.core.bayes.update import update
         from shm_ros.core.progress import Progress
 
-        post = update(model, obs, config, priors=spec.parameters,
-                      progress=Progress(f"{config.sampler} steps", every_s=2.0))
-    except (ValueError, TypeError, KeyError, OSError, StructureError, TableError, PriorError) as exc:
-        print(f"shm-ros update: error: {exc}", file=sys.stderr)
-        return 2
-    cfg_dict = {k: v for k, v in vars(config).items()}
-    cfg_dict.update({"structure": args.structure, "modes": args.modes, "bag": args.bag})
-    write_posterior(out, post, cfg_dict, args.seed)
-    if not args.no_plots:
-        from shm_ros.report.posterior import posterior_plots
+        try:
+            post = update(model, obs, config, priors=spec.parameters,
+                          progress=Progress(f"{config.sampler} steps", every_s=2.0))
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
+        cfg_dict = {k: v for k, v in vars(config).items()}
+        cfg_dict.update({"structure": args.structure, "modes": args.modes, "bag": args.bag})
+        write_posterior(stage, post, cfg_dict, args.seed)
+        if not args.no_plots:
+            from shm_ros.report.posterior import posterior_plots
 
-        posterior_plots(post.chains, post.log_prob.reshape(post.chains.shape[:2]), post.chain_names, out)
+            posterior_plots(post.chains, post.log_prob.reshape(post.chains.shape[:2]), post.chain_names, stage)
     for w in post.warnings:
         print(f"shm-ros update: warning: {w}", file=sys.stderr)
     d = post.diagnostics

@@ -78,9 +78,12 @@ def band_frequencies(spec: Any, band: str, n_modes: int) -> tuple[list[float] | 
     alike by the ``identify`` command and node, so a structure file gives the same band in both."""
     if band not in (BandSource.AUTO, BandSource.MODEL):
         return None, None
+    from shm_ros.errors import ShmError
+
     try:
         return nominal_frequencies(spec, n_modes), None
-    except Exception as exc:  # any kind's build error: the spectrum decides instead
+    except (ShmError, NotImplementedError, ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        # a kind without a model, or one that does not build: the spectrum decides instead
         return None, f"no nominal frequencies ({exc}): band from the spectrum"
 
 

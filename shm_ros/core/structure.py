@@ -30,6 +30,7 @@ from shm_ros.core.priors import PARAMETER_PRIORS, PRIOR_ALT_FIELDS, PRIOR_FIELDS
 from shm_ros.errors import InputError
 
 DIRECTIONS = ("vertical", "x", "y")
+DEFAULT_MAX_DOF = 20_000  # a model larger than this is refused unless the caller raises the limit
 DEFAULT_AXIS = {"vertical": "z", "x": "x", "y": "y"}
 
 Location = tuple[str | int, ...]
@@ -444,6 +445,21 @@ def updatable(kind: str, loc: Location) -> bool:
 # ----------------------------------------------------------------------------------------------
 
 
+_EXPONENT_NUMBER = re.compile(r"^[-+]?[0-9]+(?:\.[0-9]*)?[eE][-+]?[0-9]+$")
+
+
+def short(v: Any, limit: int = 60) -> str:
+    """``repr(v)`` cut to ``limit`` characters: an error message never echoes a whole input."""
+    if isinstance(v, (list, dict)):
+        return f"a {type(v).__name__} of {len(v)} entries"
+    text = repr(v)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def _kind_of(v: Any) -> str:
+    return "text " if isinstance(v, str) else "a boolean, " if isinstance(v, (bool, np.bool_)) else ""
+
+
 class FieldReader:
     """Checks values of one structure file; every error names the file and the field path."""
 
@@ -464,11 +480,12 @@ class FieldReader:
         return list(v)
 
     def number(self, v: Any, fld: str, positive: bool = False, nonneg: bool = False) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
-            try:
-                v = float(v)  # YAML 1.1 reads "5.0e9" without a dot as a string
-            except (TypeError, ValueError):
-                raise self.err(f"must be a number, got {v!r}", fld) from None
+        # text is refused, except a number in exponent form ("5e9", "3.4e10"): YAML 1.1 readers (PyYAML's
+        # safe_load) leave those as text, YAML 1.2 and the structure loader read them as numbers
+        if isinstance(v, str) and _EXPONENT_NUMBER.match(v):
+            v = float(v)
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise self.err(f"must be a number, got {_kind_of(v)}{short(v)}", fld)
         v = float(v)
         if not math.isfinite(v):
             raise self.err(f"must be finite, got {v!r}", fld)
@@ -481,7 +498,7 @@ class FieldReader:
     def integer(self, v: Any, fld: str, minimum: int | None = None) -> int:
         integral = isinstance(v, (int, np.integer)) or (isinstance(v, float) and v.is_integer())
         if isinstance(v, bool) or not integral:
-            raise self.err(f"must be an integer, got {v!r}", fld)
+            raise self.err(f"must be an integer, got {_kind_of(v)}{short(v)}", fld)
         v = int(v)
         if minimum is not None and v < minimum:
             raise self.err(f"must be >= {minimum}, got {v}", fld)
@@ -489,7 +506,7 @@ class FieldReader:
 
     def string(self, v: Any, fld: str) -> str:
         if not isinstance(v, str) or not v:
-            raise self.err(f"must be a non-empty string, got {v!r}", fld)
+            raise self.err(f"must be a non-empty string, got {short(v)}", fld)
         return v
 
     def keys(self, m: Mapping, allowed: tuple[str, ...], required: tuple[str, ...], fld: str) -> None:
@@ -508,10 +525,12 @@ INPUT_FIELDS = ("sensor", "kind", "at", "gain")
 
 
 def structure_from_dict(
-    data: Mapping, source: str = "<structure>", matrices_arrays: Mapping[str, np.ndarray] | None = None
+    data: Mapping, source: str = "<structure>", matrices_arrays: Mapping[str, np.ndarray] | None = None,
+    max_dof: int = DEFAULT_MAX_DOF,
 ) -> StructureSpec:
     """Validate a structure-file mapping. ``matrices_arrays``: the contents of the file the kind's
-    section names (the ``.npz`` of ``kind: matrices``)."""
+    section names (the ``.npz`` of ``kind: matrices``). A model of more than ``max_dof`` degrees of
+    freedom is refused before anything is built."""
     c = FieldReader(source)
     data = c.mapping(data, "")
     kinds = kind_names()
@@ -519,7 +538,7 @@ def structure_from_dict(
     name = c.string(data["name"], "name")
     kind = data["kind"]
     if kind not in kinds:
-        raise c.err(f"unknown kind {kind!r} (expected one of: {', '.join(kinds)})", "kind")
+        raise c.err(f"unknown kind {short(kind)} (expected one of: {', '.join(kinds)})", "kind")
     if kind not in data:
         raise c.err(f"kind is {kind!r} but the section {kind!r} is missing", kind)
     # Sections of the other kinds may be present (a file may carry both a girder and a building
@@ -527,6 +546,10 @@ def structure_from_dict(
     # stays in ``raw``.
     mk = model_kind(kind)
     section = mk.parse_section(c, data[kind], matrices_arrays)
+    n_dof = mk.n_dof(section)
+    if n_dof > max_dof:
+        raise c.err(f"the model would have about {n_dof} degrees of freedom, more than the limit of {max_dof} "
+                    "(raise it with SHM_ROS_MAX_DOF)", kind)
 
     damping = _damping(c, data.get("damping", {"kind": "rayleigh", "ratios": [0.02, 0.02]}))
     fixed_entries, roving = _roving_sensors(c, data["sensors"])

@@ -24,6 +24,7 @@ from shm_ros.core.provenance import stamp_output
 from shm_ros.core.simulate.campaign import Campaign, SimulatedWindow
 from shm_ros.core.structure import structure_from_dict
 from shm_ros.io import jsonio
+from shm_ros.io.atomic import staged_path
 from shm_ros.io.bags import BagWriter
 from shm_ros.io.structure import dump_structure
 
@@ -87,13 +88,15 @@ def iter_windows(campaign: Campaign, workers: int = 1) -> Iterator[SimulatedWind
 
 def write_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                    progress: Callable[[int, int, float], None] | None = None,
-                   command_config: dict | None = None) -> CampaignFiles:
-    """Simulate every window of ``campaign`` and write the three outputs into ``out_dir``."""
+                   command_config: dict | None = None, overwrite: bool = False) -> CampaignFiles:
+    """Simulate every window of ``campaign`` and write the three outputs into ``out_dir``; the bag
+    appears when complete (written under a temporary name), replacing an earlier one only with
+    ``overwrite``."""
     sc = campaign.scenario
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     bag = out / "bag"
-    if bag.exists():
+    if bag.exists() and not overwrite:
         raise FileExistsError(f"{bag}: already exists; choose an empty --out directory")
     t0 = time.perf_counter()
     limiter = _limit_threads()
@@ -103,7 +106,7 @@ def write_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     t_next = 0
     entries = []
     try:
-        with BagWriter(bag, storage=sc.storage, compress=sc.compress) as writer:
+        with staged_path(bag) as staged, BagWriter(staged, storage=sc.storage, compress=sc.compress) as writer:
             for w in iter_windows(campaign, workers):
                 start, end = campaign.window_bounds_ns(w.index)
                 while t_next < tstamps.size and tstamps[t_next] < end:

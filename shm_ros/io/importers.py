@@ -12,13 +12,17 @@ Readers return :class:`ImportedRecord` (samples in m/s^2, a start time, a rate o
 * MiniSEED through ObsPy.
 
 Values are never altered other than by the declared unit factor; NaN cells stay NaN (ingest flags
-them). Bad input raises :class:`ImportFileError` naming the file, line and field.
+them). Bad input raises :class:`ImportFileError` naming the file, line and field. Stamps must lie
+between 1970 and 2038 (a ROS time's seconds are a 32-bit integer); the bag is written under a
+temporary name and renamed when complete, so a failed import leaves nothing behind.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 import re
+import tokenize
 import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -60,22 +64,35 @@ class ImportedRecord:
         return self.start_ns + np.round(np.arange(self.n_samples) * (1e9 / self.sample_rate_hz)).astype(np.int64)
 
 
+MAX_STAMP_NS = (2**31 - 1) * 1_000_000_000  # builtin_interfaces/Time.sec is an int32
+
+
+def check_stamp(ns: float, what: str) -> int:
+    """A stamp in ns that a bag can hold (1970 .. 2038); ImportFileError naming ``what`` otherwise."""
+    if not (math.isfinite(ns) and 0 <= ns <= MAX_STAMP_NS):
+        raise ImportFileError(f"{what}: time {ns / 1e9:.6g} s since 1970 is outside 1970-01-01 .. 2038-01-19 "
+                              "(what a ROS time holds)")
+    return int(ns)
+
+
 def parse_time(text: str | None, what: str = "start") -> int:
     """ISO 8601 (``2024-05-01T00:00:00Z``, naive = UTC) or epoch seconds -> ns since the epoch."""
     if text is None or text == "":
         return 0
     try:
-        return int(round(float(text) * 1e9))
+        seconds = float(text)
     except ValueError:
         pass
+    else:
+        return check_stamp(round(seconds * 1e9) if math.isfinite(seconds) else seconds, what)
     try:
         dt = datetime.fromisoformat(text.replace("Z", "+00:00"))
-    except ValueError:
+        if dt.tzinfo is None:
+            dt = dt.replace(tzinfo=timezone.utc)
+        whole = int(dt.replace(microsecond=0).timestamp())
+    except (ValueError, OverflowError, OSError):
         raise ImportFileError(f"{what}: cannot read time {text!r} (ISO 8601 or epoch seconds)") from None
-    if dt.tzinfo is None:
-        dt = dt.replace(tzinfo=timezone.utc)
-    whole = int(dt.replace(microsecond=0).timestamp())
-    return whole * 1_000_000_000 + dt.microsecond * 1000
+    return check_stamp(whole * 1_000_000_000 + dt.microsecond * 1000, what)
 
 
 def _factor(units: str, source: str) -> float:
@@ -111,10 +128,17 @@ def read_csv(path: str | Path, *, sample_rate_hz: float | None = None, channels:
             delimiter = csv.Sniffer().sniff(lines[0], delimiters=",;\t ").delimiter
         except csv.Error:
             delimiter = ","
-    rows = list(csv.reader(lines, delimiter=delimiter, skipinitialspace=True))
+    try:
+        rows = list(csv.reader(lines, delimiter=delimiter, skipinitialspace=True))
+    except csv.Error as exc:
+        raise ImportFileError(f"{path}: not a CSV table: {exc}") from None
+    if not rows or not rows[0]:
+        raise ImportFileError(f"{path}: no columns")
     header_present = any(_not_number(c) for c in rows[0])
     names = [c.strip() for c in rows[0]] if header_present else None
     body = rows[1:] if header_present else rows
+    if not body:
+        raise ImportFileError(f"{path}: a header row and no data rows")
     ncol = len(rows[0])
     if names is None:
         if channels is None:
@@ -150,10 +174,15 @@ def read_csv(path: str | Path, *, sample_rate_hz: float | None = None, channels:
         if not np.all(np.isfinite(tcol)) or np.any(np.diff(tcol) <= 0):
             raise ImportFileError(f"{path}: time column {time_column!r} must be finite and increasing")
         base = parse_time(start, f"{path}: start") if tcol[0] < 1e8 else 0
+        check_stamp(base + float(tcol[0]) * 1e9, f"{path}: time column {time_column!r}, first row")
+        check_stamp(base + float(tcol[-1]) * 1e9, f"{path}: time column {time_column!r}, last row")
         stamps = base + np.round(tcol * 1e9).astype(np.int64)
         data = np.delete(data, k, axis=1)
         names = names[:k] + names[k + 1:]
         if sample_rate_hz is None:
+            if stamps.size < 2 or not np.median(np.diff(stamps)) > 0:
+                raise ImportFileError(f"{path}: give the sample rate (the time column has fewer than two distinct "
+                                      "stamps)")
             sample_rate_hz = 1e9 / float(np.median(np.diff(stamps)))
     if channels is not None and header_present:
         missing = [c for c in channels if c not in names]
@@ -161,7 +190,7 @@ def read_csv(path: str | Path, *, sample_rate_hz: float | None = None, channels:
             raise ImportFileError(f"{path}: no column(s) {', '.join(missing)} (columns: {', '.join(names)})")
         idx = [names.index(c) for c in channels]
         data, names = data[:, idx], list(channels)
-    if sample_rate_hz is None or not sample_rate_hz > 0:
+    if sample_rate_hz is None or not 0 < sample_rate_hz < math.inf:
         raise ImportFileError(f"{path}: give the sample rate (or a time column)")
     start_ns = int(stamps[0]) if stamps is not None else parse_time(start, f"{path}: start")
     return ImportedRecord(names, data * _factor(units, str(path)), float(sample_rate_hz), start_ns,
@@ -180,21 +209,40 @@ def read_npy(path: str | Path, *, sample_rate_hz: float, channels: Sequence[str]
              start: str | None = None, units: str = "m/s^2") -> ImportedRecord:
     """An ``.npy`` array (n_samples, n_channels) (a 1-D array is one channel)."""
     path = Path(path)
-    try:
-        a = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise ImportFileError(f"{path}: cannot read as .npy: {exc}") from None
+    a = _load_npy(path)
     if a.ndim == 1:
         a = a[:, None]
-    if a.ndim != 2 or not np.issubdtype(a.dtype, np.number):
-        raise ImportFileError(f"{path}: expected a numeric (n_samples, n_channels) array, got {a.dtype} {a.shape}")
+    if a.ndim != 2 or a.dtype.kind not in "iuf" or a.shape[0] == 0:
+        raise ImportFileError(f"{path}: expected a real (n_samples, n_channels) array with samples, got "
+                              f"{a.dtype} {a.shape}")
     names = list(channels) if channels is not None else [f"ch{i + 1}" for i in range(a.shape[1])]
     if len(names) != a.shape[1]:
         raise ImportFileError(f"{path}: {a.shape[1]} channels but {len(names)} names")
-    if not sample_rate_hz or sample_rate_hz <= 0:
+    if not sample_rate_hz or not 0 < sample_rate_hz < math.inf:
         raise ImportFileError(f"{path}: give the sample rate")
     return ImportedRecord(names, a.astype(np.float64) * _factor(units, str(path)), float(sample_rate_hz),
                           parse_time(start, f"{path}: start"), None, str(path), {"format": "npy"})
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    """The array of an ``.npy`` file; its header is checked (numeric or boolean dtype, data that
+    fits the file) before any data is read, and any damage is an ImportFileError."""
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+            size = path.stat().st_size - fh.tell()
+            if dtype.hasobject or math.prod(shape) * dtype.itemsize > size:
+                raise ImportFileError(f"{path}: header announces {dtype} {shape}, which the file does not hold")
+            a = np.fromfile(fh, dtype=dtype, count=math.prod(shape))
+    except ImportFileError:
+        raise
+    except (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError, UnicodeDecodeError, TypeError) as exc:
+        raise ImportFileError(f"{path}: cannot read as .npy: {type(exc).__name__}: {exc}") from None
+    return a.reshape(shape, order="F" if fortran else "C")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -237,12 +285,20 @@ def parse_v2(text: str, source: str = "<v2>") -> list[V2Channel]:
             i += 1
             continue
         header = lines[section_start:i]
-        n, dt, units, per_line, width = int(m.group(1)), float(m.group(2)), m.group(3), int(m.group(4)), int(m.group(5))
         where = f"{source}: line {i + 1}"
+        try:
+            dt = float(m.group(2))
+        except ValueError:
+            raise ImportFileError(f"{where}: bad sample interval {m.group(2)!r}") from None
+        n, units, per_line, width = int(m.group(1)), m.group(3), int(m.group(4)), int(m.group(5))
+        if not (0 < per_line <= 100 and 0 < width <= 100):
+            raise ImportFileError(f"{where}: bad value format ({per_line}F{width})")
+        if n > 10**8:
+            raise ImportFileError(f"{where}: {n} points announced; refused (more than 10^8)")
         factor = _V2_UNITS.get(units.lower().rstrip("."))
         if factor is None:
             raise ImportFileError(f"{where}: unknown units {units!r} in the accel data header")
-        if not (n > 0 and dt > 0):
+        if not (n > 0 and 0 < dt < math.inf):
             raise ImportFileError(f"{where}: bad point count {n} or interval {dt}")
         vals: list[float] = []
         j = i + 1
@@ -279,9 +335,13 @@ def _v2_header(header: list[str], source: str, line_no: int) -> dict[str, Any]:
         raise ImportFileError(f"{source}: no 'Start time: M/D/YY, hh:mm:ss UTC' before line {line_no + 1}")
     mo, d, y, hh, mm, ss = m.groups()
     year = int(y) + (2000 if int(y) < 70 else 1900) if len(y) <= 2 else int(y)
-    sec = float(ss)
-    base = datetime(year, int(mo), int(d), int(hh), int(mm), int(sec), tzinfo=timezone.utc)
-    start_ns = int(base.timestamp()) * 1_000_000_000 + int(round((sec - int(sec)) * 1e9))
+    try:
+        sec = float(ss)
+        base = datetime(year, int(mo), int(d), int(hh), int(mm), int(sec), tzinfo=timezone.utc)
+    except ValueError as exc:
+        raise ImportFileError(f"{source}: bad start time {m.group(0)!r}: {exc}") from None
+    start_ns = check_stamp(int(base.timestamp()) * 1_000_000_000 + int(round((sec - int(sec)) * 1e9)),
+                           f"{source}: start time")
     st = _V2_STATION.search(text)
     station = st.group(1) if st else "unknown"
     chan, orient, loc = 0, "", ""
@@ -311,12 +371,14 @@ def read_v2(path: str | Path, *, channels: dict[int, str] | None = None) -> list
             with zipfile.ZipFile(path) as z:
                 for name in sorted(z.namelist()):
                     if name.upper().endswith(".V2"):
+                        if z.getinfo(name).file_size > 2**30:
+                            raise ImportFileError(f"{path}:{name}: more than 1 GiB uncompressed; refused")
                         texts.append((f"{path}:{name}", z.read(name).decode("latin-1")))
             if not texts:
                 raise ImportFileError(f"{path}: no .V2 member in the archive")
         else:
             texts.append((str(path), path.read_text(encoding="latin-1")))
-    except (OSError, zipfile.BadZipFile) as exc:
+    except (OSError, zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, NotImplementedError) as exc:
         raise ImportFileError(f"{path}: cannot read: {exc}") from None
     chans: list[V2Channel] = []
     for src, text in texts:
@@ -351,14 +413,22 @@ def read_miniseed(path: str | Path, *, units: str = "m/s^2", scale: float = 1.0,
         import obspy
     except ImportError:  # pragma: no cover - obspy is a runtime dependency
         raise ImportFileError("MiniSEED needs ObsPy (pip install obspy)") from None
+    from obspy.io.mseed.core import _is_mseed
+
     path = Path(path)
     try:
+        if not _is_mseed(str(path)):
+            raise ImportFileError(f"{path}: not a MiniSEED file")
         st = obspy.read(str(path), format="MSEED")
-    except Exception as exc:
-        raise ImportFileError(f"{path}: cannot read as MiniSEED: {exc}") from None
+    except ImportFileError:
+        raise
+    except Exception as exc:  # ObsPy raises plain Exception for unreadable records, besides its own errors
+        raise ImportFileError(f"{path}: cannot read as MiniSEED: {type(exc).__name__}: {exc}") from None
     f = _factor(units, str(path)) * float(scale)
     out = []
     for tr in st:
+        if np.asarray(tr.data).dtype.kind not in "iuf":
+            raise ImportFileError(f"{path}: trace {tr.id} holds {np.asarray(tr.data).dtype} data, not samples")
         sid = tr.id
         name = (channels or {}).get(sid, sid)
         start_ns = int(tr.stats.starttime.ns)
@@ -408,13 +478,14 @@ def _pick(opts: dict[str, Any], *keys: str) -> dict[str, Any]:
 
 def write_bag(records: Sequence[ImportedRecord], out: str | Path, *, layout: str = "block",
               prefix: str = "", storage: str = "mcap", compress: bool = True, block_s: float = 1.0,
-              axis: str = "z") -> dict[str, Any]:
+              axis: str = "z", overwrite: bool = False) -> dict[str, Any]:
     """Write records as a bag of the recording layout; returns a summary (topics, messages, samples, span).
 
     ``layout="block"``: ``<prefix>/accel_block`` AccelBlocks of ``block_s`` seconds (records with
     per-sample stamps must be evenly sampled); ``layout="imu"``: one ``sensor_msgs/Imu`` per sample
     on ``<prefix>/accel/<channel>``, the value on ``axis`` (the others 0).
     """
+    from shm_ros.io.atomic import staged_path
     from shm_ros.io.bags import BagWriter
 
     if layout not in ("block", "imu"):
@@ -423,13 +494,21 @@ def write_bag(records: Sequence[ImportedRecord], out: str | Path, *, layout: str
         raise ImportFileError(f"axis must be x, y or z, got {axis!r}")
     prefix = "/" + prefix.strip("/") if prefix.strip("/") else ""
     out = Path(out)
-    if out.exists():
-        raise ImportFileError(f"{out}: already exists (choose a new bag name)")
+    if out.exists() and not overwrite:
+        raise ImportFileError(f"{out}: already exists (choose a new bag name, or --overwrite)")
+    if not any(r.n_samples for r in records):
+        raise ImportFileError(f"{', '.join(r.source for r in records) or 'input'}: no samples to import")
     pieces = []  # (t_first, order, record, slice)
     for r_i, r in enumerate(records):
         if r.samples.ndim != 2 or r.samples.shape[1] != len(r.channel_names):
             raise ImportFileError(f"{r.source}: samples do not match the channel names")
+        if not 0 < r.sample_rate_hz < math.inf:
+            raise ImportFileError(f"{r.source}: sample rate {r.sample_rate_hz} Hz")
+        if r.n_samples == 0:
+            continue
         times = r.times_ns()
+        check_stamp(float(times.min()), f"{r.source}: first sample")
+        check_stamp(float(times.max()), f"{r.source}: last sample")
         if layout == "block" and r.stamps_ns is not None:
             d = np.diff(r.stamps_ns)
             period = 1e9 / r.sample_rate_hz
@@ -443,7 +522,7 @@ def write_bag(records: Sequence[ImportedRecord], out: str | Path, *, layout: str
     n_msgs = 0
     topics: set[str] = set()
     ax = "xyz".index(axis)
-    with BagWriter(out, storage=storage, compress=compress) as w:
+    with staged_path(out) as tmp, BagWriter(tmp, storage=storage, compress=compress) as w:
         for t_first, _, r, sl in pieces:
             if layout == "block":
                 topic = f"{prefix}/accel_block"

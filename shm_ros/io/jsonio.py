@@ -56,10 +56,14 @@ def dumps(obj: Any, indent: int | None = 1) -> str:
 
 
 def dump(obj: Any, path: str | Path, indent: int | None = 1) -> Path:
-    """Write ``obj`` as strict JSON to ``path`` (parent directories are created)."""
+    """Write ``obj`` as strict JSON to ``path`` (parent directories are created), atomically: the
+    file appears complete or not at all."""
+    from shm_ros.io.atomic import atomic_path
+
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(dumps(obj, indent) + "\n", encoding="utf-8")
+    text = dumps(obj, indent) + "\n"
+    with atomic_path(p) as tmp:
+        tmp.write_text(text, encoding="utf-8")
     return p
 
 

@@ -12,16 +12,20 @@ window; an estimate whose window is already stored is skipped (:meth:`TrackStore
 One writer: the writer holds an exclusive ``flock`` on ``<path>.lock``; readers (``shm-ros track
 --store``) open the database read-only and may run at any time (WAL). Retention: rows and estimates
 older than ``retention_days`` before the newest window are deleted (models and alarms are kept).
-The checkpoint is a pickle of the tracker: the store is the node's own file, not an exchange format
-(a checkpoint that does not load, e.g. after an upgrade, is rebuilt by replaying every stored estimate).
+The checkpoint is the tracker's state in the typed, data-only encoding of
+:mod:`shm_ros.io.checkpoint` (never a pickle: opening a crafted store must not run code). A checkpoint
+that does not load - an older program's pickle, a different tracking configuration, a damaged row -
+is discarded with a notice (:attr:`TrackStore.notices`, logged) and the tracker is rebuilt by
+replaying the stored estimates.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import math
-import pickle
 import sqlite3
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -30,8 +34,20 @@ import numpy as np
 
 from shm_ros.core.observations import ModalObservations
 from shm_ros.core.tracking import TrackedRow, Tracker
+from shm_ros.core.tracking.config import EnvModel, ReferenceSource
+from shm_ros.core.tracking.environment import EnvironmentalFit, PcaModel
+from shm_ros.core.tracking.novelty import NoveltyChart
+from shm_ros.core.tracking.reference import ReferenceMode
 from shm_ros.core.types import ModalEstimate, Mode
 from shm_ros.errors import ShmError
+from shm_ros.io.checkpoint import CheckpointError, Codec
+
+log = logging.getLogger(__name__)
+CHECKPOINT_MAGIC = b"shm-ros-checkpoint 1\n"  # then the tracker's state (shm_ros.io.checkpoint)
+# what a tracker's state may hold; its configuration and structure come from the node, not the file
+_CODEC = Codec([ReferenceMode, EnvironmentalFit, PcaModel, NoveltyChart, ModalEstimate, Mode, EnvModel,
+                ReferenceSource])
+_NOT_STATE = ("config", "structure")
 
 SCHEMA_VERSION = 1
 NS_PER_DAY = 86400 * 10**9
@@ -49,6 +65,10 @@ CREATE TABLE IF NOT EXISTS models (id INTEGER PRIMARY KEY AUTOINCREMENT, after_s
 CREATE TABLE IF NOT EXISTS checkpoint (id INTEGER PRIMARY KEY CHECK (id = 1), seq INTEGER NOT NULL,
     state BLOB NOT NULL);
 """
+
+
+_COUNTS = {"rows": "SELECT COUNT(*) FROM rows", "estimates": "SELECT COUNT(*) FROM estimates",
+           "alarms": "SELECT COUNT(*) FROM alarms", "models": "SELECT COUNT(*) FROM models"}
 
 
 class StoreError(ShmError, RuntimeError):
@@ -146,6 +166,7 @@ class TrackStore:
                 raise StoreError(f"{self.path}: no such store")
             self.db = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True)
         self._since_checkpoint = 0
+        self.notices: list[str] = []  # e.g. a checkpoint discarded on open
         self._model_key: tuple[Any, ...] | None = None  # the tracker's model state at the last record
 
     def close(self) -> None:
@@ -173,8 +194,9 @@ class TrackStore:
         return None if got is None else row_from_record(json.loads(got[0]))
 
     def count(self, table: str = "rows") -> int:
-        assert table in ("rows", "estimates", "alarms", "models")
-        return int(self.db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0])
+        if table not in _COUNTS:
+            raise ValueError(f"no table {table!r} (one of {', '.join(_COUNTS)})")
+        return int(self.db.execute(_COUNTS[table]).fetchone()[0])
 
     def rows(self, start_ns: int | None = None, end_ns: int | None = None) -> list[dict[str, Any]]:
         """Tracked rows with ``start_ns <= window start < end_ns``, in time order."""
@@ -187,7 +209,8 @@ class TrackStore:
                 for w, t, s, th, m in self.db.execute("SELECT * FROM alarms ORDER BY start_ns")]
 
     def models(self, kind: str | None = None) -> list[dict[str, Any]]:
-        q = "SELECT kind, after_seq, record FROM models" + (" WHERE kind = ?" if kind else "") + " ORDER BY id"
+        q = ("SELECT kind, after_seq, record FROM models WHERE kind = ? ORDER BY id" if kind else
+             "SELECT kind, after_seq, record FROM models ORDER BY id")
         return [{"kind": k, "after_seq": s, **json.loads(r)} for k, s, r in self.db.execute(q, (kind,) if kind else ())]
 
     def estimates_after(self, seq: int) -> list[tuple[int, ModalEstimate]]:
@@ -241,7 +264,7 @@ class TrackStore:
             self._models(tracker, seq)
             self._since_checkpoint += 1
             if self._since_checkpoint >= self.checkpoint_every:
-                db.execute("INSERT OR REPLACE INTO checkpoint VALUES (1, ?, ?)", (seq, pickle.dumps(tracker)))
+                db.execute("INSERT OR REPLACE INTO checkpoint VALUES (1, ?, ?)", (seq, checkpoint_bytes(tracker)))
                 self._since_checkpoint = 0
                 self._retain(est.start_ns)
             db.execute("COMMIT")
@@ -284,20 +307,61 @@ class TrackStore:
         self.db.execute("DELETE FROM estimates WHERE start_ns < ? AND seq <= ?", (cut, keep_seq))
         self.db.execute("DELETE FROM rows WHERE start_ns < ?", (cut,))
 
-    def checkpoint(self) -> tuple[int, Tracker | None]:
+    def checkpoint(self, make_tracker: Callable[[], Tracker]) -> tuple[int, Tracker | None]:
+        """The stored checkpoint as ``(seq, tracker)`` on a fresh ``make_tracker()``; ``(0, None)`` when
+        there is none or it is discarded (with a notice)."""
         row = self.db.execute("SELECT seq, state FROM checkpoint WHERE id = 1").fetchone()
         if row is None:
             return 0, None
+        fresh = make_tracker()
         try:
-            return int(row[0]), pickle.loads(row[1])  # noqa: S301 - the node's own file (module docstring)
-        except Exception:  # an older program's tracker: rebuild by replaying every estimate
+            return int(row[0]), tracker_from_checkpoint(bytes(row[1]), fresh)
+        except CheckpointError as exc:
+            self._notice(f"{self.path}: tracker checkpoint discarded ({exc}); rebuilding it from the stored "
+                         "estimates")
             return 0, None
+
+    def _notice(self, text: str) -> None:
+        self.notices.append(text)
+        log.warning(text)
+
+
+def _config_text(tracker: Tracker) -> str:
+    return json.dumps(asdict(tracker.config), sort_keys=True, default=str)
+
+
+def checkpoint_bytes(tracker: Tracker) -> bytes:
+    """The tracker's state as a checkpoint (configuration fingerprint, then the typed encoding)."""
+    state = {k: v for k, v in vars(tracker).items() if k not in _NOT_STATE}
+    return CHECKPOINT_MAGIC + _CODEC.dumps({"config": _config_text(tracker), "state": state})
+
+
+def tracker_from_checkpoint(data: bytes, fresh: Tracker) -> Tracker:
+    """``fresh`` (a new tracker with the node's configuration) brought to the checkpoint's state;
+    :class:`CheckpointError` when the data is not a checkpoint of this program (e.g. a pickle, which
+    is never loaded) or was written under another tracking configuration."""
+    if not data.startswith(CHECKPOINT_MAGIC):
+        raise CheckpointError("not a typed checkpoint (an older program's pickle is never loaded)")
+    doc = _CODEC.loads(data[len(CHECKPOINT_MAGIC):])
+    if not isinstance(doc, dict) or set(doc) != {"config", "state"} or not isinstance(doc["state"], dict):
+        raise CheckpointError("malformed checkpoint")
+    if doc["config"] != _config_text(fresh):
+        raise CheckpointError("written under another tracking configuration")
+    state = doc["state"]
+    expected = {k: type(v) for k, v in vars(fresh).items() if k not in _NOT_STATE}
+    if set(state) != set(expected):
+        raise CheckpointError(f"fields {sorted(set(state) ^ set(expected))[:5]} differ from this program's tracker")
+    for k, cls in expected.items():
+        if state[k] is not None and cls is not type(None) and not isinstance(state[k], cls):
+            raise CheckpointError(f"field {k!r} is a {type(state[k]).__name__}, expected {cls.__name__}")
+    fresh.__dict__.update(state)
+    return fresh
 
 
 def resume(store: TrackStore, make_tracker: Any) -> tuple[Tracker, int]:
     """The tracker as it was after the last stored window (``make_tracker()``: a fresh one), and
     how many stored estimates were replayed to get there."""
-    seq, tracker = store.checkpoint()
+    seq, tracker = store.checkpoint(make_tracker)
     if tracker is None:
         seq, tracker = 0, make_tracker()
     replay = store.estimates_after(seq)

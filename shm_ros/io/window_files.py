@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from shm_ros.core.ingest.events import window_event_kind
 from shm_ros.core.types import Window
+from shm_ros.errors import InputError
 
 
 def window_filename(index: int, w: Window) -> str:
@@ -35,7 +37,15 @@ def save_window(path: str | Path, w: Window) -> None:
 
 
 def load_window(path: str | Path) -> Window:
-    """The :class:`Window` saved by :func:`save_window`."""
+    """The :class:`Window` saved by :func:`save_window`; :class:`InputError` naming the file when it
+    is not one."""
+    try:
+        return _load_window(path)
+    except (OSError, EOFError, KeyError, IndexError, TypeError, ValueError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{path}: not a window file of shm-ros ingest: {type(exc).__name__}: {exc}") from None
+
+
+def _load_window(path: str | Path) -> Window:
     with np.load(path, allow_pickle=False) as z:
         flags = z["flags"]
         t = float(z["temperature_c"])

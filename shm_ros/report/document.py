@@ -149,7 +149,7 @@ class Report:
     # -- Markdown -----------------------------------------------------------------------------
 
     def to_markdown(self, base_dir: Path) -> str:
-        lines = [f"# {self.title}", ""]
+        lines = [f"# {_md(self.title)}", ""]
         if self.summary:
             lines += ["## Summary", "", *[f"- {_md(x)}" for x in self.summary], ""]
         if self.facts:
@@ -157,11 +157,11 @@ class Report:
             lines += [f"| {_md(str(k))} | {_md(format_cell(v))} |" for k, v in self.facts.items()]
             lines.append("")
         for s in self.sections:
-            lines += [f"## {s.title}", ""]
+            lines += [f"## {_md(s.title)}", ""]
             for p in s.paragraphs:
-                lines += [p, ""]
+                lines += [_md_text(p), ""]
             if s.notes:
-                lines += [f"- {n}" for n in s.notes] + [""]
+                lines += [f"- {_md(n)}" for n in s.notes] + [""]
             for t in s.tables:
                 lines += _table_md(t, base_dir)
             for f in s.figures:
@@ -175,8 +175,15 @@ def _rel(path: Path, base_dir: Path) -> str:
     return Path(os.path.relpath(Path(path).resolve(), Path(base_dir).resolve())).as_posix()
 
 
+def _md_text(text: str) -> str:
+    """Text for Markdown that stays text: no raw HTML (``<svg onload=...>``), no links or images made
+    of input (``[x](javascript:...)``)."""
+    return html.escape(text, quote=False).replace("[", "\\[").replace("]", "\\]")
+
+
 def _md(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
+    """:func:`_md_text` on one line of a table or list."""
+    return _md_text(text).replace("|", "\\|").replace("\n", " ")
 
 
 def _is_text(v: Any) -> bool:

@@ -17,6 +17,7 @@ from typing import Any
 
 from shm_ros.core.progress import Progress
 from shm_ros.core.types import ModalEstimate, Window
+from shm_ros.errors import ShmError
 from shm_ros.ros.graph_config import GraphConfig, NodeSpec, normal_namespace
 from shm_ros.ros.replay import ReplayResult
 from shm_ros.ros.supervisor import Supervisor
@@ -167,7 +168,7 @@ def _explains_events(node: NodeSpec) -> bool:
 
     try:
         has_input = bool(load_structure(node.parameters["structure"]).input_sensor_ids())
-    except Exception:  # the node itself reports a bad file
+    except ShmError:  # the node itself reports a bad file
         has_input = False
     return explains_events(str(node.parameters.get("events", "auto")), has_input)
 

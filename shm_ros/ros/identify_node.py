@@ -10,6 +10,7 @@ from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
 from shm_ros.core.identify import IdentifyConfig, identify_window
+from shm_ros.errors import ShmError
 from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_to_msg, window_from_msg
 from shm_ros.ros.managed import ManagedNode
@@ -58,7 +59,7 @@ class IdentifyNode(ManagedNode):
 
         try:
             spec = load_structure(path)
-        except Exception as exc:  # StructureError names the file and field
+        except ShmError as exc:  # StructureError names the file and field
             raise ParameterError(f"{self.get_name()}: parameter 'structure': {exc}") from exc
         freqs, why_not = band_frequencies(spec, self.config.band, self.config.band_modes)
         self.config.nominal_frequencies_hz = freqs

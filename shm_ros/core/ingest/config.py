@@ -22,6 +22,9 @@ class EventDetector(enum.StrEnum):
     NONE = "none"
 
 
+MIN_WINDOW_S = 1.0  # a shorter window holds less than a period of most structures' modes
+
+
 @dataclass
 class IngestConfig:
     """Settings of :class:`~shm_ros.core.ingest.core.IngestCore`."""
@@ -64,19 +67,28 @@ class IngestConfig:
     check_interval_s: float = option(5.0, "streaming: at most this often (stamp time) a burst end is looked for, s",
                                      cli=False)
     rate_tolerance: float = option(0.01, "relative difference of a channel's rate from the grid's that is reported")
+    implausible_m_s2: float = option(
+        196.133, "|a| above this (20 g = 196.133 m/s^2) is implausible for a structure: the sample becomes NaN and is "
+        "reported")
+    clock_jump_s: float = option(86400.0, "stamps that step forward by more than this, s (or back at all) "
+                                 "are reported as a clock jump")
     max_repeats: int = option(5, "diagnostics of one code and source recorded between two windows (the rest counted)")
 
     def __post_init__(self) -> None:
-        if not self.window_s > 0:
-            raise ValueError(f"window_s must be > 0, got {self.window_s}")
+        if not MIN_WINDOW_S <= self.window_s < math.inf:
+            raise ValueError(f"window_s must be at least {MIN_WINDOW_S:g} s and finite, got {self.window_s}")
+        if not self.implausible_m_s2 > 0:
+            raise ValueError(f"implausible_m_s2 must be > 0, got {self.implausible_m_s2}")
+        if not self.clock_jump_s > 0:
+            raise ValueError(f"clock_jump_s must be > 0, got {self.clock_jump_s}")
         if not self.min_window_s >= 0:
             raise ValueError(f"min_window_s must be >= 0, got {self.min_window_s}")
         if not 0 < self.snap_tolerance <= 0.5:
             raise ValueError(f"snap_tolerance must be in (0, 0.5], got {self.snap_tolerance}")
         check_choice("ingest", "event_detector", self.event_detector, EventDetector)
         self.event_detector = EventDetector(self.event_detector)
-        if self.sample_rate_hz is not None and not self.sample_rate_hz > 0:
-            raise ValueError(f"sample_rate_hz must be > 0, got {self.sample_rate_hz}")
+        if self.sample_rate_hz is not None and not 0.1 <= self.sample_rate_hz <= 100_000.0:
+            raise ValueError(f"sample_rate_hz must be in [0.1, 100000], got {self.sample_rate_hz}")
         if self.settle_s is not None and not self.settle_s >= 0:
             raise ValueError(f"settle_s must be >= 0, got {self.settle_s}")
         if not self.max_latency_s >= 0:

@@ -18,6 +18,7 @@ stream time on when no data comes.
 from __future__ import annotations
 
 import math
+import time
 from collections import Counter
 from collections.abc import Sequence
 
@@ -28,7 +29,7 @@ from shm_ros.core.ingest.buffers import ChannelBuffer
 from shm_ros.core.ingest.channels import ChannelMap
 from shm_ros.core.ingest.config import IngestConfig
 from shm_ros.core.ingest.diagnostics import DiagnosticLog
-from shm_ros.core.ingest.grid import Grid, estimate_rate, fit_clock, follow_clock
+from shm_ros.core.ingest.grid import MAX_RATE_HZ, MIN_RATE_HZ, Grid, estimate_rate, fit_clock, follow_clock
 from shm_ros.core.ingest.rates import BlockRates, stamps_rate
 from shm_ros.core.ingest.results import DroppedSpan, IngestStats
 from shm_ros.core.ingest.segment import Bursts
@@ -40,6 +41,8 @@ from shm_ros.core.types import SampleFlag, Window
 _PENDING_MAX = 4096  # per-sample input consolidated into arrays after this many samples
 _PENDING_RATE = 256  # ... or this many while the rate is still unknown
 
+
+MAX_STAMP_NS = (2**31 - 1) * 1_000_000_000  # builtin_interfaces/Time.sec is an int32
 
 class IngestCore:
     """Streaming validation, alignment and windowing.
@@ -145,6 +148,13 @@ class IngestCore:
             return
         if t.size == 0:
             return
+        bad = (t < 0) | (t > MAX_STAMP_NS)
+        if bad.any():
+            self._reject(self._topic(topic_id), f"{int(bad.sum())} stamp(s) outside 1970-01-01 .. 2038-01-19 "
+                         "(what a ROS time holds): not used")
+            t, a = t[~bad], a[~bad]
+            if t.size == 0:
+                return
         self._probe_rate(topic_id, t)
         if topic_id not in self._gravity_checked and t.size >= 64:
             self._check_gravity(topic_id, a, label)
@@ -190,9 +200,11 @@ class IngestCore:
                 x = x.reshape(-1, len(names))
             if x.ndim != 2 or x.shape[1] != len(names):
                 raise ValueError(f"samples shape {x.shape} does not match {len(names)} channel names")
-            if not (math.isfinite(rate) and rate > 0):
-                raise ValueError(f"sample_rate_hz = {rate}")
+            if not (math.isfinite(rate) and MIN_RATE_HZ <= rate <= MAX_RATE_HZ):
+                raise ValueError(f"sample_rate_hz = {rate} (from {MIN_RATE_HZ:g} to at most {MAX_RATE_HZ:g})")
             t0 = int(stamp_ns)
+            if not 0 <= t0 <= MAX_STAMP_NS - x.shape[0] * 1e9 / rate:
+                raise ValueError(f"stamp {t0} ns is outside 1970-01-01 .. 2038-01-19 (what a ROS time holds)")
         except (TypeError, ValueError, OverflowError) as exc:
             self._reject(f"{topic}", f"malformed AccelBlock: {exc}", None)
             return
@@ -241,6 +253,8 @@ class IngestCore:
         source = source or f"temperature/{sensor_id}"
         try:
             t, v = int(stamp_ns), float(value_c)
+            if not 0 <= t <= MAX_STAMP_NS:
+                raise ValueError(f"stamp {t} ns is outside 1970-01-01 .. 2038-01-19")
         except (TypeError, ValueError, OverflowError) as exc:
             self._reject(source, f"malformed temperature: {exc}")
             return
@@ -390,7 +404,8 @@ class IngestCore:
     def _check_gravity(self, topic_id: str, a: np.ndarray, label: str) -> None:
         """An accelerometer at rest reads |a| = g on its three axes together: ~1 means g, ~981 cm/s^2."""
         self._gravity_checked.add(topic_id)
-        mag = float(np.nanmedian(np.sqrt(np.sum(a * a, axis=1))))
+        with np.errstate(over="ignore", invalid="ignore"):  # implausible samples are reported elsewhere
+            mag = float(np.nanmedian(np.sqrt(np.sum(a * a, axis=1))))
         guess, implausible = units_hint_from_gravity(mag)
         if guess:
             self._log.add(Level.WARN, "units", label,
@@ -429,6 +444,7 @@ class IngestCore:
                 t, v, seq = t[keep], v[keep], seq[keep]
                 if t.size == 0:
                     return
+        self._check_values(col, t, v, source)
         n_ooo = buf.append(t, v, seq)
         if n_ooo:
             self._log.add(Level.WARN, "out_of_order", source,
@@ -437,6 +453,35 @@ class IngestCore:
         tmax = int(t.max())
         cm = self._chan_max[col]
         self._chan_max[col] = tmax if cm is None else max(cm, tmax)
+
+    def _check_values(self, col: int, t: np.ndarray, v: np.ndarray, source: str) -> None:
+        """Implausible magnitudes become NaN (flagged NAN in their window) and clock jumps - forward by
+        more than ``clock_jump_s`` or any step back - are reported; both as diagnostics naming the source."""
+        lim = self.config.implausible_m_s2
+        bad = np.abs(v) > lim
+        bad &= np.isfinite(v)  # +-inf is flagged NAN like a NaN
+        if bad.any():
+            n = int(bad.sum())
+            worst = float(np.max(np.abs(v[bad])))
+            self.stats.implausible += n
+            self._log.add(Level.WARN, "implausible", source,
+                          f"{n} sample(s) beyond {lim:g} m/s^2 (up to {worst:.3g}): set to NaN",
+                          int(t[bad][0]), n)
+            v[bad] = np.nan
+        jump_ns = self.config.clock_jump_s * 1e9
+        prev = self._chan_max[col]
+        steps = np.diff(t) if prev is None else np.diff(t, prepend=prev)
+        if steps.size and (steps.max() > jump_ns or steps.min() < 0):
+            k = int(np.argmax(steps > jump_ns)) if steps.max() > jump_ns else int(np.argmax(steps < 0))
+            at = int(t[k + 1] if prev is None else t[k])
+            step_s = float(steps[k]) / 1e9
+            # a step back is a clock fault; a step forward may be a long pause between records
+            # (an event catalogue) unless it lands in the future
+            future = at > time.time_ns() + jump_ns
+            level = Level.WARN if step_s < 0 or future else Level.OK
+            what = "back" if step_s < 0 else "forward" + (" into the future" if future else
+                                                          " (a long pause, or the clock)")
+            self._log.add(level, "clock_jump", source, f"stamps jump {what} by {abs(step_s):.6g} s", at)
 
     def _newest_stamp(self) -> int | None:
         maxima = [m for m in self._chan_max if m is not None]

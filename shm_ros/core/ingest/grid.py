@@ -15,11 +15,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+MAX_RATE_HZ = 100_000.0  # the fastest sample rate ingest accepts (a window's grid is window_s x rate rows)
+MIN_RATE_HZ = 0.1  # the slowest: a period of 10 s (slower is no vibration record)
+
 
 def estimate_rate(stamps: np.ndarray, nominal: bool = True) -> float | None:
     """Sample rate (Hz) of jittered stamps: the median interval over 16 samples, refined by
     least-squares fits over growing spans; within 0.5 % of a whole number of Hz it is rounded
-    (``nominal``). None when fewer than 17 distinct stamps."""
+    (``nominal``). None when fewer than 17 distinct stamps, or outside ``MIN_RATE_HZ`` .. ``MAX_RATE_HZ``."""
     ts = np.sort(np.asarray(stamps, np.int64))
     ts = ts[np.concatenate(([True], np.diff(ts) > 0))]
     if ts.size < 17:
@@ -35,6 +38,8 @@ def estimate_rate(stamps: np.ndarray, nominal: bool = True) -> float | None:
         if k[-1] > 0:
             slope = float(np.polyfit(k, rel[:m], 1)[0])
     rate = 1e9 / slope
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:  # stamps this dense or sparse are no accelerometer's
+        return None
     if nominal and abs(rate - round(rate)) < 5e-3 * rate:
         rate = float(round(rate))
     return rate

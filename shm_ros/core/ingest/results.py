@@ -31,6 +31,7 @@ class IngestStats:
     samples_not_windowed: Counter[str] = field(default_factory=Counter)  # reason -> channel samples
     messages_rejected: int = 0
     windows: int = 0
+    implausible: int = 0  # samples beyond implausible_m_s2, set to NaN
 
 
 def windows_summary(windows: Iterable[Window]) -> list[dict[str, Any]]:

@@ -51,6 +51,11 @@ class ModelKind(ABC):
                         fld: str) -> dict[str, Any]:
         """The validated ``at`` mapping of a sensor (``fld`` is the sensor's field path)."""
 
+    def n_dof(self, section: Any) -> int:
+        """Degrees of freedom of the model the section describes (an upper estimate; 0: unknown), checked
+        against the structure loader's limit before anything is built."""
+        return 0
+
     @abstractmethod
     def updatable(self, loc: Location) -> bool:
         """Whether a location inside this kind's section is a number a parameter may scale."""

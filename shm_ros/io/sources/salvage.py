@@ -23,12 +23,14 @@ from shm_ros.io.sources.sqlite_rows import MessageCompression, RowOrder, SqliteS
 def mcap_damage_errors() -> tuple[type[BaseException], ...]:
     """What the ``mcap`` stream reader raises where a file's data ends or is damaged:
     ``McapError`` (``EndOfFile``, bad magic, oversized record), ``ValueError`` (bad CRC,
-    undecodable strings), ``struct.error`` (a record cut short) and zstd's error (a damaged
-    chunk; the package decompresses with ``zstandard``)."""
+    undecodable strings), ``struct.error`` (a record cut short), zstd's error (a damaged
+    chunk; the package decompresses with ``zstandard``) and ``MemoryError`` (a damaged length
+    field announcing gigabytes: the reader asks for them at once and gets nothing) or ``OverflowError``
+    (one beyond what an index holds)."""
     import zstandard
     from mcap.exceptions import McapError
 
-    return (McapError, ValueError, struct.error, zstandard.ZstdError)
+    return (McapError, ValueError, struct.error, zstandard.ZstdError, MemoryError, OverflowError)
 
 
 class McapRecordSource:

@@ -22,8 +22,8 @@ BATCH_ROWS = 8192
 
 
 class RowOrder(Enum):
-    RECEIVED = "ORDER BY timestamp, id"
-    WRITTEN = "ORDER BY rowid"
+    RECEIVED = "SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id"
+    WRITTEN = "SELECT topic_id, timestamp, data FROM messages ORDER BY rowid"
 
 
 class MessageCompression(Enum):
@@ -69,7 +69,7 @@ class SqliteSource:
                 rows: list[tuple[int, int, bytes]] = []
                 try:
                     # row by row (not fetchmany, which loses its rows when it meets damage)
-                    for row in con.execute(f"SELECT topic_id, timestamp, data FROM messages {self.order.value}"):
+                    for row in con.execute(self.order.value):  # the order's whole (fixed) query
                         rows.append(row)
                         if len(rows) >= BATCH_ROWS:
                             yield self._batch(rows, names, wanted, f)

@@ -92,6 +92,10 @@ class Girder(ModelKind):
     def parse_section(self, r: FieldReader, value: Any, arrays: Mapping[str, np.ndarray] | None) -> GirderSpec:
         return _parse_girder(r, value)
 
+    def n_dof(self, section: GirderSpec) -> int:
+        """Two per node: the spans' divisions, their ends and a node at each bearing."""
+        return 2 * (len(section.spans) * section.elements_per_span + 1 + len(section.bearings))
+
     def section_to_dict(self, section: GirderSpec) -> dict[str, Any]:
         g = section
         secs = [{"E": float(s.E), "I": float(s.I), "A": float(s.A), "rho": float(s.rho)} for s in g.sections]

@@ -61,6 +61,9 @@ class Matrices(ModelKind):
     def parse_section(self, r: FieldReader, value: Any, arrays: Mapping[str, np.ndarray] | None) -> MatricesSpec:
         return _parse_matrices(r, value, arrays)
 
+    def n_dof(self, section: MatricesSpec) -> int:
+        return section.n_dof
+
     def section_to_dict(self, section: MatricesSpec) -> dict[str, Any]:
         m = section
         md: dict[str, Any] = {"file": m.file, "mass": m.mass, "stiffness": m.stiffness}
@@ -116,6 +119,8 @@ def _parse_matrices(r: FieldReader, v: Any, arrays: Mapping[str, np.ndarray] | N
             fld = "matrices.mass" if key == spec.mass else "matrices.stiffness"
             raise r.err(f"array {key!r} not found in {where} (has {sorted(arrays)})", fld)
     n = arrays[spec.mass].shape[0] if arrays[spec.mass].ndim == 2 else -1
+    if n == 0:
+        raise r.err(f"mass matrix {spec.mass!r} in {where} is empty (no degree of freedom)", "matrices.mass")
     if "terms" in m:
         spec.terms = {
             str(k): r.number(f, f"matrices.terms.{k}") for k, f in r.mapping(m["terms"], "matrices.terms").items()

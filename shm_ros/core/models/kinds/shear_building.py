@@ -72,6 +72,9 @@ class ShearBuildingSpec:
 class ShearBuilding(ModelKind):
     title = "shear building"
 
+    def n_dof(self, section: ShearBuildingSpec) -> int:
+        return section.n_floors
+
     def parse_section(self, r: FieldReader, value: Any, arrays: Mapping[str, np.ndarray] | None
                       ) -> ShearBuildingSpec:
         b = r.mapping(value, "shear_building")
