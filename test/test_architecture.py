@@ -344,7 +344,8 @@ LAYER_OF = {
     "shm_ros.core.modal": "foundation", "shm_ros.core.timeutil": "foundation",
     "shm_ros.core.progress": "foundation", "shm_ros.core.provenance": "foundation",
     "shm_ros.core.diagnostics": "foundation", "shm_ros.core.priors": "foundation",
-    "shm_ros.core.observations": "foundation", "shm_ros.core.mode_pairing": "foundation",
+    "shm_ros.core.observations": "foundation", "shm_ros.core.delay": "foundation",
+    "shm_ros.core.mode_pairing": "foundation",
     # the kind registry is what the structure loader dispatches on; the kinds themselves are models
     "shm_ros.core.models.registry": "foundation",
     "shm_ros.core.models": "models",
@@ -353,6 +354,7 @@ LAYER_OF = {
     "shm_ros.core.stabilization": "identify", "shm_ros.core.band": "identify",
     "shm_ros.core.preprocess": "identify", "shm_ros.core.event_analysis": "identify",
     "shm_ros.core.tracking": "tracking",
+    "shm_ros.core.roving": "roving",
     "shm_ros.core.response": "response",
     "shm_ros.core.simulate": "simulate",
     "shm_ros.core.bayes": "bayes",
@@ -367,10 +369,11 @@ DIRECTLY_BELOW = {
     "models": {"foundation"},
     "ingest": {"models"}, "tracking": {"models"}, "response": {"models"}, "simulate": {"models"},
     "identify": {"ingest"},
+    "roving": {"identify"},  # a robot's roving sensors: setups identified and merged
     "bayes": {"tracking", "response"},
     "predict": {"bayes"},
     "explain": {"predict"},
-    "io": {"explain", "identify", "simulate"},
+    "io": {"explain", "identify", "simulate", "roving"},
     "report": {"io"}, "batch": {"io"},
     # the command line and the nodes are the two faces of the same top layer: they may use each other
     "commands": {"report", "batch", "ros"}, "ros": {"report", "batch", "commands"},

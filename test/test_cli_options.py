@@ -68,7 +68,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     shutil.copy(EXAMPLES / "tracked_modes.csv", d / "modes.csv")
     shutil.copy(EXAMPLES / "posterior.json", d / "posterior.json")
     shutil.copy(EXAMPLES / "simulate_scenario.yaml", d / "scenario.yaml")
-    shutil.copy(EXAMPLES / "main_job.yaml", d / "main_job.yaml")
+    shutil.copy(EXAMPLES.parent / "shm_ros" / "examples_data" / "main_job.yaml", d / "main_job.yaml")
     shutil.copy(ROOT / "config" / "pipeline.yaml", d / "pipeline.yaml")
     (d / "cfg.yaml").write_text("{}\n")
     (d / "a.csv").write_text("s1,s2\n" + "0.1,0.2\n" * 300)
@@ -99,6 +99,7 @@ def base_args(command: str, i: dict[str, Path], out: Path) -> dict[str, list[str
         "example": {"--config": [str(i["job"])], "--out": [str(out / "o")]},
         "replay": {"bag": [str(i["bag"])]},
         "run": {"config": [str(i["pipeline"])]},
+        "lifecycle": {"action": ["state"], "nodes": ["ingest"]},
     }
     return table[command]
 

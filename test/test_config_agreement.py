@@ -27,7 +27,9 @@ from shm_ros.ros.track_node import TrackNodeConfig
 from shm_ros.ros.update_node import UpdateNodeConfig
 
 ROOT = Path(__file__).resolve().parents[1]
-ROS_OWN = {"use_sim_time", "start_type_description_service"}  # every rclpy node has these
+# every rclpy node has the first two; every managed node of the project has autostart
+ROS_OWN = {"use_sim_time", "start_type_description_service", "autostart"}
+CLI_OWN = {"help", "overwrite"}  # every command writing outputs refuses a non-empty --out without --overwrite
 
 # stage -> (core configuration, the node's own settings, node start parameters,
 #           node-only parameters, command-only options, in both but required on the command line)
@@ -81,7 +83,7 @@ def _command_options(command: str) -> dict[str, argparse.Action]:
     from shm_ros.cli import build_parser
 
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    return {a.dest: a for a in sub.choices[command]._actions if a.dest != "help"}
+    return {a.dest: a for a in sub.choices[command]._actions if a.dest not in CLI_OWN}
 
 
 @pytest.mark.parametrize("stage", sorted(STAGES))

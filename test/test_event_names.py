@@ -6,6 +6,7 @@ and the report's summary."""
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -46,7 +47,7 @@ def _summary(res) -> str:
 
 
 def test_example_girder_traffic_is_no_earthquake(tmp_path):
-    sc = yaml.safe_load(open("examples/main_job.yaml"))["girder"]["scenario"]
+    sc = yaml.safe_load(open(Path(__file__).resolve().parents[1] / "shm_ros" / "examples_data" / "main_job.yaml"))["girder"]["scenario"]
     fields = {k: v for k, v in sc.items() if k not in ("scenario", "effects")}
     fields.update(n_windows=6, window_s=120.0, pause_s=2.0, vehicles_per_hour=1200.0)
     camp = simulate_campaign(named_scenario("girder", **fields))

@@ -40,4 +40,4 @@ def test_the_worked_example_runs_with_one_command(tmp_path):
         png = out / "explain" / f"explain_example_{name}.png"
         assert png.stat().st_size > size
         img = imread(png)
-        assert min(img.shape[:2]) > 200 and img[..., :3].std() > 0.05, (name, img.shape)  # drawn, not blank
+        assert img.shape[1] > 200 and img.shape[0] > 100 and img[..., :3].std() > 0.05, (name, img.shape)  # drawn

@@ -205,6 +205,6 @@ def test_cli_reports_the_band_and_the_filters(tmp_path, capsys):
     assert conf["identify"]["nominal_frequencies_hz"]
     # an explicit option wins
     assert main(["identify", str(d / "bag"), "--structure", str(d / "structure.yaml"), "--out",
-                 str(out), "--window", "120", "--block-rows", "24", "--band", "off"]) == 0
+                 str(out), "--window", "120", "--block-rows", "24", "--band", "off", "--overwrite"]) == 0
     (rec,) = json.loads(out.read_text())["windows"]
     assert rec["band"]["block_rows"] == 24 and rec["band"]["decimation"] == 1

@@ -118,7 +118,9 @@ def test_report_opens_in_chromium(report, tmp_path):
     from shm_ros.report.sections import builders
 
     files, _ = report
-    assert files.sections == [b.key for b in builders()], "every stage was given: every section must be there"
+    # every stage was given (a roving campaign's section is for robots' multi-setup recordings only)
+    expected = [b.key for b in builders() if b.key != "roving"]
+    assert files.sections == expected, "every stage was given: every section must be there"
     shot = tmp_path / "report.png"
     r = run_chromium(files.html, tmp_path, f"--screenshot={shot}", "--window-size=1400,3000")
     assert r.returncode == 0, r.stderr[-3000:]
@@ -134,7 +136,7 @@ def test_report_opens_in_chromium(report, tmp_path):
     assert not page_errors(d.stderr), "\n".join(page_errors(d.stderr))
     dom = Images()
     dom.feed(d.stdout)
-    missing = [b.key for b in builders() if section_anchor(b.key) not in dom.ids]
+    missing = [k for k in expected if section_anchor(k) not in dom.ids]
     assert not missing, f"sections missing from the rendered page: {missing}"
     assert len(dom.srcs) == len(files.figures) > 0
     assert all(s.startswith("data:image/png;base64,") for s in dom.srcs), "an image is not embedded"

@@ -1,12 +1,13 @@
 """Finished bags of a batch, kept in its output folder so that a killed batch resumes where it stopped.
 
-Each bag's job writes its result to ``OUT/.bags/<key>.pkl`` as soon as it is done (written to a
+Each bag's job writes its result to ``OUT/.bags/<key>.json`` as soon as it is done (written to a
 temporary file, then renamed: a job killed half-way leaves nothing). The key covers what the result
 depends on: the bag's path and files (names, sizes, modification times), the structure file's
 content and the batch settings; a bag that changed, or a batch run with other settings, is
 identified again. A restarted batch loads the finished bags and runs the others only; a batch that
-has written its outputs removes the folder. The files are
-Python pickles of the batch's own results: read them only from output folders you wrote.
+has written its outputs removes the folder. The files are in the typed, data-only encoding of
+:mod:`shm_ros.io.checkpoint` (never a pickle: reading a crafted file cannot run code; a file that does
+not decode is redone).
 """
 
 from __future__ import annotations
@@ -14,15 +15,17 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import pickle
 import shutil
 from dataclasses import asdict
 from pathlib import Path
 
 from shm_ros.batch.archive import ArchiveBag
 from shm_ros.batch.jobs import BagResult, BatchSettings, identify_bag
+from shm_ros.io.checkpoint import CheckpointError, Codec
+from shm_ros.io.store import CHECKPOINT_CLASSES
 
 FOLDER = ".bags"
+_CODEC = Codec([BagResult, *CHECKPOINT_CLASSES])
 
 
 def _files(bag: Path) -> list[tuple[str, int, int]]:
@@ -40,15 +43,14 @@ def key(item: ArchiveBag, settings: BatchSettings) -> str:
 
 
 def path_for(out: str | Path, item: ArchiveBag, settings: BatchSettings) -> Path:
-    return Path(out) / FOLDER / f"{key(item, settings)}.pkl"
+    return Path(out) / FOLDER / f"{key(item, settings)}.json"
 
 
 def load(path: Path) -> BagResult | None:
     """The finished bag's result, or None (not finished, or unreadable: then it is redone)."""
     try:
-        with open(path, "rb") as fh:
-            result = pickle.load(fh)
-    except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError):
+        result = _CODEC.loads(path.read_bytes())
+    except (OSError, CheckpointError):
         return None
     return result if isinstance(result, BagResult) else None
 
@@ -60,8 +62,7 @@ def identify_bag_kept(job: tuple[ArchiveBag, BatchSettings, str]) -> BagResult:
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = target.with_name(f"{target.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as fh:
-        pickle.dump(result, fh, protocol=pickle.HIGHEST_PROTOCOL)
+    tmp.write_bytes(_CODEC.dumps(result))
     os.replace(tmp, target)
     return result
 

@@ -16,12 +16,14 @@ ACTIONS = ("up", "down", "configure", "activate", "deactivate", "cleanup", "shut
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
+    from shm_ros.commands.checks import positive_float
+
     p = sub.add_parser("lifecycle", help="bring managed nodes up or down (lifecycle_msgs services)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("action", choices=ACTIONS)
     p.add_argument("nodes", nargs="+", metavar="NODE", help="node names (e.g. ingest identify, or /bridge_a/ingest)")
     p.add_argument("--namespace", default="", metavar="NS", help="namespace of relative node names (e.g. /bridge_a)")
-    p.add_argument("--timeout", type=float, default=60.0, help="seconds to wait for each service (default 60)")
+    p.add_argument("--timeout", type=positive_float, default=60.0, help="seconds to wait for each service (default 60)")
     p.set_defaults(func=run)
 
 

@@ -45,8 +45,9 @@ from shm_ros.io.checkpoint import CheckpointError, Codec
 log = logging.getLogger(__name__)
 CHECKPOINT_MAGIC = b"shm-ros-checkpoint 1\n"  # then the tracker's state (shm_ros.io.checkpoint)
 # what a tracker's state may hold; its configuration and structure come from the node, not the file
-_CODEC = Codec([ReferenceMode, EnvironmentalFit, PcaModel, NoveltyChart, ModalEstimate, Mode, EnvModel,
-                ReferenceSource])
+CHECKPOINT_CLASSES = (ReferenceMode, EnvironmentalFit, PcaModel, NoveltyChart, ModalEstimate, Mode, EnvModel,
+                      ReferenceSource)
+_CODEC = Codec(CHECKPOINT_CLASSES)
 _NOT_STATE = ("config", "structure")
 
 SCHEMA_VERSION = 1

@@ -18,9 +18,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from shm_ros.core.band import nominal_frequencies
+from shm_ros.core.delay import shift
 from shm_ros.core.identify import IdentifyConfig, identify_prepared
 from shm_ros.core.preprocess import PreprocessConfig, decimate, preprocess
-from shm_ros.core.roving.clock import estimate_clock_offset, shift
+from shm_ros.core.roving.clock import estimate_clock_offset
 from shm_ros.core.roving.merge_post import GlobalMode, merge_post
 from shm_ros.core.roving.merge_pre import merge_pre
 from shm_ros.core.roving.offline import MergeMethod

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.signal as sig
 from scipy.spatial.transform import Rotation
 
-from shm_ros.core.roving.clock import shift
+from shm_ros.core.delay import shift
 from shm_ros.core.simulate.campaign import rng_for
 from shm_ros.core.simulate.effects import Conditions
 from shm_ros.core.simulate.truth import ModalTruth, build_truth
