@@ -107,7 +107,7 @@ def _verdict(args: argparse.Namespace, spec, config):
         from shm_ros.io.tracked_source import tracked_observations_from_bag
 
         model = build_model(spec)
-        observed = [s for s in spec.sensor_ids if s in model.sensor_rows]
+        observed = model.observed_sensors(spec.sensor_ids)
         obs = tracked_observations_from_bag(
             args.bag, spec, observed, args.window,
             lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))

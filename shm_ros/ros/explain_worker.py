@@ -19,7 +19,7 @@ def init(structure: str) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the node ends this process, not Ctrl-C
     spec = load_structure(structure)
     model = build_model(spec)
-    _state.update(spec=spec, sensors=[s for s in spec.sensor_ids if s in model.sensor_rows])
+    _state.update(spec=spec, sensors=model.observed_sensors(spec.sensor_ids))
 
 
 def ready() -> bool:

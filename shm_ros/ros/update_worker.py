@@ -50,7 +50,7 @@ def run(windows: list, kind: str, config: UpdateConfig, warm_start: Posterior | 
     from shm_ros.core.bayes.update import update
 
     spec, model = _state["spec"], _state["model"]
-    sensors = [s for s in spec.sensor_ids if s in model.sensor_rows]
+    sensors = model.observed_sensors(spec.sensor_ids)
     if kind == "tracked":
         from shm_ros.core.bayes.tracked import observations_from_rows
 

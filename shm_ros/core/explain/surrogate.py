@@ -94,10 +94,6 @@ class Surrogate:
         self._tables: dict[str, _Table] = {}
         self._ritz: dict[tuple[str, ...], tuple] = {}
 
-    @property
-    def f_base(self) -> np.ndarray:
-        return np.exp(self.log_f_base)
-
     # -- sensitivities ---------------------------------------------------------------------------
     def sensitivities(self) -> dict[str, np.ndarray]:
         """d ln f / d x at x = 1 per group, (K,) for the tracked modes (exact eigen-derivative)."""
@@ -172,10 +168,6 @@ class Surrogate:
         t = _Table(float(x[0]), float(x[-1]), float(u[0]), float(h), CubicSpline(u, logf, axis=0).c, shapes)
         self._tables[group] = t
         return t
-
-    def prepare(self, group: str, lo: float, hi: float) -> None:
-        """Tabulate ``group`` over factors [lo, hi] ahead of the fit (the table grows on demand anyway)."""
-        self._table(group, lo, hi)
 
     # -- several groups: reduced Ritz basis -------------------------------------------------------
     def _ritz_basis(self, names: tuple[str, ...]) -> tuple:
