@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 import synthetic_oma as so
 
+from shm_ros.core.delay import shift
 from shm_ros.core.identify import IdentifyConfig, identify_array
 from shm_ros.core.modal import mac
 from shm_ros.core.preprocess import PreprocessConfig, preprocess
-from shm_ros.core.roving.clock import estimate_clock_offset, shift
+from shm_ros.core.roving.clock import estimate_clock_offset
 from shm_ros.core.roving.merge_post import merge_post, pair_modes
 from shm_ros.core.roving.merge_pre import merge_pre
 from shm_ros.core.types import ModalEstimate, Mode
