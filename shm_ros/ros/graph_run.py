@@ -77,6 +77,12 @@ def verdict_record(msg: Any) -> dict[str, Any]:
             "model_fits": msg.model_fits if msg.model_fits_known else None}
 
 
+def _level(status: Any) -> int:
+    """A DiagnosticStatus level as an int (the bag's decoder gives a byte)."""
+    level = status.level
+    return int.from_bytes(level, "little") if isinstance(level, bytes) else int(level)
+
+
 def read_pipeline_bag(path: Path, namespace: str = "") -> PipelineRecord:
     """Everything the recorder node of the graph in ``namespace`` recorded, decoded (of the global
     ``/diagnostics``, the statuses of that graph's nodes)."""
@@ -114,11 +120,10 @@ def read_pipeline_bag(path: Path, namespace: str = "") -> PipelineRecord:
         elif topic == topics.DIAGNOSTICS:
             statuses = [st for st in msg.status if st.name.startswith(mine) and (
                 mine or "/" not in st.name.split(":")[0])]  # at the root: not a namespaced graph's
-            rec.diagnostics += [f"{s.name}: {s.message}" for s in statuses if s.level != 0]
+            rec.diagnostics += [f"{s.name}: {s.message}" for s in statuses if _level(s) != 0]
             for st in statuses:
                 values = {kv.key: kv.value for kv in st.values}
-                rec.diagnostic_rows.append({"level": int.from_bytes(st.level, "little") if isinstance(
-                    st.level, bytes) else int(st.level), "source": st.name, "message": st.message,
+                rec.diagnostic_rows.append({"level": _level(st), "source": st.name, "message": st.message,
                     "code": values.get("code", st.hardware_id or ""), "values": values})
     return rec
 
