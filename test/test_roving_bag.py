@@ -34,3 +34,13 @@ def test_bag_round_trip_gives_the_same_global_modes(tmp_path):
     sec = RovingSection().build(ReportInputs(roving=doc), tmp_path / "fig")
     assert sec is not None and len(sec.tables[0].rows) == 3 and len(sec.tables[1].rows) == len(b.global_modes)
     assert sec.figures[0].png.exists() and "s_ref1" in sec.figures[0].data.read_text()
+
+
+def test_identification_section_leaves_a_roving_campaign_to_its_own_section(tmp_path):
+    from shm_ros.report.inputs import IdentifyInputs
+    from shm_ros.report.sections.identify import IdentifySection
+
+    doc = {"setups": [], "global_modes": [], "roving": {}}
+    empty = IdentifyInputs(estimates=[], method="ssi-cov")
+    assert IdentifySection().build(ReportInputs(identify=empty, roving=doc), tmp_path) is None
+    assert IdentifySection().build(ReportInputs(identify=empty), tmp_path) is not None

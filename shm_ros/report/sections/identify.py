@@ -51,8 +51,8 @@ class IdentifySection:
 
     def build(self, inputs: ReportInputs, fig_dir: Path) -> Section | None:
         ident = inputs.identify
-        if ident is None:
-            return None
+        if ident is None or (not ident.estimates and inputs.roving):
+            return None  # a roving campaign's modes.json: the roving section shows its setups
         ests = sorted(ident.estimates, key=lambda e: e.start_ns)
         s = Section(self.key, self.title)
         n_modes = [len(e.modes) for e in ests]
