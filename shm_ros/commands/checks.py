@@ -19,11 +19,15 @@ import math
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from types import TracebackType
+from typing import TypeVar
 
 from shm_ros.errors import InputError
 from shm_ros.io.atomic import DiskFullError, partial_name, replace_entry
+
+N = TypeVar("N", int, float)
 
 __all__ = ["Outputs", "add_overwrite", "count", "finite_float", "input_file", "input_path", "nonneg_float",
            "nonneg_int", "output_dir", "output_file", "output_new", "positive_float", "positive_int"]
@@ -42,20 +46,6 @@ def finite_float(text: str) -> float:
     return v
 
 
-def positive_float(text: str) -> float:
-    v = finite_float(text)
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
-    return v
-
-
-def nonneg_float(text: str) -> float:
-    v = finite_float(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
-    return v
-
-
 def _integer(text: str) -> int:
     try:
         return int(text)
@@ -63,32 +53,27 @@ def _integer(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
 
 
-def positive_int(text: str) -> int:
-    v = _integer(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
-    return v
+def _at_least(parse: Callable[[str], N], low: float, name: str, *, strict: bool = False) -> Callable[[str], N]:
+    """``parse`` then refuse a value below ``low`` (or equal to it when ``strict``)."""
+    def check(text: str) -> N:
+        v = parse(text)
+        if v < low or (strict and v == low):
+            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {low:g}, got {text!r}")
+        return v
+    check.__name__ = name
+    return check
 
 
-def nonneg_int(text: str) -> int:
-    v = _integer(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
-    return v
-
-
+positive_float = _at_least(finite_float, 0, "positive_float", strict=True)
+nonneg_float = _at_least(finite_float, 0, "nonneg_float")
+positive_int = _at_least(_integer, 1, "positive_int")
+nonneg_int = _at_least(_integer, 0, "nonneg_int")
 count = positive_int
 
 
-def min_float(low: float):
+def min_float(low: float) -> Callable[[str], float]:
     """A finite number >= ``low`` (e.g. a window of at least one second)."""
-    def check(text: str) -> float:
-        v = finite_float(text)
-        if v < low:
-            raise argparse.ArgumentTypeError(f"must be >= {low:g}, got {text!r}")
-        return v
-    check.__name__ = f"number>={low:g}"
-    return check
+    return _at_least(finite_float, low, f"number>={low:g}")
 
 
 # -- paths ---------------------------------------------------------------------------------------
