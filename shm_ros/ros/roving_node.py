@@ -191,11 +191,18 @@ class RovingNode(ManagedNode):
             if handle.is_cancel_requested:
                 handle.canceled()
                 return self._result(RecordPoint.Result(), advice, handle.request.point_id)
-            with self.lock:
-                ready = self.core.recorded_s() >= self.settings.advise_every_s * (step + 1) - 1e-9
-                if ready:
-                    step += 1
-                    advice = self.core.advise()
+            try:
+                with self.lock:
+                    ready = self.core.recorded_s() >= self.settings.advise_every_s * (step + 1) - 1e-9
+                    if ready:
+                        step += 1
+                        advice = self.core.advise()
+            except Exception as exc:  # noqa: BLE001 - one bad estimate ends this goal, never the node
+                self.diag.report("error", f"no estimate at {handle.request.point_id}: {exc}", ACTION)
+                handle.abort()
+                out = self._result(RecordPoint.Result(), advice, handle.request.point_id)
+                out.reasons = list(out.reasons) + [f"estimate failed: {exc}"]
+                return out
             if not ready:
                 time.sleep(0.02)
                 continue

@@ -85,6 +85,8 @@ class _Stream:
         self.n += len(times_ns)
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        if not self.times:
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
         if len(self.times) > 1:
             self.times, self.values = [np.concatenate(self.times)], [np.concatenate(self.values)]
         return self.times[0], self.values[0]
@@ -135,6 +137,8 @@ class LiveRoving:
         t0, _ = self.streams[self.references[0]].arrays()
         refs = {r: self.streams[r].arrays()[1][:n] for r in self.references}
         rov = {s.id: self.streams[s.id].arrays()[1][:n].reshape(n, 3) for s in self.spec.roving}
+        if t0.size < n:
+            raise InputError(f"reference {self.references[0]!r}: fewer stamps than samples")
         return t0[:n], refs, rov
 
     @property
