@@ -58,6 +58,8 @@ NODES: tuple[NodeKind, ...] = (
     NodeKind("explain", "tracked modes (and event windows) in, verdicts on missing physics out (a worker process)",
              ("shm_ros.ros.explain_node:ExplainNodeConfig", "shm_ros.core.explain.config:ExplainConfig")),
     NodeKind("recorder", "pipeline topics into a bag", ("shm_ros.ros.recorder_node:RecorderNodeConfig",)),
+    NodeKind("roving", "roving sensors and tf in, advice to the robot (RecordPoint action) and global modes out",
+             ("shm_ros.ros.roving_node:RovingNodeConfig",)),
 )
 KINDS: tuple[str, ...] = tuple(n.kind for n in NODES)
 

@@ -203,7 +203,7 @@ class RovingNode(ManagedNode):
                 out = self._result(RecordPoint.Result(), advice, handle.request.point_id)
                 out.reasons = list(out.reasons) + [f"estimate failed: {exc}"]
                 return out
-            if not ready:
+            if not ready or advice is None:
                 time.sleep(0.02)
                 continue
             handle.publish_feedback(RecordPoint.Feedback(

@@ -193,11 +193,8 @@ class LiveRoving:
         freqs, stds = [], []
         for f0 in self._targets(modes):
             g = self._closest(modes, f0, p)
-            if g is None:
-                freqs.append(np.nan), stds.append(np.nan)
-                continue
-            freqs.append(g.frequency_hz)
-            stds.append(self._point_std(g, y, fs))
+            freqs.append(np.nan if g is None else g.frequency_hz)
+            stds.append(np.nan if g is None else self._point_std(g, y, fs))
         self._history.append(freqs)
         hist = [[h[m] for h in self._history if np.isfinite(h[m])] for m in range(n)]
         verdict = setup_enough(stds, hist, a.shape_std_max, a.frequency_tol, a.n_stable)
