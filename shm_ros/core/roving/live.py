@@ -26,9 +26,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.signal as sig
+from scipy.optimize import linear_sum_assignment
 
 from shm_ros.core.band import nominal_frequencies
 from shm_ros.core.identify import identify_prepared
+from shm_ros.core.modal import mac
 from shm_ros.core.roving.advice import next_point, setup_enough
 from shm_ros.core.roving.merge_post import GlobalMode, merge_post
 from shm_ros.core.roving.pipeline import AXIS, RovingConfig, RovingResult, prepare_setup, roving_modes
@@ -191,8 +193,7 @@ class LiveRoving:
                                         or nominal_frequencies(self.spec, 6))).estimate
         modes = merge_post(self.finished + [est], self.references)
         freqs, stds = [], []
-        for f0 in self._targets(modes):
-            g = self._closest(modes, f0, p)
+        for g in self._interest(modes, p):
             freqs.append(np.nan if g is None else g.frequency_hz)
             stds.append(np.nan if g is None else self._point_std(g, y, fs))
         self._history.append(freqs)
@@ -225,17 +226,24 @@ class LiveRoving:
         y, self._names = setup_channels(setup, {r: v[start:] for r, v in refs.items()}, along)
         return y, fs
 
-    def _targets(self, modes: list[GlobalMode]) -> list[float]:
-        """The modes of interest's frequencies: the nominal ones, or the global mode nearest each."""
-        out = []
-        for f0 in self.nominal:
-            near = [g.frequency_hz for g in modes if abs(g.frequency_hz / f0 - 1) <= self.advice.frequency_match]
-            out.append(min(near, key=lambda f: abs(f / f0 - 1)) if near else f0)
+    def _interest(self, modes: list[GlobalMode], point: str) -> list[GlobalMode | None]:
+        """The global mode (with a component at ``point``) that is each mode of interest: one optimal
+        assignment on the frequency's distance from the nominal one (within ``frequency_match``) and
+        the MAC of the references' components against the nominal model's."""
+        cands = [g for g in modes if point in g.shape]
+        if not cands:
+            return [None] * len(self.nominal)
+        ref_nominal = self.rows(self.references)
+        ref_found = np.array([[g.shape[r] for r in self.references] for g in cands])
+        df = np.abs(np.array([g.frequency_hz for g in cands])[None, :] / np.array(self.nominal)[:, None] - 1)
+        m = mac(ref_nominal.T[:, None, :], ref_found[None, :, :]) if len(self.references) > 1 else np.ones(df.shape)
+        ok = df <= self.advice.frequency_match
+        rows, cols = linear_sum_assignment(np.where(ok, df / self.advice.frequency_match + (1 - m), 1e6))
+        out: list[GlobalMode | None] = [None] * len(self.nominal)
+        for r, c in zip(rows, cols, strict=True):
+            if ok[r, c]:
+                out[r] = cands[c]
         return out
-
-    def _closest(self, modes: list[GlobalMode], f0: float, point: str) -> GlobalMode | None:
-        near = [g for g in modes if point in g.shape and abs(g.frequency_hz / f0 - 1) <= self.advice.frequency_match]
-        return min(near, key=lambda g: abs(g.frequency_hz / f0 - 1)) if near else None
 
     def _point_std(self, g: GlobalMode, y: np.ndarray, fs: float) -> float:
         """The point's shape std of mode ``g`` (module doc): transmissibility error and merge std."""
