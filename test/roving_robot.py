@@ -136,6 +136,15 @@ class Robot:
         self.i = max(self.i, i_end)
         self.spin_until(lambda: self.acked >= self.published, 120.0, f"{self.published} samples taken")
 
+    def goal_accepted(self, point: str) -> bool:
+        """Send a goal for ``point`` and say whether the node accepted it (cancelled at once if so)."""
+        fut = self.client.send_goal_async(self.RecordPoint.Goal(point_id=point))
+        self.spin_until(fut.done, 30.0, "the goal's answer")
+        handle = fut.result()
+        if handle.accepted:
+            handle.cancel_goal_async()
+        return bool(handle.accepted)
+
     def record_at(self, point: str, i0: int, i1: int, chunk_s: float = 5.0) -> Goal:
         """Stand at ``point`` over samples [i0, i1): send the goal, publish ``chunk_s`` at a time and
         wait for the estimate of each; leave (cancel) at the end of the dwell or once enough."""

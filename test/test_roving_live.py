@@ -46,6 +46,7 @@ def _first_setup(noise: float):
     try:
         robot.load(rec)
         robot.wait_for_node()
+        assert not robot.goal_accepted("p99")  # not a measurement point: refused, the node lives on
         _, t0, t1, point = rec.phases[0]
         i0, i1 = np.searchsorted(rec.times_ns * 1e-9, [t0, t1 + 1e-6])
         return robot.record_at(point, int(i0), int(i1))
