@@ -110,10 +110,11 @@ def test_the_launch_file_starts_what_shm_ros_run_starts(launch_stand_ins):
     launched = _launched({})
     shipped = launch_stand_ins / "config" / "pipeline.yaml"
     assert launched == _supervised(shipped)
-    # every node of the registry, explain included, each respawned, each with the file's parameters
-    from shm_ros.ros.registry import KINDS
+    # every node of the registry's shipped graph, explain included, each respawned, each with the
+    # file's parameters
+    from shm_ros.ros.registry import DEFAULT_KINDS
 
-    assert set(launched) == set(KINDS)
+    assert set(launched) == set(DEFAULT_KINDS)
     file = yaml.safe_load(shipped.read_text())
     for name, node in launched.items():
         assert node["respawn"] is True and node["respawn_delay"] > 0

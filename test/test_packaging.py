@@ -55,6 +55,8 @@ DEPENDENCIES: dict[str, tuple[str, str | None]] = {
     "rosgraph_msgs": ("rosgraph_msgs", None),
     "shm_interfaces": ("shm_interfaces", None),
     "lifecycle_msgs": ("lifecycle_msgs", None),
+    "geometry_msgs": ("geometry_msgs", None),
+    "tf2_msgs": ("tf2_msgs", None),
 }
 
 

@@ -29,6 +29,8 @@ class NodeKind:
     #: configuration dataclasses whose options are the node's parameters, as ``module:Class``
     configs: tuple[str, ...]
     respawn: bool = True
+    #: part of the shipped graph (config/pipeline.yaml); False: started where a graph file names it
+    default: bool = True
 
     @property
     def module(self) -> str:
@@ -58,8 +60,12 @@ NODES: tuple[NodeKind, ...] = (
     NodeKind("explain", "tracked modes (and event windows) in, verdicts on missing physics out (a worker process)",
              ("shm_ros.ros.explain_node:ExplainNodeConfig", "shm_ros.core.explain.config:ExplainConfig")),
     NodeKind("recorder", "pipeline topics into a bag", ("shm_ros.ros.recorder_node:RecorderNodeConfig",)),
+    NodeKind("roving", "roving sensors and tf in, advice to the robot (RecordPoint action) and global modes out "
+             "(for a structure with roving sensors; not in the shipped graph)",
+             ("shm_ros.ros.roving_node:RovingNodeConfig",), default=False),
 )
 KINDS: tuple[str, ...] = tuple(n.kind for n in NODES)
+DEFAULT_KINDS: tuple[str, ...] = tuple(n.kind for n in NODES if n.default)
 
 
 def node_kind(kind: str) -> NodeKind:

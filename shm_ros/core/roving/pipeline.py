@@ -20,7 +20,7 @@ import numpy as np
 from shm_ros.core.band import nominal_frequencies
 from shm_ros.core.delay import shift
 from shm_ros.core.identify import IdentifyConfig, identify_prepared
-from shm_ros.core.preprocess import PreprocessConfig, decimate, preprocess
+from shm_ros.core.preprocess import Prepared, PreprocessConfig, decimate, preprocess
 from shm_ros.core.roving.clock import estimate_clock_offset
 from shm_ros.core.roving.merge_post import GlobalMode, merge_post
 from shm_ros.core.roving.merge_pre import merge_pre
@@ -39,7 +39,7 @@ from shm_ros.core.roving.transforms import TransformBuffer
 from shm_ros.core.structure import StructureSpec
 from shm_ros.errors import NoWindowsError
 
-__all__ = ["RovingConfig", "RovingResult", "roving_modes"]
+__all__ = ["RovingConfig", "RovingResult", "prepare_setup", "roving_modes"]
 
 AXIS = {"vertical": 2, "x": 0, "y": 1}
 
@@ -78,6 +78,17 @@ class RovingResult:
                            "clock_offset_s": self.clock_offset_s, "notes": list(self.notes)}}
 
 
+def prepare_setup(y: np.ndarray, names: list[str], n_ref: int, fs: float, cfg: RovingConfig
+                  ) -> tuple[float, Prepared]:
+    """One setup's channels (references first): the roving sensors' clock offset, and the data
+    pre-processed for identification with that offset corrected (``cfg.correct_clock``)."""
+    off = estimate_clock_offset(y[:, n_ref], y[:, :n_ref], fs).offset_s
+    if cfg.correct_clock:
+        y = y.copy()
+        y[:, n_ref:] = shift(y[:, n_ref:], fs, off)
+    return off, preprocess(y, fs, names, PreprocessConfig())
+
+
 def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, references: Mapping[str, np.ndarray],
                  roving: Mapping[str, np.ndarray], buffer: TransformBuffer, config: RovingConfig | None = None
                  ) -> RovingResult:
@@ -98,12 +109,9 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
     offsets, preps = [], []
     for setup in cut.setups:
         y, names = setup_channels(setup, references, along)
-        n_ref = len(refs)
-        off = estimate_clock_offset(y[:, n_ref], y[:, :n_ref], fs).offset_s
+        off, prep = prepare_setup(y, names, len(refs), fs, cfg)
         offsets.append(off)
-        if cfg.correct_clock:
-            y[:, n_ref:] = shift(y[:, n_ref:], fs, off)
-        preps.append(preprocess(y, fs, names, PreprocessConfig()))
+        preps.append(prep)
     notes = [f"{len(cut.setups)} setups; clock offset of the roving sensors {1e3 * float(np.median(offsets)):.1f} ms "
              f"({'corrected' if cfg.correct_clock else 'not corrected'})"]
     results = [identify_prepared(p, icfg) for p in preps]

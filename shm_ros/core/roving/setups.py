@@ -45,6 +45,7 @@ class SensorTrack:
     acceleration: np.ndarray | None
     valid: np.ndarray
     gaps: list[Gap]
+    tf_period_s: float = 0.0  # the chain's longest median period (the setups' edge guard)
 
 
 def sensor_track(buffer: TransformBuffer, structure_frame: str, sensor: RovingSensorSpec, times_ns: np.ndarray,
@@ -61,7 +62,8 @@ def sensor_track(buffer: TransformBuffer, structure_frame: str, sensor: RovingSe
     look = buffer.lookup(structure_frame, sensor.frame, times)
     acc = None if acceleration is None else look.rotate(np.asarray(acceleration, dtype=float).reshape(-1, 3))
     gaps = buffer.gaps(structure_frame, sensor.frame, int(times[0]), int(times[-1])) if times.size else []
-    return SensorTrack(sensor.id, times, look.translation, acc, look.valid, gaps)
+    return SensorTrack(sensor.id, times, look.translation, acc, look.valid, gaps,
+                       buffer.period_s(structure_frame, sensor.frame))
 
 
 @dataclass
@@ -162,14 +164,38 @@ def cut_setups(tracks: Sequence[SensorTrack], points: Sequence[MeasurementPoint]
         setups.append(Setup(len(setups) + 1, {tr.sensor: points[key[a][j]].id for j, tr in enumerate(tracks)},
                             [(a, b)], int(times[a]), int(times[b - 1])))
     kept: list[Setup] = []
+    guard = int(np.ceil(max(tr.tf_period_s for tr in tracks) / dt - 1e-9))
     for s in setups:
         if s.samples >= min_n:
             s.id = len(kept) + 1
             kept.append(s)
+            _guard_edges(s, idx, guard, times)
         else:
             short += s.samples
+    at_point = np.all(idx >= 0, axis=1)
     gaps = sorted({g for tr in tracks for g in tr.gaps}, key=lambda g: g.start_ns)
     return SetupCut(kept, int(np.sum(~at_point & ~missing)), int(np.sum(missing)), short, gaps, idx)
+
+
+def _guard_edges(setup: Setup, idx: np.ndarray, guard: int, times: np.ndarray) -> None:
+    """Leave out ``guard`` samples (one tf period) at each end of the setup's segments where the robot
+    arrived or left (not at the recording's ends, nor next to a missing transform): the filtered
+    position says when it arrived or left only to within a tf period, and the samples of that
+    period may hold its ride vibration, far stronger than the structure's response."""
+    if guard <= 0:
+        return
+    segs = []
+    n = idx.shape[0]
+    for a, b in setup.segments:
+        head = guard if a > 0 and not np.any(idx[a - 1] == -2) else 0
+        tail = guard if b < n and not np.any(idx[b] == -2) else 0
+        if b - a > head + tail:
+            idx[a:a + head] = -1
+            idx[b - tail:b] = -1
+            segs.append((a + head, b - tail))
+    if segs:
+        setup.segments = segs
+        setup.start_ns, setup.end_ns = int(times[segs[0][0]]), int(times[segs[-1][1] - 1])
 
 
 def setup_channels(setup: Setup, references: Mapping[str, np.ndarray], roving: Mapping[str, np.ndarray]

@@ -77,10 +77,12 @@ class _Edge:
         return (np.asarray(self.stamps, dtype=np.int64), np.asarray(self.translations, dtype=float),
                 np.asarray(self.rotations, dtype=float))
 
-    def max_gap_ns(self) -> float:
+    def period_ns(self) -> float:
         t = np.asarray(self.stamps, dtype=np.int64)
-        period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-        return max(MIN_GAP_S * 1e9, GAP_PERIODS * period)
+        return float(np.median(np.diff(t))) if t.size > 1 else 0.0
+
+    def max_gap_ns(self) -> float:
+        return max(MIN_GAP_S * 1e9, GAP_PERIODS * self.period_ns())
 
 
 class TransformBuffer:
@@ -211,6 +213,13 @@ class TransformBuffer:
         out_t[valid] = np.column_stack([np.interp(xq, x, tr[:, j]) for j in range(3)])
         out_q[valid] = Slerp(x, Rotation.from_quat(q))(xq).as_quat()
         return out_t, out_q, valid
+
+    def period_s(self, target: str, source: str) -> float:
+        """The longest median period of the chain's dynamic edges (s; 0 for a static chain): how
+        finely in time the chain's position is known."""
+        up_s, up_t = self.chain(target, source)
+        edges = [self._edges[c] for c in up_s[:-1] + up_t[:-1]]
+        return max([e.period_ns() * 1e-9 for e in edges if not e.static], default=0.0)
 
     def gaps(self, target: str, source: str, start_ns: int, end_ns: int) -> list[Gap]:
         """Every stretch inside [start_ns, end_ns] where an edge of the chain ``target <- source`` has
