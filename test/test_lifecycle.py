@@ -1,12 +1,15 @@
 """Managed nodes: a lifecycle manager drives the graph through the standard lifecycle_msgs services.
 
-* A structure file with a bad field fails the ingest node's ``configure`` transition (the service
+One graph, ``shm-ros run --no-autostart --namespace /lc``: ingest and a recorder start unconfigured.
+
+* Its structure file has a bad field: the ingest node's ``configure`` transition fails (the service
   answers ``success: false``, the node stays unconfigured) with that field in the reason (on
   /diagnostics and in the log); the node stays up, and once the file is fixed ``configure`` succeeds.
-* ``shm-ros run --no-autostart --namespace /lc`` starts ingest and a recorder unconfigured; driven by
-  the services they come up (configure, activate: their topics appear, a replayed bag comes out as
-  windows in the recorder's bag) and go down (deactivate: no more heartbeats; cleanup: their topics
-  are gone and the bag is closed), and come up again (``shm-ros lifecycle up``).
+* Driven by the services the nodes come up (configure, activate: their topics appear, a replayed bag
+  comes out as windows in the recorder's bag) and go down (deactivate: no more heartbeats; cleanup:
+  their topics are gone and the bag is closed), and come up again (``shm-ros lifecycle up``).
+
+Both points share one graph start (the nodes' start-up is most of the test's time).
 """
 
 from __future__ import annotations
@@ -20,7 +23,6 @@ import numpy as np
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from ros_helpers.graph import node_process, stop
 from shm_interfaces.msg import Window
 from test_graph_replay import STRUCTURE, _write_bag
 
@@ -53,33 +55,12 @@ def _spin_until(node, pred, timeout: float = 30.0):
     return None
 
 
-def test_a_bad_structure_field_fails_configure_with_the_field(tmp_path, probe):
-    structure = tmp_path / "structure.yaml"
-    structure.write_text(BAD)
-    ingest = node_process("ingest", {"structure": str(structure), "autostart": False})
-    try:
-        client = LifecycleClient(probe, "/ingest")
-        assert client.state(timeout_s=60) == "unconfigured"
-        assert client.transition("configure") is False
-        assert client.state() == "unconfigured"
-        reason = _spin_until(probe, lambda: next((m for n, lvl, m in probe.statuses
-                                                   if n == "ingest: configure" and lvl == 2), None), 10)
-        assert reason and "direction" in reason and str(structure) in reason, probe.statuses
-        structure.write_text(STRUCTURE)  # fixed: the same node configures now
-        assert client.transition("configure") is True and client.state() == "inactive"
-        assert client.transition("activate") is True and client.state() == "active"
-    finally:
-        code, log = stop(ingest)
-    assert code == 0, log[-2000:]
-    assert "direction" in log  # the reason is in the node's log too
-
-
-def test_a_lifecycle_manager_brings_the_graph_up_and_down(tmp_path, probe):
+def test_a_bad_field_fails_configure_then_a_manager_brings_the_graph_up_and_down(tmp_path, probe):
     from shm_ros.io.bags import read_messages
     from shm_ros.ros.replay import replay_bag
 
     structure = tmp_path / "structure.yaml"
-    structure.write_text(STRUCTURE)
+    structure.write_text(BAD)
     bag = tmp_path / "recording"
     _write_bag(bag, "imu", np.random.default_rng(3))
     out = tmp_path / "pipeline"
@@ -94,6 +75,14 @@ def test_a_lifecycle_manager_brings_the_graph_up_and_down(tmp_path, probe):
         clients = [LifecycleClient(probe, n) for n in nodes]
         assert [c.state(timeout_s=60) for c in clients] == ["unconfigured"] * 2
         assert probe.count_publishers("/lc/shm/windows") == 0  # nothing before configure
+
+        # the bad field fails ingest's configure, with the field and the file in the reason
+        assert clients[0].transition("configure") is False
+        assert clients[0].state() == "unconfigured"
+        reason = _spin_until(probe, lambda: next((m for n, lvl, m in probe.statuses
+                                                   if n == "lc/ingest: configure" and lvl == 2), None), 10)
+        assert reason and "direction" in reason and str(structure) in reason, probe.statuses
+        structure.write_text(STRUCTURE)  # fixed: the same node configures now
 
         bring_up(probe, nodes)
         assert [c.state() for c in clients] == ["active"] * 2
@@ -130,3 +119,4 @@ def test_a_lifecycle_manager_brings_the_graph_up_and_down(tmp_path, probe):
         graph.send_signal(signal.SIGINT)
         text, _ = graph.communicate(timeout=60)
     assert graph.returncode == 0, text[-3000:]
+    assert "direction" in text  # the reason is in the node's log too

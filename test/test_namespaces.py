@@ -4,7 +4,8 @@ tracked modes, the same posterior), and nothing of one graph reaches the other's
 recorder holds only its own namespace's topics (and the global /diagnostics), with exactly its own
 windows. The two recordings differ (seed, start day), so a window that crossed over would show.
 
-Reduced size: four 30-s windows per girder, ingest -> identify -> track -> update (short sampler);
+Reduced size: three 20-s windows per girder (tracking's reference period), ingest -> identify -> track ->
+update (a 100-step sampler: the equality is exact whatever its length);
 the two namespaced graphs run one process per node (the deployment), the two references each in one
 process.
 """
@@ -19,7 +20,7 @@ import numpy as np
 
 from shm_ros.cli import main
 
-N_WINDOWS, WINDOW_S = 4, 30.0
+N_WINDOWS, WINDOW_S = 3, 20.0
 STARTS = {"a": "2024-03-01T00:00:00Z", "b": "2024-06-01T00:00:00Z"}
 
 
@@ -33,7 +34,7 @@ def _graph(sim: str, work: str, namespace: str, single_process: bool = False) ->
                                expected_windows=N_WINDOWS, identify={"uncertainty": False},
                                track={"reference_windows": 3, "training_windows": 3, "store": "none"},
                                update={"min_windows": N_WINDOWS, "min_new_windows": N_WINDOWS, "evidence": False,
-                                       "n_steps": 200, "max_steps": 200},
+                                       "n_steps": 100, "max_steps": 100},
                                timeout_s=240.0, namespace=namespace, log=lambda s: None,
                                single_process=single_process)
     assert run.output_bag is not None
