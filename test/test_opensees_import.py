@@ -6,8 +6,7 @@ and OpenSees's own eigen to 0.5 %; ``update`` on modal data simulated from a fin
 (16 elements per span: truth outside the analysis model) puts the truth inside its 95 % interval;
 ``predict``, with a shaker's force added to the imported file as an input, follows the finer girder's
 response to that force (computed here with scipy's ``lsim``, not the project's response code) under
-the posterior; ``explain`` does not work on it yet (xfail: its parameter groups exist for the girder
-and shear-building kinds only).
+the posterior; ``explain`` names a temperature knee on the imported deck's stiffness term.
 
 OpenSeesPy is optional for users but installed by the test set-up (requirements/test.txt): under CI
 (``CI=true``, as ``.ci/run`` sets) its absence fails the tests instead of skipping them.
@@ -31,7 +30,6 @@ from shm_ros.core.bayes.update import UpdateConfig, priors_from_structure, updat
 from shm_ros.core.models import build_model
 from shm_ros.core.observations import ModalObservations
 from shm_ros.core.structure import structure_from_dict
-from shm_ros.errors import ShmError
 from shm_ros.io.structure import load_structure
 
 SCRIPT = Path(__file__).resolve().parent / "data" / "opensees" / "girder.py"
@@ -179,18 +177,17 @@ def test_predict_on_the_imported_model_follows_the_finer_girder(imported, poster
             assert s["peak_inside"], (seed, cid, s)
 
 
-@pytest.mark.xfail(strict=True, raises=(ShmError, ValueError),
-                   reason="explain's parameter groups exist for the girder and shear-building kinds only "
-                          "(core/explain/groups.py); a matrices structure has none yet")
 def test_explain_on_the_imported_model_names_a_temperature_knee(imported):
-    """A deck that stiffens below 0 degC (E_scale 8 % up when frozen) over 32 windows of a finer
-    girder: explain on the imported model names ``temperature_dependent_stiffness``."""
+    """A deck that stiffens below 0 degC (E_scale 8 % up when frozen) over 192 windows (four
+    temperature cycles) of a finer girder: explain on the imported model names
+    ``temperature_dependent_stiffness`` on the imported deck's stiffness term (its parameter groups
+    are the file's terms, core/explain/groups.py), with the knee near 0 degC."""
     from shm_ros.core.explain.config import ExplainConfig
     from shm_ros.core.explain.explain import explain
 
     truth_model = build_model(structure_from_dict(builtin_girder(16)))
     rng = np.random.default_rng(3)
-    temps = 2.0 + 6.0 * np.sin(2 * np.pi * np.arange(32) / 16) + 0.5 * rng.standard_normal(32)
+    temps = 2.0 + 6.0 * np.sin(2 * np.pi * np.arange(192) / 48) + 0.5 * rng.standard_normal(192)
     parts = [synth_modal(truth_model, TRUTH * [1.08 if t < 0 else 1.0, 1.0], list(SENSOR_X), 1, rng) for t in temps]
     obs = ModalObservations(times=600.0 * np.arange(temps.size), mode_numbers=parts[0].mode_numbers,
                             frequencies_hz=np.concatenate([p.frequencies_hz for p in parts]),
@@ -200,6 +197,9 @@ def test_explain_on_the_imported_model_names_a_temperature_knee(imported):
                                                    surrogate_check=False)).to_dict()
     named = [m["name"] for m in verdict["missing_physics"] if m["name"] != "unmodelled_modes"]
     assert named and named[0] == "temperature_dependent_stiffness", verdict["missing_physics"]
+    first = next(m for m in verdict["missing_physics"] if m["name"] == named[0])
+    assert "E_scale" in first["where"] and not first.get("downgraded_by"), first
+    assert abs(first["parameters"]["knee_c"]) < 3.0, first["parameters"]
 
 
 def test_a_parameter_the_script_does_not_declare_is_named(tmp_path):

@@ -16,6 +16,9 @@ assembles it. Coarse groups (``EI``, ``mass``) are sums of the fine ones.
 girder: ``EI``, ``EI:k`` (span k, 1-based), ``bearings``, ``bearings_rot``, ``mass``, ``mass:k``.
 shear_building: ``EI``, ``EI:k`` (story k), ``mass``, ``mass:k`` (floor k), ``damper`` (when the file
 has ``dampers:``). A base spring (foundation) changes the model's DOFs and is not a group here.
+matrices (a user's model, e.g. imported from OpenSees): ``EI:<term>`` per stiffness term of the file
+(``matrices.terms``), ``EI`` their sum (the whole stiffness when the file has no terms), ``mass``
+(the whole mass) and ``mass:<term>`` per mass term.
 """
 
 from __future__ import annotations
@@ -82,7 +85,7 @@ def calibrated_spec(spec: StructureSpec, theta: dict[str, float]) -> StructureSp
     scaled = spec.scaled({k: v for k, v in theta.items() if k in {p.name for p in spec.parameters}})
     data = scaled.to_dict()
     data.pop("parameters", None)
-    return structure_from_dict(data, source=spec.source)
+    return structure_from_dict(data, source=spec.source, matrices_arrays=spec.arrays)
 
 
 def build_groups(spec: StructureSpec, theta: dict[str, float] | None = None) -> GroupModel:
@@ -92,7 +95,10 @@ def build_groups(spec: StructureSpec, theta: dict[str, float] | None = None) -> 
         return _girder(base)
     if base.kind == "shear_building":
         return _shear_building(base)
-    raise ValueError(f"explain: no parameter groups for structure kind {base.kind!r} (girder, shear_building)")
+    if base.kind == "matrices":
+        return _matrices(base)
+    raise ValueError(f"explain: no parameter groups for structure kind {base.kind!r} "
+                     "(girder, shear_building, matrices)")
 
 
 def _assemble(data: dict[str, Any], fine: list[tuple[str, str, bool, str]], source: str
@@ -173,3 +179,22 @@ def _shear_building(spec: StructureSpec) -> GroupModel:
             dK += float(k_ref) * np.outer(b, b)
         groups["damper"] = Group("damper", dK, np.zeros_like(M), True, "damper braces as springs")
     return GroupModel(K, M, groups, model, coarse)
+
+
+def _matrices(spec: StructureSpec) -> GroupModel:
+    """Groups of a user's matrices: each term as the calibrated file scales it (factor 1 = the file)."""
+    model = build_model(spec)
+    m = spec.section
+    arrays: dict[str, np.ndarray] = m.arrays
+    K, M = model.K0.copy(), model.M0.copy()
+    z = np.zeros_like(K)
+    groups = {f"EI:{t}": Group(f"EI:{t}", f * arrays[t], z, False, f"stiffness term {t}")
+              for t, f in m.terms.items()}
+    groups |= {f"mass:{t}": Group(f"mass:{t}", z, f * arrays[t], False, f"mass term {t}")
+               for t, f in m.mass_terms.items()}
+    stiff = [g for g in groups.values() if g.name.startswith("EI:")]
+    groups["EI"] = _sum_group("EI", stiff, "every stiffness term") if stiff else Group(
+        "EI", K.copy(), z, False, "the whole stiffness")
+    groups["mass"] = Group("mass", z, M.copy(), False, "the whole mass")
+    return GroupModel(K, M, groups, model, {"EI": [g.name for g in stiff],
+                                            "mass": [n for n in groups if n.startswith("mass:")]})
