@@ -2,8 +2,12 @@
 the truth's responses at floors no sensor reads and its story drift ratios.
 
 A truth source is a function ``(seed, profile) -> PredictCampaign``; the registry ``SOURCES`` names
-them and ``SHM_PREDICT_TRUTH`` (default ``simulator``) picks the one the tests use, so an
-independent generator (e.g. an OpenSeesPy model) is swapped in by registering it here.
+them and ``SHM_PREDICT_TRUTH`` picks the one the tests use (else each test's default: ``opensees``
+for the acceptance of the bands, ``simulator`` where a test sets the events' PGAs and onsets).
+
+``opensees``: the independent OpenSeesPy generator (``test/truths``, adapter
+test/predict_opensees.py): hysteretic story springs that yield in the strongest events, centre of
+mass 2-6 % off, non-proportional damping, a damper; the nominal planar model is the generator's.
 
 ``simulator``: the project's simulator (``shm_ros.core.simulate``) outside the analysis class -
 x, y and twist per floor with mass centres 2-6 % of the plan off the stiffness centre (at and above
@@ -58,6 +62,7 @@ class Profile:
     pga_m_s2: tuple[float, float] = (0.3, 1.5)
     drift_ref_m: float = 0.06  # softening story springs: k / (1 + |d| / d_ref)
     earthquakes: tuple[tuple[float, float], ...] = ()  # (pga m/s^2, onset s) per event; () = drawn
+    stories: tuple[int, int] = (3, 8)  # OpenSees source: stories drawn in this range (inclusive)
 
 
 def simulator_campaign(seed: int, profile: Profile | None = None) -> PredictCampaign:
@@ -95,12 +100,19 @@ def simulator_campaign(seed: int, profile: Profile | None = None) -> PredictCamp
                            yields, ELASTIC_SHARE * profile.drift_ref_m / STORY_HEIGHT_M)
 
 
-SOURCES: dict[str, Callable[..., PredictCampaign]] = {"simulator": simulator_campaign}
+def opensees_campaign(seed: int, profile: Profile | None = None) -> PredictCampaign:
+    """The independent OpenSeesPy truth (test/predict_opensees.py)."""
+    from predict_opensees import opensees_campaign as make
+
+    return make(seed, profile)
 
 
-def truth_source() -> Callable[..., PredictCampaign]:
-    """The truth source ``SHM_PREDICT_TRUTH`` names (default ``simulator``)."""
-    name = os.environ.get("SHM_PREDICT_TRUTH", "simulator")
+SOURCES: dict[str, Callable[..., PredictCampaign]] = {"simulator": simulator_campaign, "opensees": opensees_campaign}
+
+
+def truth_source(default: str = "simulator") -> Callable[..., PredictCampaign]:
+    """The truth source ``SHM_PREDICT_TRUTH`` names (else ``default``)."""
+    name = os.environ.get("SHM_PREDICT_TRUTH", default)
     if name not in SOURCES:
         raise KeyError(f"SHM_PREDICT_TRUTH={name!r}: one of {sorted(SOURCES)}")
     return SOURCES[name]

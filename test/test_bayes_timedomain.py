@@ -8,9 +8,9 @@ sample rate and decimated, and 3 % noise is added per channel.
 from __future__ import annotations
 
 import numpy as np
+from bayes_synth import building_dict, spec_and_model
 from scipy import signal
 
-from bayes_synth import building_dict, spec_and_model
 from shm_ros.core.bayes.timedomain import AccelerationRecord, TimeDomainLikelihood, base_response
 from shm_ros.core.bayes.update import UpdateConfig, update
 
@@ -88,3 +88,22 @@ def test_sampled_channel_variance_integrates_to_marginal():
     assert abs(num - marg(theta[None])[0]) < 1e-3
     # the sampled form itself evaluates to the same expression
     assert abs(samp(X[:1])[0] - (f[0] - samp.extra_logprior(X[:1, 3:])[0])) < 1e-6 * abs(f[0])
+
+
+def test_variance_per_event_weighs_each_record_by_its_own_error():
+    """A joint likelihood with a variance per record (``variance_per_event``) is the sum of the
+    records' own likelihoods; pooled, a record ten times stronger decides the sum of squares."""
+    from shm_ros.core.bayes.records import JointTimeDomainLikelihood, RecordSet
+
+    _, model = spec_and_model(building_dict())
+    weak, strong = _record(model, 1), _record(model, 2)
+    strong = AccelerationRecord(strong.dt, 10 * strong.input_accel, 10 * strong.outputs, strong.channel_ids)
+    data = RecordSet([weak, strong])
+    x = np.vstack([TRUTH, 1.05 * TRUTH, [1.1, 0.9, 1.0]])
+    own = JointTimeDomainLikelihood(model, data, ar_order=0, per_record=True)(x)
+    parts = [TimeDomainLikelihood(model, r, ar_order=0)(x) for r in data.records]
+    np.testing.assert_allclose(own, parts[0] + parts[1], rtol=1e-10)
+    pooled = JointTimeDomainLikelihood(model, data, ar_order=0)
+    ss = pooled.record_ss(x)
+    assert np.all(ss[1] > 50 * ss[0])  # pooled, the weak record hardly counts
+    assert not np.allclose(pooled(x), own)

@@ -57,25 +57,40 @@ def load_windows(args: argparse.Namespace, spec: Any) -> list:
     return [load_window(p) for p in args.windows]
 
 
+def learn_model_error(model: Any, posterior: Any, calibration: list, config: Any) -> Any:
+    """The model error learnt out of sample from ``calibration`` (the windows ``posterior`` was
+    calibrated on, two or more) by leave-one-event-out cross-validation from the posterior's MAP."""
+    import numpy as np
+
+    from shm_ros.core.predict import draws_from_posterior, event_from_window
+    from shm_ros.core.predict.model_error import cross_validated_error
+
+    if posterior is None:
+        raise ValueError("calibration windows need the posterior they calibrated (--posterior)")
+    theta_map = draws_from_posterior(posterior, model, 0, np.random.default_rng(0), config.relative_error).theta_map
+    return cross_validated_error(model, [event_from_window(w, model) for w in calibration], theta_map, config)
+
+
 def predict_windows(model: Any, windows: list, posterior: Any, config: Any, calibration: list | None = None,
-                    limits: Any = None) -> tuple[list, list[str]]:
+                    limits: Any = None, model_error: Any = None) -> tuple[list, list[str]]:
     """Predictions of ``windows`` (the same numbers as the predict node's for the same seed).
     ``calibration``: the windows the posterior was calibrated on (two or more: the model error is
-    learnt from them by leave-one-event-out cross-validation); ``limits``: the structure's drift
-    limits (each event's drift risk, for models with drift ratios)."""
+    learnt from them by leave-one-event-out cross-validation; ``model_error``: that error already
+    learnt, :func:`learn_model_error`); ``limits``: the structure's drift limits (each event's drift
+    risk, for models with drift ratios)."""
     import numpy as np
 
     from shm_ros.core.predict import draws_from_posterior, event_from_window, predict_event
-    from shm_ros.core.predict.model_error import cross_validated_error
     from shm_ros.core.predict.risk import event_risk
 
     draws = None if posterior is None else draws_from_posterior(
         posterior, model, config.n_draws, np.random.default_rng(config.seed), config.relative_error)
-    if calibration:
+    if calibration and model_error is None:
+        model_error = learn_model_error(model, posterior, calibration, config)
+    if model_error is not None:
         if draws is None:
-            raise ValueError("calibration windows need the posterior they calibrated (--posterior)")
-        events = [event_from_window(w, model) for w in calibration]
-        draws = draws.with_model_error(cross_validated_error(model, events, draws.theta_map, config))
+            raise ValueError("a learnt model error needs the posterior it was learnt for")
+        draws = draws.with_model_error(model_error)
     preds, errors = [], []
     for w in windows:
         try:

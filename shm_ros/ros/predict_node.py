@@ -50,6 +50,11 @@ class PredictNodeConfig:
                                          "posterior file and its samples exist, at most this long (wall clock, "
                                          "from the first queued window); then the nominal model is used "
                                          "(0: no wait)")
+    calibration_windows: list[str] | None = option(None, "window files (.npz, as `shm-ros ingest --windows` writes) "
+                                                   "of the events the posterior was calibrated on in the time "
+                                                   "domain, two or more: the model error is learnt from them out "
+                                                   "of sample (leave one event out); unset: the calibration's "
+                                                   "in-sample error")
     output_dir: str | None = option(None, "directory of prediction.json and prediction_series.json (as `shm-ros "
                                     "predict` writes them), rewritten after every prediction (unset: not written)")
 
@@ -91,6 +96,8 @@ class PredictNode(ManagedNode):
 
         self.structure: str = self.settings.structure
         model = build_model(load_structure(self.structure))  # a bad file stops the node at once
+        calibration = tuple(self.settings.calibration_windows or ())
+        _check_calibration(self.get_name(), calibration)
         # a structure without a measured input ('input'/'inputs') has nothing to drive a prediction
         # with: the node stays up (a graph may list it for every structure) and predicts nothing
         self.enabled = bool(model.inputs)
@@ -115,7 +122,8 @@ class PredictNode(ManagedNode):
                                  stream_qos())
         self.results: deque = deque(maxlen=MAX_FILED)  # (prediction, Table-3 row, model label) for output_dir
         self.waiting_since: float | None = None  # monotonic time of the first window held for the posterior
-        self.workers: WorkerPool | None = (WorkerPool(predict_worker.init, (self.structure,), predict_worker.ready)
+        self.workers: WorkerPool | None = (WorkerPool(predict_worker.init, (self.structure, calibration),
+                                                                    predict_worker.ready)
                                            if self.enabled else None)
         steady_timer(self, 0.1, self._poll)
 
@@ -212,6 +220,21 @@ class PredictNode(ManagedNode):
         self.diag.report("warn", f"no posterior {p} after {wait:.0f} s: predicting with the nominal model",
                          "prediction")
         return None
+
+
+def _check_calibration(name: str, paths: tuple[str, ...]) -> None:
+    """Calibration windows: two or more readable window files (else the node does not start)."""
+    from shm_ros.errors import ShmError
+    from shm_ros.io.window_files import load_window
+
+    if len(paths) == 1:
+        raise ParameterError(f"{name}: parameter 'calibration_windows': give two or more events (one is left "
+                             "out at a time)")
+    for p in paths:
+        try:
+            load_window(p)
+        except ShmError as exc:
+            raise ParameterError(f"{name}: parameter 'calibration_windows': {exc}") from None
 
 
 def _posterior_file(path: str) -> Path:

@@ -3,11 +3,16 @@
 Calibrating on several earthquakes is one likelihood: the records are independent given theta, so
 it is built from one :class:`~.timedomain.TimeDomainLikelihood` per record (the same residual
 model: an AR(p) per channel whose coefficients each record fixes once at the white-noise MAP,
-``fix_ar``). The records share the prediction-error variance of each channel, so their innovation
-sums of squares and counts add up before the variance is marginalised or sampled (as in
-:mod:`.timedomain`). The responses of a batch of parameter sets (an ensemble sampler's walkers)
-are computed together (:func:`shm_ros.core.response.batch.batch_responses`: one discretisation per
-set) and handed to each record's likelihood.
+``fix_ar``). By default the records share the prediction-error variance of each channel, so their
+innovation sums of squares and counts add up before the variance is marginalised or sampled (as in
+:mod:`.timedomain`). With ``per_record`` every record has its own variance per channel (marginalised
+record by record): a model-form error that scales with the response (a planar model of a twisting
+building, an equivalent-linear model of yielding springs) is a relative error, and one pooled
+variance would let the strongest event's residuals, a hundred times the weakest's, decide the fit
+alone; each event then weighs by its own residual level. The responses of a batch of parameter
+sets (an ensemble sampler's walkers) are computed together
+(:func:`shm_ros.core.response.batch.batch_responses`: one discretisation per set) and handed to each
+record's likelihood.
 """
 
 from __future__ import annotations
@@ -57,9 +62,12 @@ class JointTimeDomainLikelihood:
     the per-record likelihoods in :attr:`parts`, their innovation sums of squares pooled per channel."""
 
     def __init__(self, model: AffineModel, data: RecordSet, *, variance: str = "marginal",
-                 error_prior_shape: float = 1.0, error_guess: float = 0.1, ar_order: int = 2, chunk: int = 64):
+                 error_prior_shape: float = 1.0, error_guess: float = 0.1, ar_order: int = 2, chunk: int = 64,
+                 per_record: bool = False):
         if variance not in ("marginal", "sampled"):
             raise ValueError(f"variance must be 'marginal' or 'sampled', got {variance!r}")
+        if per_record and variance != "marginal":
+            raise ValueError("a variance per record is marginalised: variance must be 'marginal'")
         from shm_ros.core.response import sensor_outputs
 
         self.parts = [TimeDomainLikelihood(model, r, variance=variance, error_prior_shape=error_prior_shape,
@@ -73,6 +81,7 @@ class JointTimeDomainLikelihood:
         rms = np.where(self.rms > 0, self.rms, 1.0)
         # one variance per channel for all records: its prior from the pooled RMS
         self.priors = [InverseGamma.weak(error_guess * r, error_prior_shape) for r in rms]
+        self.per_record = per_record  # per record and channel: each record's own priors (its RMS)
         self.variance_names = list(self.parts[0].variance_names)
         self.extra_names = [f"log_{n}" for n in self.variance_names] if variance == "sampled" else []
         self.n_theta = model.n_parameters
@@ -103,11 +112,15 @@ class JointTimeDomainLikelihood:
 
     def residual_ss(self, thetas: np.ndarray) -> np.ndarray:
         """(B, channels) innovation sums of squares, summed over the records."""
+        return self.record_ss(thetas).sum(axis=0)
+
+    def record_ss(self, thetas: np.ndarray) -> np.ndarray:
+        """(records, B, channels) innovation sums of squares of each record."""
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
-        ss = np.zeros((thetas.shape[0], len(self.outputs)))
-        for part in self.parts:
+        ss = np.zeros((len(self.parts), thetas.shape[0], len(self.outputs)))
+        for i, part in enumerate(self.parts):
             for a, Y in self._responses(thetas, part.record):
-                ss[a:a + Y.shape[0]] += part.innovation_ss_batch(Y)
+                ss[i, a:a + Y.shape[0]] += part.innovation_ss_batch(Y)
         return ss
 
     def prepare_at_map(self, theta: np.ndarray) -> bool:
@@ -128,6 +141,11 @@ class JointTimeDomainLikelihood:
         out = np.full(x.shape[0], -np.inf)
         ok = np.all(x[:, :self.n_theta] > 0, axis=1)
         if not ok.any():
+            return out
+        if self.per_record:
+            rss = self.record_ss(x[ok, :self.n_theta])
+            out[ok] = sum(ig_marginal_loglik(rss[i, :, j], part.n_innovations, p)
+                          for i, part in enumerate(self.parts) for j, p in enumerate(part.priors))
             return out
         ss = self.residual_ss(x[ok, :self.n_theta])
         N = self.n_innovations

@@ -79,6 +79,10 @@ class UpdateConfig:
     damping_error_guess: float = option(0.3, "prior mode of the relative damping-ratio error std")
     residual_ar_order: int = option(2, "time likelihood: order of the autoregressive model of the "
                                     "residuals (0: independent samples)")
+    variance_per_event: bool = option(False, "time likelihood over several events: each event its own "
+                                      "error variance per channel (a model error relative to the response "
+                                      "weighs every event alike; else one variance per channel, which the "
+                                      "strongest event's residuals dominate); needs variance: marginal")
     alpha: float = option(0.5, "fitness likelihood: weight of the frequencies")
     beta: float = option(0.5, "fitness likelihood: weight of 1 - MAC")
     k: float = option(0.05, "fitness likelihood: tolerance k")

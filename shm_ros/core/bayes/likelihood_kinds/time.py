@@ -16,7 +16,8 @@ class Time(LikelihoodKind):
         c, data = inputs.config, inputs.data
         if isinstance(data, RecordSet):
             return JointTimeDomainLikelihood(inputs.model, data, variance=c.variance, error_prior_shape=c.ig_shape,
-                                             ar_order=c.residual_ar_order)
+                                             ar_order=c.residual_ar_order,
+                                             per_record=c.variance_per_event)
         if not isinstance(data, AccelerationRecord):
             raise TypeError("likelihood 'time' needs an AccelerationRecord (input and output "
                             "accelerations), not modal data")
