@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -57,6 +57,7 @@ from .types import Baseline, CandidateResult, FitScores, Mismatch, Proposal, Ver
 from .whiteness import residual_whiteness
 
 Progress = Callable[[str, float], None]
+SPARSE_WINDOWS = 40  # fewer training windows: sparse records (a few events), every candidate is tried
 
 
 # -- baseline ----------------------------------------------------------------------------------------
@@ -355,6 +356,14 @@ def _locate_phase(run: Run) -> None:
     """Where the misfit is and what to fit (training windows only), and the threshold in force."""
     run.mismatch, run.proposals, more = _locate(run.obs, run.base, run.context, run.config, run.groups)
     run.notes += more
+    if int(run.train.sum()) < SPARSE_WINDOWS:  # a few events: no residual test has the power to gate
+        seen = {(p.candidate, p.group) for p in run.proposals}
+        extra = [p for p in default_proposals(run.groups) if (p.candidate, p.group) not in seen]
+        run.proposals += [replace(p, reason=f"{p.reason}: {int(run.train.sum())} training windows (sparse records) "
+                                  "are too few for the residual analysis to gate the candidates") for p in extra]
+        if extra:
+            run.notes.append(f"{int(run.train.sum())} training windows (sparse records): every candidate is tried "
+                             "on its default groups as well as where the residual analysis points")
     info = shipped_threshold()
     run.threshold = float(run.config.threshold if run.config.threshold is not None else info["log_bayes_factor"])
     if run.config.threshold is not None:
