@@ -61,9 +61,9 @@ ROWS: tuple[Row, ...] = (
     Row("soil", ("event_soil",), "right_name", ("support_flexibility",)),
     Row("damper_loss", ("event_damper_loss",), "damper_loss", ("damper_stiffness", "stiffness_change_at_time")),
     # nulls: no name except unmodelled_modes (unexplained_structure allowed, counted)
-    Row("nulls", ("dense_ar1_null", "dense_random_walk_null", "dense_clean", "event_clean"), "null", full=25),
+    Row("nulls", ("dense_ar1_null", "dense_random_walk_null", "dense_clean", "event_clean"), "null", full=100),
     # second row: amplitude / temperature names or none; never a step
-    Row("transient_or_lagged", ("event_transient_softening", "dense_lagged_temperature"), "no_step", full=20),
+    Row("transient_or_lagged", ("event_transient_softening", "dense_lagged_temperature"), "no_step", full=40),
     # outside the vocabulary (the table's last four rows)
     Row("humidity", ("dense_humidity",), "humidity", full=13),
     Row("stick_slip", ("dense_stick_slip",), "stick_slip", full=13),
@@ -218,21 +218,24 @@ def _nice() -> None:
 
 
 def tasks_for(rows: list[Row], size: str, per_kind: int | None, seeds: list[int] | None,
-              dev: bool, tree: str) -> list[tuple[str, str, int, str]]:
-    """(row, kind, seed, size) of every campaign: each row's count (``per_kind`` campaigns per kind,
-    default its full-size share) spread over its kinds, seeds from the tree (or given / development)."""
-    tasks = []
+              dev: bool, tree: str) -> tuple[list[tuple[str, str, int, str]], dict[str, list[int]]]:
+    """(row, kind, seed, size) of every campaign and each row's seeds: a row's count (``per_kind``
+    campaigns per kind, default its full-size share) spread over its kinds, the i-th seed of the row
+    for the i-th campaign of each kind (seeds from the tree, or given / development)."""
+    tasks, used = [], {}
     for row in rows:
-        n = per_kind * len(row.kinds) if per_kind else row.full
+        K = len(row.kinds)
+        n = per_kind * K if per_kind else row.full
+        m = -(-n // K)
         if seeds is not None:
-            pool = list(seeds)
+            pool = [seeds[i % len(seeds)] for i in range(m)]
         elif dev:
-            pool = list(range(n))
+            pool = list(range(m))
         else:
-            pool = explain_seeds(n, tree, row.name)
-        for j in range(n):
-            tasks.append((row.name, row.kinds[j % len(row.kinds)], pool[j % len(pool)], size))
-    return tasks
+            pool = explain_seeds(m, tree, row.name)
+        used[row.name] = pool
+        tasks += [(row.name, row.kinds[j % K], pool[j // K], size) for j in range(n)]
+    return tasks, used
 
 
 def figures(results: list[dict]) -> dict[str, dict]:
@@ -326,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = [r for r in ROWS if not args.only or r.name in args.only]
     tree = core_tree()
     dev = bool(args.dev_seeds or args.seeds)
-    tasks = tasks_for(rows, args.size, args.per_kind, args.seeds, dev, tree)
+    tasks, seeds = tasks_for(rows, args.size, args.per_kind, args.seeds, dev, tree)
     t0, c0 = time.time(), time.process_time()
     results = []
     with mp.get_context("spawn").Pool(args.jobs, initializer=_nice) as pool:
@@ -337,9 +340,6 @@ def main(argv: list[str] | None = None) -> int:
                   flush=True)
     cpu = time.process_time() - c0 + sum(r.get("cpu_s", 0.0) for r in results)
     figs = figures(results)
-    seeds: dict[str, list[int]] = {}
-    for row_name, _kind, seed, _size in tasks:
-        seeds.setdefault(row_name, []).append(seed)
     meta = {"date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "kind": ("development" if dev else "acceptance") + (" (reduced size)" if args.size == "reduced" else ""),
             "commit": _git("rev-parse", "--short=12", "HEAD"), "tree": tree,
