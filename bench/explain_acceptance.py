@@ -328,7 +328,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.seeds and any(not 0 <= s < DEV_SEEDS for s in args.seeds):
         ap.error(f"--seeds are development seeds, 0 .. {DEV_SEEDS - 1}")
     rows = [r for r in ROWS if not args.only or r.name in args.only]
-    tree = core_tree()
+    tree, commit = core_tree(), _git("rev-parse", "--short=12", "HEAD")  # the code the run starts with
+    dirty = bool(_git("status", "--porcelain", "--", "shm_ros/core"))
     dev = bool(args.dev_seeds or args.seeds)
     tasks, seeds = tasks_for(rows, args.size, args.per_kind, args.seeds, dev, tree)
     t0, c0 = time.time(), time.process_time()
@@ -343,8 +344,7 @@ def main(argv: list[str] | None = None) -> int:
     figs = figures(results)
     meta = {"date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "kind": ("development" if dev else "acceptance") + (" (reduced size)" if args.size == "reduced" else ""),
-            "commit": _git("rev-parse", "--short=12", "HEAD"), "tree": tree,
-            "dirty": bool(_git("status", "--porcelain", "--", "shm_ros/core")),
+            "commit": commit, "tree": tree, "dirty": dirty,
             "command": "nice .venv/bin/python -m bench.explain_acceptance " + " ".join(argv or sys.argv[1:]),
             "size": args.size, "cpu_s": cpu, "wall_s": time.time() - t0,
             "seed_kind": "development" if dev else "acceptance (explain_seeds of the core tree)", "seeds": seeds}

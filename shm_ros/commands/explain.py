@@ -168,12 +168,15 @@ def _event_records(path: str, spec, window_s: float | None) -> list:
     from shm_ros.io.tracked_source import event_ingest
 
     # None: the ingest default (600 s); events by STA/LTA or the strong-motion peak (event_ingest)
-    windows, _ = windows_from_bag(path, spec, window_s, config=event_ingest(spec))
+    config = event_ingest(spec)
+    windows, _ = windows_from_bag(path, spec, window_s, config=config)
     events = [w for w in windows if w.is_event]
     if events and len(windows) <= MAX_TD_EVENTS:
-        # sparse records (a burst per event): a weak event below the triggers is still a record of the
-        # measured input and of the response, and the weak end of the amplitude range
-        events = list(windows)
+        # sparse records (a burst per event): a weak event below the triggers, recorded as a burst of its
+        # own (shorter than the window length), is still a record of the measured input and the response,
+        # and the weak end of the amplitude range
+        length = window_s or (config.window_s if config is not None else 600.0)
+        events = [w for w in windows if w.is_event or w.duration_s < 0.95 * length]
     if not events:
         raise NoWindowsError(f"{path}: no event window among its {len(windows)} window(s)")
     model = build_model(spec)
