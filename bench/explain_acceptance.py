@@ -284,15 +284,15 @@ def log_entry(meta: dict, figs: dict, results: list[dict]) -> str:
              f"wall {meta['wall_s']:.0f} s",
              f"- seeds: {meta['seed_kind']}: " + "; ".join(f"{row} {','.join(map(str, s))}"
                                                           for row, s in meta["seeds"].items()),
-             "", "| criterion | figure | campaigns | bound | pass |", "|---|---|---|---|---|"]
-    for f in figs.values():
+             "", "| criterion | what | figure | campaigns | bound | pass |", "|---|---|---|---|---|---|"]
+    for key, f in figs.items():
         sign = ">=" if f["sense"] == "min" else "<="
-        lines.append(f"| {f['what']} | {f['value']:.2f} | {f['n']} | {sign} {f['bound']:g} | "
+        lines.append(f"| {key} | {f['what']} | {f['value']:.2f} | {f['n']} | {sign} {f['bound']:g} | "
                      f"{'yes' if f['pass'] else 'NO'} |")
     per_row: dict[str, list[str]] = {}
     for r in results:
         per_row.setdefault(r["row"], []).append(
-            f"{r['kind'].split('_', 1)[1]}/{r['seed']}:{'ok' if r.get('ok') else 'x'}"
+            f"{r['kind']}/{r['seed']}:{'ok' if r.get('ok') else 'x'}"
             f"[{','.join(r.get('names', [])) or r.get('error', 'none')}]")
     lines += ["", "<details><summary>per campaign</summary>", ""]
     lines += [f"- {row}: {' '.join(items)}" for row, items in per_row.items()]
