@@ -63,10 +63,14 @@ SPARSE_WINDOWS = 40  # fewer training windows: sparse records (a few events), ev
 # -- baseline ----------------------------------------------------------------------------------------
 
 def split(times_s: np.ndarray, config: ExplainConfig) -> np.ndarray:
-    """Training mask (W,): every ``held_out_every``-th block of windows is held out."""
+    """Training mask (W,): every ``held_out_every``-th block of windows is held out (a block: a day of
+    windows, W/8 windows of a shorter campaign, or one window of sparse records, fewer than
+    ``SPARSE_WINDOWS``: held-out events interleaved with the training ones)."""
     W = len(times_s)
     if config.block_windows > 0:
         block = np.arange(W) // config.block_windows
+    elif W < SPARSE_WINDOWS:  # sparse records (events days apart): every n-th event, interleaved
+        block = np.arange(W)
     elif times_s[-1] - times_s[0] >= 4 * 86400.0:
         block = ((times_s - times_s[0]) // 86400.0).astype(int)
     else:
