@@ -25,3 +25,15 @@ def acceptance_seeds(n: int, tree: str | None = None) -> list[int]:
     tree = core_tree() if tree is None else tree
     base = int(hashlib.sha256(tree.encode()).hexdigest()[:6], 16) if tree else 0
     return [base + k for k in range(n)]
+
+
+DEV_SEEDS = 1_000_000  # development seeds are 0 .. DEV_SEEDS - 1; acceptance seeds are never below it
+ACCEPTANCE_SPAN = 1_000_000_000
+
+
+def explain_seeds(n: int, tree: str, row: str) -> list[int]:
+    """``n`` acceptance seeds of one row of explain's acceptance (bench/explain_acceptance.py) from the
+    git tree of ``shm_ros/core`` (which holds the shipped threshold files), in [DEV_SEEDS,
+    DEV_SEEDS + ACCEPTANCE_SPAN): disjoint from the development seeds, and drawn by the hash alone."""
+    base = int(hashlib.sha256(f"{tree}:{row}".encode()).hexdigest()[:12], 16) % ACCEPTANCE_SPAN
+    return [DEV_SEEDS + (base + k) % ACCEPTANCE_SPAN for k in range(n)]

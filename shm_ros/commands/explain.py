@@ -16,6 +16,8 @@ import argparse
 import sys
 from pathlib import Path
 
+MAX_TD_EVENTS = 60  # --bag: more event windows than this are a dense campaign, the modal path's alone
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     from shm_ros.commands.checks import add_overwrite, min_float
@@ -112,7 +114,35 @@ def _verdict(args: argparse.Namespace, spec, config):
             args.bag, spec, observed, args.window,
             lambda text: print(f"shm-ros explain: note: {text}", file=sys.stderr))
     bar = Progress("explain", every_s=2.0)  # explain reports (stage, fraction done)
-    return explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
+    verdict = explain(obs, spec, config, progress=lambda stage, frac: bar(int(round(100 * frac)), 100))
+    if args.bag and spec.input_sensor_ids():
+        verdict = _with_time_path(args, spec, config, verdict)
+    return verdict
+
+
+def _with_time_path(args: argparse.Namespace, spec, config, modal):
+    """``--bag`` on a recording of sparse events with a measured input: the time-domain path too, where
+    it helps (at least ``MIN_EVENTS`` event windows with a usable input record, at most
+    ``MAX_TD_EVENTS``: a dense campaign's many windows are the modal path's), and one verdict of both
+    (:func:`shm_ros.core.explain.td_paths.merge_paths`: the fit ratio the larger of the two)."""
+    from shm_ros.core.explain.td_paths import merge_paths
+    from shm_ros.core.explain.timedomain import MIN_EVENTS
+    from shm_ros.errors import NoWindowsError, NumericalFailure
+
+    try:
+        records = _event_records(args.bag, spec, args.window)
+    except NoWindowsError:
+        return modal
+    if not MIN_EVENTS <= len(records) <= MAX_TD_EVENTS:
+        return modal
+    print(f"shm-ros explain: note: {len(records)} event windows with a measured input: the time-domain path "
+          "runs beside the per-event modal estimates", file=sys.stderr)
+    try:
+        events = _events_explain(args, spec, config, records)
+    except NumericalFailure as exc:  # the time path's nominal calibration failed: the modal verdict stands
+        modal.notes.append(f"time-domain path not used: {exc}")
+        return modal
+    return merge_paths(modal, events)
 
 
 def _events_verdict(args: argparse.Namespace, spec, config):
@@ -120,25 +150,36 @@ def _events_verdict(args: argparse.Namespace, spec, config):
     structure's measured input and outputs, explained by :func:`explain_events`. The options
     ``--time-domain.*`` apply, and of the modal path's ``--threshold``, ``--tie-nats`` and ``--seed``
     (a ``--time-domain.`` option of the same name wins)."""
-    from shm_ros.commands.options import config_from_args
-    from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
+    from shm_ros.errors import InputError
+
+    if not spec.input_sensor_ids():
+        raise InputError(f"{args.structure}: --events needs a measured input (`input: {{sensor: ...}}`), and "
+                         "the structure declares none")
+    return _events_explain(args, spec, config, _event_records(args.events, spec, args.window))
+
+
+def _event_records(path: str, spec, window_s: float | None) -> list:
+    """The recording's event windows (docs/interfaces.md §1) as records of the structure's measured
+    input and outputs; an event without a usable input record is left out, and said so."""
     from shm_ros.core.models import build_model
     from shm_ros.core.predict import event_from_window
     from shm_ros.errors import InputError, NoWindowsError
     from shm_ros.io.recording import windows_from_bag
     from shm_ros.io.tracked_source import event_ingest
 
-    if not spec.input_sensor_ids():
-        raise InputError(f"{args.structure}: --events needs a measured input (`input: {{sensor: ...}}`), and "
-                         "the structure declares none")
     # None: the ingest default (600 s); events by STA/LTA or the strong-motion peak (event_ingest)
-    windows, _ = windows_from_bag(args.events, spec, args.window, config=event_ingest(spec))
+    config = event_ingest(spec)
+    windows, _ = windows_from_bag(path, spec, window_s, config=config)
     events = [w for w in windows if w.is_event]
+    if events and len(windows) <= MAX_TD_EVENTS:
+        # sparse records (a burst per event): a weak event below the triggers, recorded as a burst of its
+        # own (shorter than the window length), is still a record of the measured input and the response,
+        # and the weak end of the amplitude range
+        length = window_s or (config.window_s if config is not None else 600.0)
+        events = [w for w in windows if w.is_event or w.duration_s < 0.95 * length]
     if not events:
-        raise NoWindowsError(f"{args.events}: no event window among its {len(windows)} window(s)")
+        raise NoWindowsError(f"{path}: no event window among its {len(windows)} window(s)")
     model = build_model(spec)
-    cfg = config_from_args(TimeDomainConfig, args, "time_domain.",
-                           TimeDomainConfig(threshold=config.threshold, tie_nats=config.tie_nats, seed=config.seed))
     records = []
     for w in events:
         try:
@@ -146,7 +187,18 @@ def _events_verdict(args: argparse.Namespace, spec, config):
         except InputError as exc:  # an event without a usable input record is left out, and said so
             print(f"shm-ros explain: note: {exc}; event left out", file=sys.stderr)
     if not records:
-        raise NoWindowsError(f"{args.events}: no event window with a usable input record")
+        raise NoWindowsError(f"{path}: no event window with a usable input record")
+    return records
+
+
+def _events_explain(args: argparse.Namespace, spec, config, records: list):
+    """:func:`explain_events` with the ``--time-domain.*`` options (and the modal path's ``--threshold``,
+    ``--tie-nats``, ``--seed`` where no ``--time-domain.`` option of the same name is given)."""
+    from shm_ros.commands.options import config_from_args
+    from shm_ros.core.explain.timedomain import TimeDomainConfig, explain_events
+
+    cfg = config_from_args(TimeDomainConfig, args, "time_domain.",
+                           TimeDomainConfig(threshold=config.threshold, tie_nats=config.tie_nats, seed=config.seed))
     return explain_events(records, spec, cfg, progress=lambda text: print(f"shm-ros explain: {text}", file=sys.stderr))
 
 

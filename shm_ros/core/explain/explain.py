@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -57,15 +57,20 @@ from .types import Baseline, CandidateResult, FitScores, Mismatch, Proposal, Ver
 from .whiteness import residual_whiteness
 
 Progress = Callable[[str, float], None]
+SPARSE_WINDOWS = 40  # fewer training windows: sparse records (a few events), every candidate is tried
 
 
 # -- baseline ----------------------------------------------------------------------------------------
 
 def split(times_s: np.ndarray, config: ExplainConfig) -> np.ndarray:
-    """Training mask (W,): every ``held_out_every``-th block of windows is held out."""
+    """Training mask (W,): every ``held_out_every``-th block of windows is held out (a block: a day of
+    windows, W/8 windows of a shorter campaign, or one window of sparse records, fewer than
+    ``SPARSE_WINDOWS``: held-out events interleaved with the training ones)."""
     W = len(times_s)
     if config.block_windows > 0:
         block = np.arange(W) // config.block_windows
+    elif W < SPARSE_WINDOWS:  # sparse records (events days apart): every n-th event, interleaved
+        block = np.arange(W)
     elif times_s[-1] - times_s[0] >= 4 * 86400.0:
         block = ((times_s - times_s[0]) // 86400.0).astype(int)
     else:
@@ -355,6 +360,14 @@ def _locate_phase(run: Run) -> None:
     """Where the misfit is and what to fit (training windows only), and the threshold in force."""
     run.mismatch, run.proposals, more = _locate(run.obs, run.base, run.context, run.config, run.groups)
     run.notes += more
+    if int(run.train.sum()) < SPARSE_WINDOWS:  # a few events: no residual test has the power to gate
+        seen = {(p.candidate, p.group) for p in run.proposals}
+        extra = [p for p in default_proposals(run.groups) if (p.candidate, p.group) not in seen]
+        run.proposals += [replace(p, reason=f"{p.reason}: {int(run.train.sum())} training windows (sparse records) "
+                                  "are too few for the residual analysis to gate the candidates") for p in extra]
+        if extra:
+            run.notes.append(f"{int(run.train.sum())} training windows (sparse records): every candidate is tried "
+                             "on its default groups as well as where the residual analysis points")
     info = shipped_threshold()
     run.threshold = float(run.config.threshold if run.config.threshold is not None else info["log_bayes_factor"])
     if run.config.threshold is not None:

@@ -166,6 +166,8 @@ def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch:
         if mod.groups:  # the form flag's evidence (form_check): smooth functions of the effect's factor
             x = np.asarray(next(iter(mod.groups.values()))[0], float)
             res.extra["form_gain"] = form_gain(x[train], (r_all - delta)[train], job.lik.noise_guess)
+    if delta is None and z_all is not None:  # a damping candidate: the same form check on ln zeta
+        _form_on_damping(res, job, fr.theta_map, z_all, train)
     if c.look_elsewhere():
         res.extra["look_elsewhere_nats"] = c.look_elsewhere()
     res.extra.update({"key_parameter": key, "gain_at_map": fr.gain_map, "acts_on": res_acts, "evaluations": fr.n_eval,
@@ -174,6 +176,19 @@ def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch:
     if t0 is not None:
         res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, t0))
     return res
+
+
+def _form_on_damping(res: CandidateResult, job: Job, theta: np.ndarray, z_all: np.ndarray, train: np.ndarray) -> None:
+    """The form flag's evidence of a damping candidate (form_check): smooth functions of its damping
+    factor on the log-damping misfit it leaves (damping scatter from the configuration's default)."""
+    mod = job.cand.modify(np.atleast_2d(theta))
+    if mod.damping is None:
+        return
+    _, dd = job.deltas(theta)
+    rd = np.log(np.where(z_all > 0, z_all, np.nan))
+    after = rd if dd is None else rd - np.broadcast_to(dd[0], rd.shape)
+    x = np.asarray(mod.damping[0], float)
+    res.extra["form_gain"] = form_gain(x[train], after[train], ExplainConfig().damping_noise_guess)
 
 
 def fit_on_top(cand: Candidate, fixed: list[tuple[Candidate, np.ndarray]], sur, lik, train, seed: int,

@@ -57,6 +57,7 @@ from .td_fit import (
     spectral_starts,
 )
 from .td_model import SEGMENT_S, EventData, FactorModel, event_data, segment_amplitudes
+from .td_paths import td_form_fits
 from .types import CandidateResult, FitScores, Mismatch, Verdict
 
 THRESHOLD_FILE = "threshold_timedomain.json"
@@ -204,6 +205,8 @@ def _fit(run: EventsRun) -> None:
                 continue
             r.extra["nrms_per_event"] = r.extra.pop("_nrms").tolist()
             r.extra["resolution"] = res
+            r.form_fits, form = td_form_fits(np.asarray(r.extra["nrms_per_event"])[run.train], run.amp[run.train])
+            r.extra.update(form)
             if within:
                 r.label = f"{r.label}/within_event"
                 r.extra.update(period_s=period, segment_s=cfg.segment_s)

@@ -66,3 +66,18 @@ def after_change(context: Context) -> np.ndarray:
 def change_time(context: Context) -> float:
     """Seconds since the first window of locate's hinted change window."""
     return float(context.times_s[int(context.hints["change_index"])])
+
+
+def hinted_window_look_elsewhere(context: Context) -> float:
+    """The look-elsewhere correction of a candidate that starts at locate's hinted change window
+    itself (``change_index``; a change inside held-out windows: ``change_span``) instead of searching
+    for it: ln(full range / hinted range) in windows, the full range being the windows a change can
+    start at (the 2nd to the second-to-last, as the step's prior), the hinted range the hinted span.
+    Locate searched every window of the same data for it, which the hinted fit must not get for free.
+    0 without a hint."""
+    h, W = context.hints, len(context.times_s)
+    if "change_index" not in h or W <= 3:
+        return 0.0
+    i = int(h["change_index"])
+    a, b = h.get("change_span", (i, i))
+    return float(max(np.log((W - 2) / max(int(b) - int(a) + 1, 1)), 0.0))

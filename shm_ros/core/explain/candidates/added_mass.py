@@ -11,7 +11,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import after_change, change_time, daily_windows, hour_utc, hours_text, temperatures
+from ._common import (
+    after_change,
+    change_time,
+    daily_windows,
+    hinted_window_look_elsewhere,
+    hour_utc,
+    hours_text,
+    temperatures,
+)
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -54,3 +62,7 @@ class AddedMass(Candidate):
         if h.get("when") == "after" and "change_index" in h:
             return change_time(self.context)
         return None
+
+    def look_elsewhere(self) -> float:
+        """From the hinted window on: ln(full range / hinted range) (:func:`._common.hinted_window_look_elsewhere`)."""
+        return hinted_window_look_elsewhere(self.context) if self.context.hints.get("when") == "after" else 0.0

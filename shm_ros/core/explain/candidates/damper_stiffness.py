@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..groups import DAMPER_REFERENCE
-from ._common import after_change, change_time, temperatures
+from ._common import after_change, change_time, hinted_window_look_elsewhere, temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -77,3 +77,7 @@ class DamperStiffness(Candidate):
         if self._change() == "step":
             return change_time(self.context)
         return None
+
+    def look_elsewhere(self) -> float:
+        """From the hinted window on: ln(full range / hinted range) (:func:`._common.hinted_window_look_elsewhere`)."""
+        return hinted_window_look_elsewhere(self.context) if self._change() == "step" else 0.0

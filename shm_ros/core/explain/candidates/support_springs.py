@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import after_change, change_time, temperatures
+from ._common import after_change, change_time, hinted_window_look_elsewhere, temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -74,3 +74,7 @@ class SupportSprings(Candidate):
         if self._change() == "step":
             return change_time(self.context)
         return None
+
+    def look_elsewhere(self) -> float:
+        """From the hinted window on: ln(full range / hinted range) (:func:`._common.hinted_window_look_elsewhere`)."""
+        return hinted_window_look_elsewhere(self.context) if self._change() == "step" else 0.0
