@@ -56,6 +56,7 @@ __all__ = [
     "printed_eq13_estimate",
     "forward_backward_A",
     "two_a_partners",
+    "BackwardCheck",
 ]
 
 
@@ -631,6 +632,37 @@ def _backward_partners(f: np.ndarray, z: np.ndarray, phi: np.ndarray, sel: np.nd
     return fb, zb, macb
 
 
+class BackwardCheck:
+    """The second (backward) estimate of ``A`` of one subspace model, solved order by order on
+    demand: :meth:`partners` gives chosen poles of one order the backward partner that
+    :func:`poles_all_orders` with ``two_a=True`` gives them (the model's ``B'`` is formed once)."""
+
+    def __init__(self, model: SubspaceModel, max_order: int,
+                 match_scale: tuple[float, float, float] = (0.01, 0.05, 0.9), std_scale: float = 0.0):
+        self.fs = model.sample_rate_hz
+        self.match_scale = match_scale
+        self.std_scale = std_scale
+        self.b_all, self.c_b, self.nb = _backward_form(model.observability, model.n_outputs,
+                                                       max_order)
+
+    def partners(self, poles: PoleSet, at: np.ndarray) -> None:
+        """Fill ``frequency_b_hz``, ``damping_b`` and ``mac_b`` of the poles ``at`` (indices, all
+        of one model order) in place."""
+        n = int(poles.order[at[0]])
+        if n > self.nb:
+            poles.frequency_b_hz[at], poles.damping_b[at], poles.mac_b[at] = np.nan, np.nan, 0.0
+            return
+        try:
+            evb = eigen.eigenvalues(self.b_all[:n, :n], balance=False)
+        except (np.linalg.LinAlgError, ValueError):
+            evb = None
+        sel = np.isfinite(poles.shape[at, 0])
+        fb, zb, macb = _backward_partners(poles.frequency_hz[at], poles.damping_ratio[at],
+                                          poles.shape[at], sel, evb, self.c_b[:, :n], self.fs,
+                                          self.match_scale, self.std_scale)
+        poles.frequency_b_hz[at], poles.damping_b[at], poles.mac_b[at] = fb, zb, macb
+
+
 def two_a_partners(model: SubspaceModel, poles: PoleSet, which: np.ndarray,
                    match_scale: tuple[float, float, float] = (0.01, 0.05, 0.9),
                    std_scale: float = 0.0) -> PoleSet:
@@ -647,20 +679,7 @@ def two_a_partners(model: SubspaceModel, poles: PoleSet, which: np.ndarray,
     out = poles.subset(np.ones(len(poles), bool))
     if idx.size == 0:
         return out
-    o, n_out, fs = model.observability, model.n_outputs, model.sample_rate_hz
-    b_all, c_b, nb = _backward_form(o, n_out, int(poles.order.max()))
+    check = BackwardCheck(model, int(poles.order.max()), match_scale, std_scale)
     for n in np.unique(poles.order[idx]):
-        at = idx[poles.order[idx] == n]
-        if n > nb:
-            out.frequency_b_hz[at], out.damping_b[at], out.mac_b[at] = np.nan, np.nan, 0.0
-            continue
-        try:
-            evb = eigen.eigenvalues(b_all[:n, :n], balance=False)
-        except (np.linalg.LinAlgError, ValueError):
-            evb = None
-        sel = np.isfinite(poles.shape[at, 0])
-        fb, zb, macb = _backward_partners(poles.frequency_hz[at], poles.damping_ratio[at],
-                                          poles.shape[at], sel, evb, c_b[:, :n], fs, match_scale,
-                                          std_scale)
-        out.frequency_b_hz[at], out.damping_b[at], out.mac_b[at] = fb, zb, macb
+        check.partners(out, idx[poles.order[idx] == n])
     return out
