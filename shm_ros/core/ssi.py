@@ -142,17 +142,16 @@ def hankel_gram(z: np.ndarray, n_blocks: int, n_cols: int) -> np.ndarray:
     ``H`` has ``n_blocks`` block rows ``z[a : a + n_cols]^T`` (a = 0..n_blocks-1). Entry block
     ``(a, b) = sum_{k<n_cols} z_{a+k} z_{b+k}^T`` is built from full-length lag products (FFT) with
     exact corrections for the samples beyond the Hankel's columns, then propagated along block
-    diagonals with rank-c updates: O(N c^2 log N + n_blocks^2 c^2) instead of O(N n_blocks^2 c^2).
+    diagonals with rank-c updates: O(N c^2 log n_blocks + n_blocks^2 c^2) instead of
+    O(N n_blocks^2 c^2).
     """
     n, c = z.shape
     if n_blocks - 1 + n_cols > n:
         raise ValueError("Hankel matrix larger than the data")
-    nfft = scipy.fft.next_fast_len(n + n_blocks, real=True)
-    fz = scipy.fft.rfft(z, n=nfft, axis=0)
-    full = np.empty((n_blocks, c, c))
-    for p in range(c):
-        full[:, p, :] = scipy.fft.irfft(np.conj(fz[:, p])[:, None] * fz, n=nfft, axis=0)[:n_blocks]
-    # full[d] = sum_{k=0}^{n-1-d} z_k z_{k+d}^T ; first block row needs k < n_cols only
+    # full[d] = sum_{k=0}^{n-1-d} z_k z_{k+d}^T (the lag products, by segmented FFTs); the first
+    # block row needs k < n_cols only
+    full = (correlations(z, np.arange(c), n_blocks)
+            * (n - np.arange(n_blocks))[:, None, None]).transpose(0, 2, 1)
     g0 = np.empty((n_blocks, c, c))
     for d in range(n_blocks):
         tail = z[n_cols:n - d]
