@@ -35,6 +35,7 @@ from shm_ros.core.stabilization import (
     StabilityConfig,
     TwoAScope,
     classify,
+    cluster_candidates,
     pick_modes_reported,
     real_mode_shape,
     standard_error,
@@ -355,6 +356,7 @@ def diagram_picks(model: ssi.SubspaceModel, orders: np.ndarray, cfg: IdentifyCon
     poles = ssi.poles_all_orders(model, orders, two_a=every, match_scale=match,
                                  shapes_for=(st.freq_tol, st.damping_tol), std_scale=std_scale)
     flags = classify(poles, st, model.sample_rate_hz, duration_s=duration_s)
+    clusters = cluster_candidates(poles, flags, cfg.picking)  # the two-A check does not change them
     if st.two_a and scope == TwoAScope.STABLE:
         poles = ssi.two_a_partners(model, poles, flags.stable & flags.physical_ok, match, std_scale)
         sigma = standard_error(poles.frequency_hz, poles.damping_ratio, duration_s)
@@ -367,8 +369,9 @@ def diagram_picks(model: ssi.SubspaceModel, orders: np.ndarray, cfg: IdentifyCon
             check.partners(poles, idx)
             return two_a_flags(poles.subset(idx), st, sigma[idx])
 
-        flags.two_a_ok, flags.two_a_checked = two_a_by_column(poles, flags, cfg.picking, validate)
-    picked, report = pick_modes_reported(poles, flags, cfg.picking, use_filters=cfg.use_filters)
+        flags.two_a_ok, flags.two_a_checked = two_a_by_column(poles, flags, cfg.picking, validate, clusters)
+    picked, report = pick_modes_reported(poles, flags, cfg.picking, use_filters=cfg.use_filters,
+                                         clusters=clusters)
     return poles, flags, picked, report
 
 

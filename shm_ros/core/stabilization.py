@@ -44,7 +44,8 @@ from shm_ros.core.modal import real_shape as real_mode_shape
 from shm_ros.core.ssi import PoleSet
 
 __all__ = ["TwoAScope", "StabilityConfig", "two_a_flags", "PickingConfig", "PoleFlags", "PickedMode",
-           "FilterReport", "mpc", "stable_columns", "passes_needed", "two_a_by_column",
+           "FilterReport", "mpc", "Clusters", "cluster_candidates", "stable_columns", "passes_needed",
+           "two_a_by_column",
            "classify", "standard_error", "pick_modes", "pick_modes_reported", "real_mode_shape"]
 
 
@@ -56,7 +57,6 @@ class TwoAScope(enum.StrEnum):
     # so each column is checked at as few of its orders as settle that verdict (reached, or out of
     # reach); the backward A is solved only at those orders.
     COLUMNS = "columns"
-    # the stable, physical candidates, at every order where they occur
     STABLE = "stable"  # stable, physical candidate poles, at the orders where they occur
     ALL = "all"  # every pole of every order (the whole diagram shows its verdict)
 
@@ -231,19 +231,20 @@ def pick_modes(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig,
     return pick_modes_reported(poles, flags, cfg, use_filters)[0]
 
 
-def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, use_filters: bool = True
-                        ) -> tuple[list[PickedMode], FilterReport]:
+def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, use_filters: bool = True,
+                        clusters: Clusters | None = None) -> tuple[list[PickedMode], FilterReport]:
     """Picked modes and the :class:`FilterReport`: stable, physical poles are clustered; a cluster
     with poles at enough orders is removed by the two-A (then the MPC) filter when it passes that
     check at fewer than ``column_pass_fraction`` of its orders or at fewer orders than a mode
-    needs (so a column the pole-by-pole filter kept is kept, with all its orders)."""
+    needs (so a column the pole-by-pole filter kept is kept, with all its orders). ``clusters``:
+    :func:`cluster_candidates` of the same poles and flags, when already made."""
     report = FilterReport.empty(len(poles), use_filters)
     stable = np.flatnonzero(flags.stable)
     report.stable = int(stable.size)
     unphysical = stable[~flags.physical_ok[stable]]
     report.removed_by[unphysical] = "physical"
     report.removed["physical"] = int(unphysical.size)
-    cand, labels, need = _clusters(poles, flags, cfg)
+    cand, labels, need = clusters or cluster_candidates(poles, flags, cfg)
     if labels is None:
         report.removed_by[cand] = "too few orders"
         report.removed["too few orders"] += int(cand.size)
@@ -314,10 +315,12 @@ def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, us
     return merged, report
 
 
-def _clusters(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig
-              ) -> tuple[np.ndarray, np.ndarray | None, int]:
+Clusters = tuple[np.ndarray, "np.ndarray | None", int]
+
+
+def cluster_candidates(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig) -> Clusters:
     """The stable, physical poles, their cluster labels (None: too few poles to make a mode) and
-    the number of orders a mode needs."""
+    the number of orders a mode needs (what picking clusters; the two-A check does not change it)."""
     stable = np.flatnonzero(flags.stable)
     cand = stable[flags.physical_ok[stable]]
     n_orders = int(np.unique(poles.order).size) if len(poles) else 0
@@ -327,10 +330,11 @@ def _clusters(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig
     return cand, _cluster(poles.frequency_hz[cand], poles.shape[cand], cfg.distance_cutoff), need
 
 
-def stable_columns(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig) -> tuple[list[np.ndarray], int]:
+def stable_columns(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, clusters: Clusters | None = None
+                   ) -> tuple[list[np.ndarray], int]:
     """The stable columns picking judges with the two-A and MPC filters (the clusters of stable,
     physical poles at enough orders: member indices) and the number of orders a mode needs."""
-    cand, labels, need = _clusters(poles, flags, cfg)
+    cand, labels, need = clusters or cluster_candidates(poles, flags, cfg)
     if labels is None:
         return [], need
     columns = [cand[labels == lab] for lab in np.unique(labels)]
@@ -349,7 +353,8 @@ def passes_needed(n_orders: int, need: int, fraction: float) -> int:
 
 
 def two_a_by_column(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig,
-                    validate: Callable[[np.ndarray], np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+                    validate: Callable[[np.ndarray], np.ndarray], clusters: Clusters | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """Two-A verdicts of each stable column at as few of its orders as settle its verdict.
 
     ``validate(idx)`` returns the two-A verdict of the poles ``idx`` (all of one model order).
@@ -361,7 +366,7 @@ def two_a_by_column(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig,
     and the mask of the poles checked."""
     ok = np.zeros(len(poles), bool)
     checked = np.zeros(len(poles), bool)
-    columns, need = stable_columns(poles, flags, cfg)
+    columns, need = stable_columns(poles, flags, cfg, clusters)
     if not columns:
         return ok, checked
     top = int(poles.order.max()) + 1
