@@ -45,8 +45,8 @@ def test_data() -> Path:
 
 @pytest.fixture(autouse=True)
 def _two_a_scope_check(request, monkeypatch):
-    """In the identify tests, every identification with the default two-A scope (stable
-    candidates) is redone with the all-orders check and must pick the same modes
+    """In the identify tests, every identification with the default two-A scope (stable columns,
+    each until its verdict is settled) is redone with the all-orders check and must pick the same modes
     (test/two_a_scope_check.py; ``SHM_TWO_A_CHECK=0`` leaves it out, to time the tests alone)."""
     name = request.module.__name__.rsplit(".", 1)[-1]
     if not name.startswith("test_identify_") or os.environ.get("SHM_TWO_A_CHECK", "1") == "0":
@@ -66,4 +66,6 @@ def pytest_terminal_summary(terminalreporter):
     if checker is not None and checker.TOTAL.compared:
         t = checker.TOTAL
         terminalreporter.write_line(f"two-A scope check: {t.compared} identifications compared with the "
-                                    f"all-orders check, {len(t.differences)} differences, {t.cpu_s:.1f} s CPU")
+                                    f"all-orders check, {len(t.differences)} differences, {t.cpu_s:.1f} s CPU"
+                                    + (f"; candidates checked: {t.checked} of {t.candidates}"
+                                       if t.candidates else ""))

@@ -1,11 +1,13 @@
-"""The two-A check on stable candidates (``stability.two_a_scope: stable``, the default) picks
-the same modes as the check of every pole of every order (``all``).
+"""The two-A check on stable columns until each verdict is settled (``stability.two_a_scope:
+columns``, the default) and on every stable candidate (``stable``) pick the same modes as the
+check of every pole of every order (``all``).
 
 Every identification the ``test_identify_*`` modules make with the default scope is redone with
 ``all`` on the same subspace model and compared (test/two_a_scope_check.py, installed by
-conftest.py): same count, frequencies within 0.1 %, MAC >= 0.999, and the same two-A verdict
-for every pole that enters picking. This module adds the windows of the synthetic acceptance
-(both output-only methods, 2 % and 5 % noise) and shows that the comparison can fail.
+conftest.py): same count, frequencies within 0.1 %, MAC >= 0.999, the same verdict of every
+column, and the same two-A verdict for every pole that enters picking and was checked. This
+module adds the windows of the synthetic acceptance (both output-only methods, 2 % and 5 %
+noise; the ``stable`` scope on SSI-cov) and shows that the comparison can fail.
 """
 
 from __future__ import annotations
@@ -35,13 +37,14 @@ def _window(seed: int, noise: float) -> Window:
     return Window(f"syn{seed}", 0, fs, names, np.array(y))
 
 
-@pytest.mark.parametrize("method", ["ssi-cov", "ssi-data"])
-def test_stable_candidates_pick_what_every_pole_picks(method, _two_a_scope_check):
+@pytest.mark.parametrize(("method", "scope"), [("ssi-cov", "columns"), ("ssi-data", "columns"),
+                                               ("ssi-cov", "stable")])
+def test_stable_candidates_pick_what_every_pole_picks(method, scope, _two_a_scope_check):
     check = _two_a_scope_check
     validated = []
     for seed, noise in [(300, 0.02), (301, 0.05)]:
-        res = identify_window_detailed(_window(seed, noise), IdentifyConfig(method=method,
-                                                                          uncertainty=False))
+        cfg = IdentifyConfig(method=method, uncertainty=False, stability=StabilityConfig(two_a_scope=scope))
+        res = identify_window_detailed(_window(seed, noise), cfg)
         assert len(res.diagram.picked) >= 4
         validated.append(np.isfinite(res.diagram.poles.frequency_b_hz).mean())
     # compared here (the fixture asserts no difference at teardown), and the check was cheaper:

@@ -72,3 +72,57 @@ def test_column_pass_fractions_and_one_pole_per_order_match_a_loop_over_orders(s
         assert len(mode) == 1 and np.array_equal(mode[0].pole_index, expected)
     assert kept == len(picked) >= 1
     assert report.removed["same order"] == same_order > 0
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
+def test_columns_checked_until_settled_keep_every_verdict(seed):
+    """``two_a_by_column`` asks for the two-A verdict of each column's poles only until the
+    column's verdict is settled, and picking then keeps and removes the same columns as with
+    every pole's verdict; the report's pass fraction is that of the orders checked."""
+    from shm_ros.core.stabilization import passes_needed, stable_columns, two_a_by_column
+
+    poles, flags = _diagram(seed)
+    truth = flags.two_a_ok.copy()
+    cfg = PickingConfig()
+    asked: list[np.ndarray] = []
+
+    def validate(idx):
+        assert np.unique(poles.order[idx]).size == 1  # one model order at a time
+        asked.append(idx)
+        return truth[idx]
+
+    ok, checked = two_a_by_column(poles, flags, cfg, validate)
+    assert np.array_equal(ok, truth & checked) and 0 < checked.sum() < truth.size
+    columns, need = stable_columns(poles, flags, cfg)
+    for members in columns:
+        orders = np.unique(poles.order[members])
+        seen = np.unique(poles.order[members[checked[members]]])
+        passed = sum(bool(truth[members[poles.order[members] == o]].any()) for o in seen)
+        required = passes_needed(orders.size, need, cfg.column_pass_fraction)
+        # settled: reached, or out of reach ...
+        assert passed >= required or passed + orders.size - seen.size < required
+        # ... and not before its last order checked
+        sequence = [int(poles.order[idx[0]]) for idx in asked if np.isin(idx, members).any()]
+        assert sorted(sequence) == list(seen)
+        n_pass = 0
+        for k, o in enumerate(sequence[:-1]):
+            n_pass += bool(truth[members[poles.order[members] == o]].any())
+            assert n_pass < required and n_pass + orders.size - (k + 1) >= required
+    full = pick_modes_reported(poles, flags, cfg)
+    lazy_flags = PoleFlags(flags.mpc, flags.stable_freq, flags.stable, ok, flags.mpc_ok,
+                           flags.physical_ok, two_a_checked=checked)
+    lazy = pick_modes_reported(poles, lazy_flags, cfg)
+    assert [p.frequency_hz for p in lazy[0]] == [p.frequency_hz for p in full[0]]
+    assert lazy[1].removed == full[1].removed
+    for c in lazy[1].columns:
+        assert c["orders_checked"] <= c["orders"]
+    assert sum(c["orders_checked"] < c["orders"] for c in lazy[1].columns if c["check"] == "two-A") >= 1
+
+
+@pytest.mark.parametrize("n_orders", [10, 30, 48, 50, 99, 100])
+def test_passes_needed_is_the_picking_rule(n_orders):
+    from shm_ros.core.stabilization import passes_needed
+
+    need, fraction = 10, 0.2
+    keep = [k for k in range(n_orders + 1) if not (k / n_orders < fraction or k < need)]
+    assert passes_needed(n_orders, need, fraction) == keep[0]

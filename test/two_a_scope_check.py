@@ -3,7 +3,8 @@
 ``same_picks`` compares two lists of picked modes: same count, frequencies within 0.1 %, MAC of
 the complex shapes >= 0.999. ``ScopeCheck`` wraps ``shm_ros.core.identify.diagram_picks`` so that
 every identification of a test (every window the identify tests identify) that runs the default
-``two_a_scope: stable`` is redone with ``all`` on the same subspace model and compared; conftest.py
+``two_a_scope: columns`` (or ``stable``) is redone with ``all`` on the same subspace model and
+compared (picks, every column's verdict, each checked candidate's verdict); conftest.py
 installs it for the ``test_identify_*`` modules.
 """
 
@@ -43,6 +44,8 @@ class ScopeCheck:
 
     compared: int = 0
     poles: int = 0
+    checked: int = 0  # candidates whose two-A verdict the ``columns`` scope computed
+    candidates: int = 0  # of these candidates
     cpu_s: float = 0.0  # CPU seconds of the comparisons (the all-orders diagrams redone)
     differences: list[str] = field(default_factory=list)
 
@@ -50,7 +53,7 @@ class ScopeCheck:
         def diagram_picks(model, orders, cfg, duration_s):
             out = original(model, orders, cfg, duration_s)
             st = cfg.stability
-            if st.two_a and st.two_a_scope == TwoAScope.STABLE:
+            if st.two_a and st.two_a_scope != TwoAScope.ALL:
                 every = replace(cfg, stability=replace(st, two_a_scope=TwoAScope.ALL.value))
                 c0 = time.process_time()
                 ref = original(model, orders, every, duration_s)
@@ -59,10 +62,20 @@ class ScopeCheck:
                 self.poles += len(out[0])
                 self.differences += [f"{model.method}, {model.block_rows} block rows: {d}"
                                      for d in same_picks(out[2], ref[2])]
-                # the poles that entered picking carry the same two-A verdict
+                # the poles that entered picking carry the same two-A verdict (under ``columns``
+                # those checked: each column's until its verdict was settled)
                 cand = out[1].stable & out[1].physical_ok
+                if out[1].two_a_checked is not None:
+                    cand &= out[1].two_a_checked
+                    self.checked += int(cand.sum())
+                    self.candidates += int(np.count_nonzero(out[1].stable & out[1].physical_ok))
                 if not np.array_equal(out[1].two_a_ok[cand], ref[1].two_a_ok[cand]):
                     self.differences.append(f"{model.method}: a candidate's two-A verdict differs")
+                # every column judged carries the same verdict
+                verdicts = [(round(c["frequency_hz"], 6), c["check"]) for c in out[3].columns]
+                if verdicts != [(round(c["frequency_hz"], 6), c["check"]) for c in ref[3].columns] \
+                        or out[3].removed != ref[3].removed:
+                    self.differences.append(f"{model.method}: a column's verdict differs")
             return out
 
         return diagram_picks
@@ -81,4 +94,6 @@ def add_to_total(check: ScopeCheck) -> None:
     TOTAL.compared += check.compared
     TOTAL.poles += check.poles
     TOTAL.cpu_s += check.cpu_s
+    TOTAL.checked += check.checked
+    TOTAL.candidates += check.candidates
     TOTAL.differences += check.differences

@@ -35,9 +35,11 @@ from shm_ros.core.stabilization import (
     StabilityConfig,
     TwoAScope,
     classify,
+    cluster_candidates,
     pick_modes_reported,
     real_mode_shape,
     standard_error,
+    two_a_by_column,
     two_a_flags,
 )
 from shm_ros.core.types import ModalEstimate, Mode, Window
@@ -341,21 +343,35 @@ def diagram_picks(model: ssi.SubspaceModel, orders: np.ndarray, cfg: IdentifyCon
     """Poles of every order, their flags, the picked modes and the filter report.
 
     The two-A check validates the poles ``stability.two_a_scope`` says: every pole of every
-    order, or (default) the stable, physical candidates, at the orders where they occur
-    (:func:`shm_ros.core.ssi.two_a_partners`). Only those candidates enter picking, and each
-    gets the same verdict either way, so the picks are the same."""
+    order; the stable, physical candidates at the orders where they occur
+    (:func:`shm_ros.core.ssi.two_a_partners`); or (default) each stable column at as few of its
+    orders as settle its verdict (:func:`shm_ros.core.stabilization.two_a_by_column`). Picking
+    judges a column by the share of its orders that pass, so each column gets the same verdict
+    either way, and the picks are the same."""
     st = cfg.stability
-    every = st.two_a and st.two_a_scope == TwoAScope.ALL
+    scope = TwoAScope(st.two_a_scope)
+    every = st.two_a and scope == TwoAScope.ALL
     match = (st.two_a_freq_tol, st.two_a_damping_tol, st.two_a_mac_min)
     std_scale = max(st.damping_sigmas, st.two_a_sigmas) / np.sqrt(duration_s)
     poles = ssi.poles_all_orders(model, orders, two_a=every, match_scale=match,
                                  shapes_for=(st.freq_tol, st.damping_tol), std_scale=std_scale)
     flags = classify(poles, st, model.sample_rate_hz, duration_s=duration_s)
-    if st.two_a and not every:
+    clusters = cluster_candidates(poles, flags, cfg.picking)  # the two-A check does not change them
+    if st.two_a and scope == TwoAScope.STABLE:
         poles = ssi.two_a_partners(model, poles, flags.stable & flags.physical_ok, match, std_scale)
         sigma = standard_error(poles.frequency_hz, poles.damping_ratio, duration_s)
         flags.two_a_ok = two_a_flags(poles, st, sigma)
-    picked, report = pick_modes_reported(poles, flags, cfg.picking, use_filters=cfg.use_filters)
+    elif st.two_a and scope == TwoAScope.COLUMNS and len(poles):
+        check = ssi.BackwardCheck(model, int(poles.order.max()), match, std_scale)
+        sigma = standard_error(poles.frequency_hz, poles.damping_ratio, duration_s)
+
+        def validate(idx: np.ndarray) -> np.ndarray:
+            check.partners(poles, idx)
+            return two_a_flags(poles.subset(idx), st, sigma[idx])
+
+        flags.two_a_ok, flags.two_a_checked = two_a_by_column(poles, flags, cfg.picking, validate, clusters)
+    picked, report = pick_modes_reported(poles, flags, cfg.picking, use_filters=cfg.use_filters,
+                                         clusters=clusters)
     return poles, flags, picked, report
 
 

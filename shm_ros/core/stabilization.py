@@ -32,6 +32,7 @@ What each check removed is counted in a :class:`FilterReport`.
 from __future__ import annotations
 
 import enum
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,7 +44,8 @@ from shm_ros.core.modal import real_shape as real_mode_shape
 from shm_ros.core.ssi import PoleSet
 
 __all__ = ["TwoAScope", "StabilityConfig", "two_a_flags", "PickingConfig", "PoleFlags", "PickedMode",
-           "FilterReport", "mpc",
+           "FilterReport", "mpc", "Clusters", "cluster_candidates", "stable_columns", "passes_needed",
+           "two_a_by_column",
            "classify", "standard_error", "pick_modes", "pick_modes_reported", "real_mode_shape"]
 
 
@@ -51,7 +53,10 @@ class TwoAScope(enum.StrEnum):
     """Which poles the two-A check validates (docs/identify.md)."""
 
     # The building paper's use: the second estimate of A validates the poles that passed the
-    # stabilization criteria; it is solved only at the orders where such poles occur.
+    # stabilization criteria. Picking judges a stable column by the share of its orders that pass,
+    # so each column is checked at as few of its orders as settle that verdict (reached, or out of
+    # reach); the backward A is solved only at those orders.
+    COLUMNS = "columns"
     STABLE = "stable"  # stable, physical candidate poles, at the orders where they occur
     ALL = "all"  # every pole of every order (the whole diagram shows its verdict)
 
@@ -69,9 +74,10 @@ class StabilityConfig:
     two_a_sigmas: float = option(1.0, "two-A agreement: relative frequency and damping differences up to "
                                  "this many standard errors sqrt(zeta / (2 pi f T)) are accepted too")
     two_a_mac_min: float = option(0.9, "two-A agreement: MAC")
-    two_a_scope: str = option(TwoAScope.STABLE.value, "poles the two-A check validates: stable (the "
-                              "stable, physical candidates, at the orders where they occur; the same "
-                              "picks at a fraction of the cost) or all (every pole of every order)",
+    two_a_scope: str = option(TwoAScope.COLUMNS.value, "poles the two-A check validates: columns (each "
+                              "stable column at as few of its orders as settle its verdict), stable "
+                              "(the stable, physical candidates at every order where they occur) or "
+                              "all (every pole of every order); the picks are the same",
                               choices=TwoAScope)
     mpc_min: float = option(0.5, "smallest modal phase collinearity (0 disables the MPC filter)")
     damping_min: float = option(0.0, "physical pole: damping ratio above this")
@@ -100,6 +106,8 @@ class PoleFlags:
     two_a_ok: np.ndarray
     mpc_ok: np.ndarray
     physical_ok: np.ndarray
+    # poles whose two-A verdict was computed (None: every pole's); two_a_ok is False elsewhere
+    two_a_checked: np.ndarray | None = None
 
     def candidates(self, use_filters: bool = True) -> np.ndarray:
         """Poles that enter picking: stable and physical, plus two-A and MPC when filtering."""
@@ -223,26 +231,25 @@ def pick_modes(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig,
     return pick_modes_reported(poles, flags, cfg, use_filters)[0]
 
 
-def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, use_filters: bool = True
-                        ) -> tuple[list[PickedMode], FilterReport]:
+def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, use_filters: bool = True,
+                        clusters: Clusters | None = None) -> tuple[list[PickedMode], FilterReport]:
     """Picked modes and the :class:`FilterReport`: stable, physical poles are clustered; a cluster
     with poles at enough orders is removed by the two-A (then the MPC) filter when it passes that
     check at fewer than ``column_pass_fraction`` of its orders or at fewer orders than a mode
-    needs (so a column the pole-by-pole filter kept is kept, with all its orders)."""
+    needs (so a column the pole-by-pole filter kept is kept, with all its orders). ``clusters``:
+    :func:`cluster_candidates` of the same poles and flags, when already made."""
     report = FilterReport.empty(len(poles), use_filters)
     stable = np.flatnonzero(flags.stable)
     report.stable = int(stable.size)
     unphysical = stable[~flags.physical_ok[stable]]
     report.removed_by[unphysical] = "physical"
     report.removed["physical"] = int(unphysical.size)
-    cand = stable[flags.physical_ok[stable]]
-    n_orders = int(np.unique(poles.order).size) if len(poles) else 0
-    need = max(cfg.min_poles, int(np.ceil(cfg.min_fraction * n_orders)))
-    if cand.size < need:
+    cand, labels, need = clusters or cluster_candidates(poles, flags, cfg)
+    if labels is None:
         report.removed_by[cand] = "too few orders"
         report.removed["too few orders"] += int(cand.size)
         return [], report
-    labels = _cluster(poles.frequency_hz[cand], poles.shape[cand], cfg.distance_cutoff)
+    checked = flags.two_a_checked
     picked: list[PickedMode] = []
     for lab in np.unique(labels):
         members = cand[labels == lab]
@@ -260,8 +267,16 @@ def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, us
                 # order, e.g. a split pair, must not outvote the column)
                 passed = np.bincount(at_order, weights=ok[members], minlength=col_orders.size) > 0
                 share = float(np.mean(passed))
+                # the verdict counts an order that was not checked as failing (a column is checked
+                # until its verdict is settled, so this is the verdict of all its orders); the
+                # report gives the pass fraction of the orders checked
+                seen = np.ones(col_orders.size, bool) if check != "two-A" or checked is None else \
+                    np.bincount(at_order, weights=checked[members], minlength=col_orders.size) > 0
                 report.columns.append({"frequency_hz": float(fmed), "poles": int(members.size),
-                                       "check": check, "pass_fraction": round(share, 3)})
+                                       "check": check, "orders": int(col_orders.size),
+                                       "orders_checked": int(seen.sum()),
+                                       "pass_fraction": round(float(np.sum(passed) / max(1, seen.sum())),
+                                                              3)})
                 if share < cfg.column_pass_fraction or int(np.sum(passed)) < need:
                     verdict = check
                     break
@@ -271,7 +286,9 @@ def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, us
                 report.columns_removed[verdict] = report.columns_removed.get(verdict, 0) + 1
                 continue
             for check, ok in (("two-A", flags.two_a_ok), ("MPC", flags.mpc_ok)):
-                report.kept_failing[check] += int(np.count_nonzero(~ok[members]))
+                failed = ~ok[members] if check != "two-A" or checked is None else \
+                    ~ok[members] & checked[members]
+                report.kept_failing[check] += int(np.count_nonzero(failed))
         # one pole per order: the one nearest the cluster's median frequency (the first of equals)
         by = np.lexsort((members, np.abs(poles.frequency_hz[members] - fmed), at_order))
         first = np.r_[True, np.diff(at_order[by]) != 0]
@@ -296,6 +313,81 @@ def pick_modes_reported(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, us
             report.removed["duplicate"] += int(p.pole_index.size)
     report.removed_by[np.concatenate([p.pole_index for p in merged]) if merged else []] = "picked"
     return merged, report
+
+
+Clusters = tuple[np.ndarray, "np.ndarray | None", int]
+
+
+def cluster_candidates(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig) -> Clusters:
+    """The stable, physical poles, their cluster labels (None: too few poles to make a mode) and
+    the number of orders a mode needs (what picking clusters; the two-A check does not change it)."""
+    stable = np.flatnonzero(flags.stable)
+    cand = stable[flags.physical_ok[stable]]
+    n_orders = int(np.unique(poles.order).size) if len(poles) else 0
+    need = max(cfg.min_poles, int(np.ceil(cfg.min_fraction * n_orders)))
+    if cand.size < need:
+        return cand, None, need
+    return cand, _cluster(poles.frequency_hz[cand], poles.shape[cand], cfg.distance_cutoff), need
+
+
+def stable_columns(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig, clusters: Clusters | None = None
+                   ) -> tuple[list[np.ndarray], int]:
+    """The stable columns picking judges with the two-A and MPC filters (the clusters of stable,
+    physical poles at enough orders: member indices) and the number of orders a mode needs."""
+    cand, labels, need = clusters or cluster_candidates(poles, flags, cfg)
+    if labels is None:
+        return [], need
+    columns = [cand[labels == lab] for lab in np.unique(labels)]
+    return [m for m in columns if np.unique(poles.order[m]).size >= need], need
+
+
+def passes_needed(n_orders: int, need: int, fraction: float) -> int:
+    """Fewest passing orders of a column of ``n_orders`` orders that keep it: at least ``need``
+    and a share of at least ``fraction`` (the same comparison as the picking's)."""
+    k = max(need, int(np.ceil(fraction * n_orders)))
+    while k > need and (k - 1) / n_orders >= fraction:
+        k -= 1
+    while k <= n_orders and k / n_orders < fraction:
+        k += 1
+    return k
+
+
+def two_a_by_column(poles: PoleSet, flags: PoleFlags, cfg: PickingConfig,
+                    validate: Callable[[np.ndarray], np.ndarray], clusters: Clusters | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Two-A verdicts of each stable column at as few of its orders as settle its verdict.
+
+    ``validate(idx)`` returns the two-A verdict of the poles ``idx`` (all of one model order).
+    A column is kept by picking when the orders with a passing pole reach
+    :func:`passes_needed`, removed when they can no longer reach it; checking stops for a
+    column at either point, so the verdict is that of all its orders. The next order checked is
+    the one with the most unsettled columns (each order costs one backward eigenvalue problem,
+    shared by the columns there). Returns the two-A flag of every pole (False where not checked)
+    and the mask of the poles checked."""
+    ok = np.zeros(len(poles), bool)
+    checked = np.zeros(len(poles), bool)
+    columns, need = stable_columns(poles, flags, cfg, clusters)
+    if not columns:
+        return ok, checked
+    top = int(poles.order.max()) + 1
+    by_order = [{int(o): m[poles.order[m] == o] for o in np.unique(poles.order[m])} for m in columns]
+    remaining = [set(d) for d in by_order]
+    required = [passes_needed(len(d), need, cfg.column_pass_fraction) for d in by_order]
+    passed = [0] * len(columns)
+    open_ = set(range(len(columns)))
+    while open_:
+        counts = np.bincount([o for c in open_ for o in remaining[c]], minlength=top)
+        n = int(np.argmax(counts))
+        here = [c for c in open_ if n in remaining[c]]
+        idx = np.concatenate([by_order[c][n] for c in here])
+        ok[idx] = validate(idx)
+        checked[idx] = True
+        for c in here:
+            remaining[c].discard(n)
+            passed[c] += bool(ok[by_order[c][n]].any())
+            if passed[c] >= required[c] or passed[c] + len(remaining[c]) < required[c]:
+                open_.discard(c)
+    return ok, checked
 
 
 @dataclass

@@ -23,9 +23,15 @@ class ChannelBuffer:
         self.chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self.last_max: int | None = None  # latest stamp seen (for OUT_OF_ORDER at arrival)
 
-    def append(self, t: np.ndarray, v: np.ndarray, seq: np.ndarray) -> int:
-        """Add samples; returns how many are out of order (stamp < an earlier stamp)."""
+    def append(self, t: np.ndarray, v: np.ndarray, seq: np.ndarray, ascending: bool = False) -> int:
+        """Add samples; returns how many are out of order (stamp < an earlier stamp).
+        ``ascending``: the caller knows ``t`` does not decrease (then only its first stamp is
+        compared with the earlier ones)."""
         if t.size == 0:
+            return 0
+        if ascending and (self.last_max is None or t[0] >= self.last_max):
+            self.last_max = int(t[-1])
+            self.chunks.append((t, v, np.zeros(t.size, np.uint8), seq))
             return 0
         run = np.maximum.accumulate(t)
         prev = np.empty_like(run)

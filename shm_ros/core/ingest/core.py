@@ -232,6 +232,11 @@ class IngestCore:
         self._block_rates.add(t0, t0 + int(round((n - 1) * 1e9 / rate)), rate)
         t = t0 + np.round(np.arange(n) * (1e9 / rate)).astype(np.int64)
         seq = self._next_seq(n)
+        # what depends on the block's stamps or on all its values is found once for the block: its
+        # stamps ascend, by steps of one period (no clock jump inside), and which of its columns
+        # hold an implausible value (|x * factor * sign| = |x| |factor| exactly)
+        steady = float(1e9 / rate) + 1.0 <= self.config.clock_jump_s * 1e9  # steps are rounded to 1 ns
+        flagged = np.any((np.abs(x) * abs(factor) > self.config.implausible_m_s2) & np.isfinite(x), axis=0)
         for j, name in enumerate(names):
             routes = self._block_routes.get(name)
             if routes is None:
@@ -244,7 +249,8 @@ class IngestCore:
                     v = v * sign
                 if self._channel_factor[col] is None:
                     self._channel_factor[col] = factor
-                self._append(col, t, v, seq, f"{topic}.samples[{name}]")
+                self._append(col, t, v, seq, f"{topic}.samples[{name}]",
+                             steady=steady, plausible=not flagged[j])
         self._after_add()
 
     def add_temperature(self, sensor_id: str, stamp_ns: int, value_c: float, source: str | None = None) -> None:
@@ -428,11 +434,15 @@ class IngestCore:
                 self._log.add(Level.OK, "sample_rate", f"{self._topic(topic_id)} (stamps)",
                               f"grid rate {rate:g} Hz (fitted to the stamps)", int(t[0]))
 
-    def _append(self, col: int, t: np.ndarray, v: np.ndarray, seq: np.ndarray, source: str) -> None:
+    def _append(self, col: int, t: np.ndarray, v: np.ndarray, seq: np.ndarray, source: str,
+                steady: bool = False, plausible: bool = False) -> None:
+        """Check and buffer one channel's samples. ``steady``: the stamps ascend by steps within
+        the clock-jump limit (a DAQ block); ``plausible``: no value is beyond the implausible limit
+        (the checks that would find nothing are then left out)."""
         buf = self._buf[col]
         self._seen_source[col] = source
         self.stats.samples_in += int(t.size)
-        if self._committed_ns is not None:
+        if self._committed_ns is not None and not (steady and t[0] >= self._committed_ns):
             late = t < self._committed_ns
             if late.any():
                 n = int(late.sum())
@@ -444,20 +454,26 @@ class IngestCore:
                 t, v, seq = t[keep], v[keep], seq[keep]
                 if t.size == 0:
                     return
-        self._check_values(col, t, v, source)
-        n_ooo = buf.append(t, v, seq)
+        self._check_values(col, t, v, source, steady, plausible)
+        n_ooo = buf.append(t, v, seq, ascending=steady)
         if n_ooo:
             self._log.add(Level.WARN, "out_of_order", source,
                           f"{n_ooo} stamp(s) earlier than a previous stamp: placed by stamp, flagged "
                           "OUT_OF_ORDER", int(t[0]), n_ooo)
-        tmax = int(t.max())
+        tmax = int(t[-1] if steady else t.max())
         cm = self._chan_max[col]
         self._chan_max[col] = tmax if cm is None else max(cm, tmax)
 
-    def _check_values(self, col: int, t: np.ndarray, v: np.ndarray, source: str) -> None:
+    def _check_values(self, col: int, t: np.ndarray, v: np.ndarray, source: str, steady: bool = False,
+                      plausible: bool = False) -> None:
         """Implausible magnitudes become NaN (flagged NAN in their window) and clock jumps - forward by
-        more than ``clock_jump_s`` or any step back - are reported; both as diagnostics naming the source."""
+        more than ``clock_jump_s`` or any step back - are reported; both as diagnostics naming the source.
+        ``steady`` and ``plausible``: see :meth:`_append`."""
         lim = self.config.implausible_m_s2
+        jump_ns = self.config.clock_jump_s * 1e9
+        prev = self._chan_max[col]
+        if plausible and steady and (prev is None or 0 <= t[0] - prev <= jump_ns):
+            return
         bad = np.abs(v) > lim
         bad &= np.isfinite(v)  # +-inf is flagged NAN like a NaN
         if bad.any():
@@ -468,8 +484,6 @@ class IngestCore:
                           f"{n} sample(s) beyond {lim:g} m/s^2 (up to {worst:.3g}): set to NaN",
                           int(t[bad][0]), n)
             v[bad] = np.nan
-        jump_ns = self.config.clock_jump_s * 1e9
-        prev = self._chan_max[col]
         steps = np.diff(t) if prev is None else np.diff(t, prepend=prev)
         if steps.size and (steps.max() > jump_ns or steps.min() < 0):
             k = int(np.argmax(steps > jump_ns)) if steps.max() > jump_ns else int(np.argmax(steps < 0))
