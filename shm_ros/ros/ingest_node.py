@@ -32,6 +32,7 @@ from shm_ros.core.config import option
 from shm_ros.core.diagnostics import Diagnostic, Level
 from shm_ros.core.ingest import ChannelMap, IngestConfig, IngestCore, channel_mismatches
 from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
+from shm_ros.io.faults import fault_point
 from shm_ros.io.imu_cdr import decode_imu_batch
 from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
@@ -263,6 +264,7 @@ class IngestNode(ManagedNode):
             window = self.pending.popleft()
             self.window_pub.publish(window_to_msg(window, self.frame_id))
             self.windows_out += 1
+            fault_point(self.get_name(), "published")
             self.get_logger().info(f"window {window.window_id}: {window.n_samples} samples x "
                                    f"{len(window.channel_names)} channels")
 

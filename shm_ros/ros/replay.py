@@ -38,6 +38,9 @@ class ReplayResult:
     bag_span_s: float = 0.0
     started_ns: int = 0  # system clock at the first publish
     error: str = ""  # the bag could not be read to its end (what was read has been replayed)
+    ingest_restarts: int = 0  # new ingest processes seen while replaying
+    lost_at_restarts: int = 0  # messages sent to an ingest process that died before taking them
+    stopped: bool = False  # stopped by SIGINT/SIGTERM before the end of the bag
 
     @property
     def lost(self) -> int:
@@ -45,18 +48,36 @@ class ReplayResult:
 
 
 class Replayer(Node):
+    """Publishes the recording; counts ingest's acknowledgements. A count that goes back is a new
+    ingest process (a restart): what the old one had not acknowledged was lost with it and is
+    counted as lost at once, and the new count is taken from where the replay stands, so a replay
+    goes on after an ingest restart instead of waiting for acknowledgements that cannot come."""
+
     def __init__(self, credit: int = 2000, namespace: str = "") -> None:
         super().__init__("shm_replay", namespace=namespace or None)
         self.credit = credit
-        self.acknowledged = 0
+        self.acknowledged = 0  # messages settled: acknowledged, or lost at an ingest restart
+        self.published = 0
+        self.offset = 0  # ingest's count when the replay began (it may have taken other bags before)
+        self.base = 0  # settled before the current ingest process started
+        self.last_count = 0
+        self.restarts = 0
+        self.lost_at_restarts = 0
         self.ack_seen = False
         self.create_subscription(UInt64, topics.INGEST_RECEIVED, self._on_ack, pipeline_qos())
         self.done_pub = self.create_publisher(String, topics.REPLAY_DONE, latched_qos())
         self.pubs: dict[str, Publisher] = {}
 
     def _on_ack(self, msg: UInt64) -> None:
+        count = int(msg.data)
+        if self.ack_seen and count < self.last_count:  # a new ingest process counts from 0
+            self.restarts += 1
+            settled = max(self.offset + self.published - count, self.acknowledged)
+            self.lost_at_restarts += settled - self.acknowledged
+            self.base = settled
         self.ack_seen = True
-        self.acknowledged = max(self.acknowledged, int(msg.data))
+        self.last_count = count
+        self.acknowledged = max(self.acknowledged, self.base + count)
 
     def publisher(self, topic: str, msgtype: str) -> Publisher:
         pub = self.pubs.get(topic)
@@ -88,7 +109,7 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
                drain_timeout_s: float = 300.0, stall_s: float = 30.0, recording_only: bool = True,
                progress: bool = False, clock_hz: float = 0.0, clock_readers: int = 0,
-               namespace: str = "") -> ReplayResult:
+               namespace: str = "", stop: Callable[[], bool] | None = None) -> ReplayResult:
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
 
     ``rate``: 1.0 = real time, N = N x real time, 0 = as fast as the graph acknowledges.
@@ -102,6 +123,8 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     sim time) have matched; 0 = those the graph shows once they have stayed matched for
     ``CLOCK_SETTLE_S`` (a node discovered later than that takes the clock only from then on).
     ``namespace``: the graph's (``/bridge_a``); the recording's topics and the flow control go under it.
+    ``stop``: asked before each message; True (a SIGINT or SIGTERM) ends the replay there, after
+    which what was sent is drained and the graph is told the replay is done (``result.stopped``).
     """
     node = Replayer(credit, namespace)
     result = ReplayResult()
@@ -150,13 +173,16 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         t0_wall = time.monotonic()
         t0_bag: int | None = None
         last_bag = 0
-        start_ack = node.acknowledged
+        start_ack = node.offset = node.acknowledged
         last_report = t0_wall
         sizes: deque[int] = deque()  # bytes of the messages not yet acknowledged
         in_flight_bytes = 0
         acked_upto = 0
         messages = reader(list(node.pubs))
         for k, m in enumerate(_until_error(messages, result)):
+            if stop is not None and stop():
+                result.stopped = True
+                break
             t0_bag = m.receive_ns if t0_bag is None else t0_bag
             last_bag = m.receive_ns
             if clock is not None:
@@ -191,6 +217,7 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 result.started_ns = time.time_ns()
             node.pubs[m.topic].publish(m.data)
             result.published += 1
+            node.published = result.published
             if k % 200 == 0:
                 rclpy.spin_once(node, timeout_sec=0)
             if progress and time.monotonic() - last_report > 2.0:
@@ -199,14 +226,15 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         # Drain: wait until the graph has taken everything that was sent.
         if flow or node.ack_seen:
             stalled = result.error.endswith("replay stopped")
-            end = time.monotonic() + (0.0 if stalled else drain_timeout_s)
+            end = time.monotonic() + (0.0 if stalled else STOPPED_DRAIN_S if result.stopped else drain_timeout_s)
             while node.acknowledged - start_ack < result.published and time.monotonic() < end:
                 rclpy.spin_once(node, timeout_sec=0.05)
                 if node.count_publishers(topics.INGEST_RECEIVED) == 0:  # ingest left: nothing more comes
                     result.error = result.error or (f"{path}: the ingest node left the graph before "
                                                     "acknowledging every message")
                     break
-            result.acknowledged = node.acknowledged - start_ack
+            result.acknowledged = node.acknowledged - start_ack - node.lost_at_restarts
+            result.ingest_restarts, result.lost_at_restarts = node.restarts, node.lost_at_restarts
         else:
             result.acknowledged = result.published
         result.wall_s = time.monotonic() - t0_wall
@@ -221,6 +249,7 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     return result
 
 
+STOPPED_DRAIN_S = 10.0  # s a stopped replay waits for the acknowledgements of what it sent
 CLOCK_SETTLE_S = 1.0  # s the /clock readers must stay matched before the replay starts
 
 
