@@ -1,8 +1,9 @@
 """Deterministic faults for the reliability tests: a node kills itself at a named point.
 
 ``SHM_FAULT=<node>:<point>[:<count>]`` makes the node named ``<node>`` (its ROS name, e.g.
-``identify``; ``bag`` and ``store`` for the bag writer and the track store of any process) die by ``SIGKILL`` the ``<count>``-th time (default 1) it passes ``<point>``; several
-faults are separated by commas. With ``SHM_FAULT_MARK=<file>`` a fault fires once only: firing
+``identify``; ``bag`` and ``store`` for the bag writer and the track store of any process) die by
+``SIGKILL`` the ``<count>``-th time (default 1) it passes ``<point>``; several faults are separated
+by commas. With ``SHM_FAULT_MARK=<file>`` a fault fires once only: firing
 creates the file, and a node restarted after it runs on normally. ``<point>`` ``enospc`` is not a
 kill: the write there fails with ``ENOSPC`` (a full disk) instead.
 

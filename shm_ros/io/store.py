@@ -281,7 +281,8 @@ class TrackStore:
             db.execute("COMMIT")
         except (sqlite3.OperationalError, OSError) as exc:
             self._rollback()
-            if getattr(exc, "errno", None) == errno.ENOSPC or getattr(exc, "sqlite_errorcode", 0) == sqlite3.SQLITE_FULL:
+            code = getattr(exc, "sqlite_errorcode", 0)
+            if getattr(exc, "errno", None) == errno.ENOSPC or code == sqlite3.SQLITE_FULL:
                 raise DiskFullError(errno.ENOSPC, f"{self.path}: no space left on the device: window "
                                     f"{est.window_id} not stored; the {self.count('estimates')} windows "
                                     "stored before are kept") from exc
