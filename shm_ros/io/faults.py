@@ -3,8 +3,8 @@
 ``SHM_FAULT=<node>:<point>[:<count>]`` makes the node named ``<node>`` (its ROS name, e.g.
 ``identify``; ``bag`` and ``store`` for the bag writer and the track store of any process) die by
 ``SIGKILL`` the ``<count>``-th time (default 1) it passes ``<point>``; several faults are separated
-by commas. With ``SHM_FAULT_MARK=<file>`` a fault fires once only: firing
-creates the file, and a node restarted after it runs on normally. ``<point>`` ``enospc`` is not a
+by commas. With ``SHM_FAULT_MARK=<folder>`` each fault fires once only: firing creates
+``<folder>/<node>.<point>``, and a node restarted after it runs on normally. ``<point>`` ``enospc`` is not a
 kill: the write there fails with ``ENOSPC`` (a full disk) instead.
 
 Points: ``bag:write`` (a bag writer flushing a message: a large record is partly on disk when the
@@ -43,10 +43,10 @@ def _fires(node: str, point: str) -> bool:
     _passes[key] = _passes.get(key, 0) + 1
     if _passes[key] != count:
         return False
-    mark = os.environ.get("SHM_FAULT_MARK")
-    if mark:
+    marks = os.environ.get("SHM_FAULT_MARK")
+    if marks:
         try:  # exclusive create: the first process to fire it wins, a restarted one runs normally
-            Path(mark).touch(exist_ok=False)
+            (Path(marks) / f"{node}.{point}").touch(exist_ok=False)
         except FileExistsError:
             return False
     return True
