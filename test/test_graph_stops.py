@@ -33,8 +33,8 @@ from test_supervisor import _children, _identity, _Lines, _still_running, _wait_
 
 FS = 100.0
 T0 = 1_714_521_600_000_000_000
-WINDOW_S = 10.0
-N_WINDOWS = 8
+WINDOW_S = 5.0
+N_WINDOWS = 6
 STRUCTURE = """
 name: three-storey-test-frame
 kind: shear_building
@@ -114,7 +114,38 @@ def _estimates_in_store(path: Path) -> int:
         return store.count("estimates")
 
 
-def test_faults_sigterm_of_a_replay_and_ctrl_c_of_the_group_lose_and_duplicate_nothing(tmp_path):
+def _session(tmp_path: Path, bag: Path, env: dict[str, str], stop_when, stop_signal: int, *replay_args: str):
+    """Start the graph, replay ``bag``, and once ``stop_when()`` holds send ``stop_signal`` to the
+    graph's process group; returns (graph exit code, its output, replay exit code and output,
+    every process seen, whether the replay still ran at the stop)."""
+    sup = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(_config(tmp_path))],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                           start_new_session=True)  # its own process group, as a terminal's job
+    out = _Lines(sup)
+    family = _Family(sup.pid)
+    try:
+        up = _wait_for(lambda: all(out.count(f"[{n}]:") for n in ("ingest", "identify", "track", "recorder")),
+                       timeout=120)
+        assert up, out.text()
+        replay = _replay(bag, *replay_args)
+        assert _wait_for(stop_when, timeout=300), out.text()
+        replaying = replay.poll() is None
+        os.killpg(sup.pid, stop_signal)
+        sup.wait(timeout=90)
+        replay_out, _ = replay.communicate(timeout=120)
+    finally:
+        if sup.poll() is None:
+            os.killpg(sup.pid, signal.SIGKILL)
+            sup.wait()
+    seen = family.close()
+    return sup.returncode, out.text(join_timeout=10), replay.returncode, replay_out, seen, replaying
+
+
+def _clean(text: str) -> bool:
+    return "Traceback" not in text and "KeyboardInterrupt" not in text and "terminate called" not in text
+
+
+def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplicate_nothing(tmp_path):
     from shm_ros.core.tracking import Tracker, TrackingConfig
     from shm_ros.io.sources import open_source
     from shm_ros.ros.graph_run import read_pipeline_bag
@@ -123,50 +154,34 @@ def test_faults_sigterm_of_a_replay_and_ctrl_c_of_the_group_lose_and_duplicate_n
     _bag(bag)
     marks = tmp_path / "marks"
     marks.mkdir()
-    env = {**os.environ, "SHM_FAULT_MARK": str(marks),
-           "SHM_FAULT": "bag:write:25,identify:published:3,store:commit:5"}
-    sup = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(_config(tmp_path))],
-                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
-                           start_new_session=True)  # its own process group, as a terminal's job
-    out = _Lines(sup)
-    family = _Family(sup.pid)
     store = tmp_path / "track.sqlite"
-    try:
-        up = _wait_for(lambda: all(out.count(f"[{n}]:") for n in ("ingest", "identify", "track", "recorder")),
-                       timeout=120)
-        assert up, out.text()
-        # replay 1: the faults fire while it runs; SIGTERM stops it after the third fault
-        first = _replay(bag)
-        fired = _wait_for(lambda: len(list(marks.iterdir())) == 3, timeout=240)
-        assert fired, f"faults fired: {sorted(p.name for p in marks.iterdir())}\n{out.text()}"
-        first.send_signal(signal.SIGTERM)
-        first_out, _ = first.communicate(timeout=60)
-        # replay 2 of the same bag resumes: what the first left out is done now, nothing twice
-        _wait_for(lambda: out.count("restarting") >= 3 and len(_children(sup.pid)) == 4, timeout=60)
-        time.sleep(3.0)
-        second = subprocess.run(_replay(bag).args, capture_output=True, text=True, timeout=300)
-        assert second.returncode == 0, second.stdout + second.stderr
-        assert _wait_for(lambda: _estimates_in_store(store) == N_WINDOWS, timeout=120), out.text()
-        time.sleep(3.0)  # the last rows reach the recorder
-        os.killpg(sup.pid, signal.SIGINT)  # Ctrl-C in a terminal: every process of the group
-        sup.wait(timeout=90)
-    finally:
-        if sup.poll() is None:
-            os.killpg(sup.pid, signal.SIGKILL)
-            sup.wait()
-    seen = family.close()
-    text = out.text(join_timeout=10)
-    print(text[-4000:])
-    # the stopped replay says it stopped and exits non-zero; the supervisor reports the deaths (1)
-    assert first.returncode == 1 and "stopped by a signal" in first_out, first_out
-    assert sup.returncode == 1, text
-    assert "may be lost" in text and "all nodes stopped" in text
-    assert "Traceback" not in text and "KeyboardInterrupt" not in text and "terminate called" not in text
-    assert len(seen) >= 4 + 3 and _still_running(seen) == [], text  # the three killed, the restarts
-    # the bag: complete, one bag of several splits, every window's outputs exactly once
+    # 1: faults while a replay runs; SIGTERM to the graph (every process) once all three fired
+    faults = {**os.environ, "SHM_FAULT_MARK": str(marks),
+              "SHM_FAULT": "bag:write:15,identify:published:1,store:commit:1"}
+    code, text, replay_code, replay_out, seen, replaying = _session(
+        tmp_path, bag, faults, lambda: len(list(marks.iterdir())) == 3, signal.SIGTERM, "--rate", "1")
+    print(text[-3000:], replay_out[-1000:])
+    assert replaying and replay_code != 0, "the graph stopped during the replay: the replay must say so"
+    assert sorted(p.name for p in marks.iterdir()) == ["bag.write", "identify.published", "store.commit"]
+    assert code == 1 and "may be lost" in text and "all nodes stopped" in text, text  # nodes died: 1
+    assert _clean(text), text
+    assert len(seen) >= 4 + 1 and _still_running(seen) == [], text  # the four and the restarted recorder at least
+    assert open_source(tmp_path / "out").note == "", "the bag must be complete after the stop"
+    first = read_pipeline_bag(tmp_path / "out")
+    for ids in ([w.window_id for w in first.windows], [e.window_id for e in first.estimates],
+                [r["window_id"] for r in first.tracked]):
+        assert max(collections.Counter(ids).values(), default=0) <= 1, ids
+    # 2: rerun (no faults): the same bag again resumes; then Ctrl-C to the whole process group
+    code2, text2, replay_code2, replay_out2, seen2, _ = _session(
+        tmp_path, bag, dict(os.environ), lambda: _estimates_in_store(store) == N_WINDOWS and time.sleep(3) is None,
+        signal.SIGINT)
+    print(text2[-3000:], replay_out2[-1000:])
+    assert code2 == 0 and "exit code 0" in text2, text2  # nothing died, nothing lost
+    assert replay_code2 == 0 and "lost 0" in replay_out2, replay_out2
+    assert _clean(text2) and _still_running(seen2) == [], text2
     source = open_source(tmp_path / "out")
     assert source.note == "", source.note
-    assert len(list((tmp_path / "out").glob("*.mcap"))) >= 2
+    assert len(list((tmp_path / "out").glob("*.mcap"))) >= 3  # splits: the killed one, its restart, the rerun
     rec = read_pipeline_bag(tmp_path / "out")
     windows = [w.window_id for w in rec.windows]
     estimates = [e.window_id for e in rec.estimates]

@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from shm_ros.ros.node_main import StopSignals
     from shm_ros.ros.replay import replay_bag
 
-    with StopSignals() as stop:
+    with StopSignals(restore=False) as stop:
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         try:
             result = replay_bag(args.bag, rate=args.rate, credit=args.credit, credit_bytes=args.credit_bytes,
@@ -61,6 +61,10 @@ def run(args: argparse.Namespace) -> int:
                                 stop=lambda: stop.stopping)
         finally:
             rclpy.try_shutdown()
+        return _report(result)  # a signal from here on is too late to stop anything: noted, ignored
+
+
+def _report(result) -> int:
     for topic, why in sorted(result.skipped_topics.items()):
         print(f"skipped {topic}: {why}")
     speed = result.bag_span_s / result.wall_s if result.wall_s > 0 else float("inf")

@@ -57,9 +57,10 @@ class StopSignals:
     asks the spin loop to end; later ones while the node closes its files are noted and ignored, so
     nothing interrupts a write or a close. No KeyboardInterrupt is raised."""
 
-    def __init__(self) -> None:
+    def __init__(self, restore: bool = True) -> None:
         self.signum = 0
         self.repeated = 0
+        self.restore = restore
 
     def __enter__(self) -> StopSignals:
         # A process started in the background by a non-interactive shell inherits SIGINT as
@@ -68,8 +69,12 @@ class StopSignals:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        for s, handler in self._previous.items():
-            signal.signal(s, handler)
+        # A node process keeps them to its end (``restore=False``): a signal that comes while the
+        # interpreter winds down must not raise KeyboardInterrupt inside a callback of rclpy's C++
+        # executor threads (that aborts the process: "terminate called ... error_already_set").
+        if self.restore:
+            for s, handler in self._previous.items():
+                signal.signal(s, handler)
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         if self.signum:
@@ -106,7 +111,7 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None,
     die_with_parent()
     node = None
     code = 0
-    with StopSignals() as stop:
+    with StopSignals(restore=False) as stop:
         rclpy.init(args=sys.argv if args is None else args,
                    signal_handler_options=SignalHandlerOptions.NO)
         try:

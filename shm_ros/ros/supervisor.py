@@ -246,7 +246,7 @@ def run_single_process(config: GraphConfig, autostart: bool = True) -> int:
     die_with_parent()
     nodes = []
     code = 0
-    with StopSignals() as stop:
+    with StopSignals(restore=False) as stop:
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         executor = SingleThreadedExecutor()
         try:
