@@ -99,6 +99,20 @@ def run(seconds: float = 600.0) -> dict:
             out[name] = out.get(name, 0) + n
 
     node.create_subscription(Window, topics.WINDOWS, on_window, stream_qos())
+    retries = [0]
+
+    def publish(pub, msg) -> None:
+        """Publish; a reliable writer whose reader is behind refuses for a moment (the DDS writer's
+        blocking time ran out): wait and try again, as a buffering source would (back-pressure)."""
+        from rclpy._rclpy_pybind11 import RCLError
+
+        while True:
+            try:
+                pub.publish(msg)
+                return
+            except RCLError:
+                retries[0] += 1
+                rclpy.spin_once(node, timeout_sec=0.01)
     try:
         end = time.monotonic() + 120
         while time.monotonic() < end and not (
@@ -131,14 +145,14 @@ def run(seconds: float = 600.0) -> dict:
             t_ns = T0 + int(sent * 1e9 / FS)
             block.header.stamp.sec, block.header.stamp.nanosec = divmod(t_ns, 10**9)
             block.samples = (rng.standard_normal(k * N_BLOCK) * 0.01).tolist()
-            block_pub.publish(block)
+            publish(block_pub, block)
             values = rng.standard_normal((k, N_IMU)) * 0.01
             for j in range(k):
                 s = T0 + int((sent + j) * 1e9 / FS)
                 imu.header.stamp.sec, imu.header.stamp.nanosec = divmod(s, 10**9)
                 for c, pub in enumerate(imu_pubs):
                     imu.linear_acceleration.x = float(values[j, c])
-                    pub.publish(imu)
+                    publish(pub, imu)
             sent += k
             rclpy.spin_once(node, timeout_sec=0)
             now = time.monotonic() - t_start
@@ -168,7 +182,8 @@ def run(seconds: float = 600.0) -> dict:
             "windows": windows[0], "wall_s": round(wall, 1), "max_publish_lag_s": round(max_lag, 3),
             "ingest_cpu_s": round(cpu, 1), "ingest_cpu_per_s": round(cpu / wall, 3),
             "rss_mb_start": round(rss[0], 1), "rss_mb_end": round(rss[-1], 1), "rss_mb_max": round(max(rss), 1),
-            "rss_slope_mb_per_min": round(slope, 3), "ingest_exit_code": code,
+            "rss_slope_mb_per_min": round(slope, 3), "ingest_exit_code": code, "publish_retries": retries[0],
+            "rss_mb_every_10_s": [round(v, 1) for v in rss[::10]],
             "ingest_log_tail": log[-1500:] if code else "", "load_average": [round(v, 2) for v in os.getloadavg()]}
 
 
