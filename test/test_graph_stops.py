@@ -235,7 +235,25 @@ def test_a_node_with_a_bad_configuration_stops_the_graph_with_its_reason(tmp_pat
                          capture_output=True, text=True, timeout=180)
     text = run.stdout + run.stderr
     assert run.returncode == 2, text
-    assert "identify cannot start" in text and "missing.yaml" in text, text
+    assert "identify cannot go on" in text and "missing.yaml" in text, text
     assert text.count("started identify") == 1, "not restarted"
     assert "restarting" not in text
     assert time.monotonic() - started < 120
+
+
+def test_a_full_disk_stops_the_recorder_and_the_graph_and_keeps_what_was_recorded(tmp_path):
+    """``recorder:enospc:5``: the recorder's 5th write fails as on a full disk."""
+    from shm_ros.io.bags import read_messages
+    from shm_ros.io.sources import open_source
+
+    config = _config(tmp_path)
+    env = {**os.environ, "SHM_FAULT": "recorder:enospc:5"}
+    run = subprocess.run([sys.executable, "-m", "shm_ros.cli", "run", str(config)],
+                         capture_output=True, text=True, timeout=180, env=env)
+    text = run.stdout + run.stderr
+    assert run.returncode == 2, text
+    assert "recorder cannot go on" in text and "no space left on the device: recording stopped; the 4 " \
+        "messages recorded before are kept" in text, text
+    assert "restarting" not in text and _clean(text), text
+    assert open_source(tmp_path / "out").note == ""
+    assert len(list(read_messages(tmp_path / "out"))) == 4

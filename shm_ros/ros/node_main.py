@@ -87,8 +87,9 @@ class StopSignals:
         return bool(self.signum)
 
 
-def report_bad_configuration(text: str) -> None:
-    """Say why the node cannot start: on stderr and, under a supervisor, in its reason file."""
+def report_stop_reason(text: str) -> None:
+    """Say why the node cannot start or go on (a bad configuration, a full disk): on stderr and,
+    under a supervisor, in its reason file."""
     print(text, file=sys.stderr, flush=True)
     path = os.environ.get(REASON_FILE_ENV)
     if path:
@@ -119,7 +120,7 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None,
             if getattr(node, "autostart", False) and not getattr(node, "configured", True):
                 # a managed node that could not configure itself: say why and stop (a supervisor
                 # stops the graph with this reason rather than restarting it in a loop)
-                report_bad_configuration(node.config_error)
+                report_stop_reason(node.config_error)
                 return 2
             executor = (executor_factory or SingleThreadedExecutor)()
             executor.add_node(node)
@@ -128,8 +129,8 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None,
                 executor.spin_once(timeout_sec=0.2)
         except ExternalShutdownException:
             pass
-        except ShmError as exc:  # configuration errors: the message says what is wrong
-            print(exc, file=sys.stderr)
+        except ShmError as exc:  # configuration errors, a full disk: the message says what is wrong
+            report_stop_reason(str(exc))
             code = exc.exit_code
         finally:
             if node is not None:

@@ -78,8 +78,8 @@ class Supervisor:
     delay, doubled after each restart up to ``MAX_RESPAWN_DELAY_S``, at most ``max_restarts``
     times); SIGINT or SIGTERM stops all cleanly.
 
-    A node that exits with code 2 has a bad configuration: it is not restarted, the graph is stopped
-    and the node's reason is logged (exit code 2). A node that died (and was restarted or not) may
+    A node that exits with code 2 has a bad configuration (or a full disk): it is not restarted, the
+    graph is stopped and the node's reason is logged (exit code 2). A node that died (and was restarted or not) may
     have lost what it held, so the exit code is then 1; 0 means every node ran until the stop and
     closed its files. The children die with the supervisor (``SHM_SUPERVISOR_PID``: each asks the
     kernel for a parent-death signal), so killing it with SIGKILL leaves no node running."""
@@ -159,12 +159,12 @@ class Supervisor:
             if proc is None or proc.poll() is None:
                 continue
             code = proc.returncode
-            if code == 2:  # a bad configuration: restarting cannot help
+            if code == 2:  # a bad configuration, a full disk: restarting cannot help
                 reason_file = self._reason_file(name)
                 reason = reason_file.read_text().strip() if reason_file.exists() else ""
                 self.procs.pop(name)
                 self.fatal_code = 2
-                return f"{name} cannot start: {reason or 'bad configuration (exit code 2)'}"
+                return f"{name} cannot go on: {reason or 'exit code 2 (a bad configuration)'}"
             self.failures.append(f"{name} exited with {code}")
             if now - self._started.get(name, now) >= STABLE_AFTER_S:
                 self.restarts[name] = 0
@@ -241,7 +241,7 @@ def run_single_process(config: GraphConfig, autostart: bool = True) -> int:
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from shm_ros.ros.node_main import StopSignals, close_node, die_with_parent, report_bad_configuration
+    from shm_ros.ros.node_main import StopSignals, close_node, die_with_parent, report_stop_reason
 
     die_with_parent()
     nodes = []
@@ -255,7 +255,7 @@ def run_single_process(config: GraphConfig, autostart: bool = True) -> int:
                                                                         launch.namespace)
                 nodes.append(node)
                 if autostart and not node.configured:
-                    report_bad_configuration(node.config_error)
+                    report_stop_reason(node.config_error)
                     return 2
                 executor.add_node(node)
             while rclpy.ok() and not stop.stopping:
