@@ -257,3 +257,46 @@ def test_a_full_disk_stops_the_recorder_and_the_graph_and_keeps_what_was_recorde
     assert "restarting" not in text and _clean(text), text
     assert open_source(tmp_path / "out").note == ""
     assert len(list(read_messages(tmp_path / "out"))) == 4
+
+
+def test_a_replay_goes_on_after_an_ingest_restart_and_counts_what_was_lost(tmp_path):
+    """Ingest killed after its second window: the replay does not wait out its drain for
+    acknowledgements that cannot come; it counts the messages the dead process took with it, goes
+    on with the restarted ingest, and exits 1 (something was lost)."""
+    from shm_ros.io.sources import open_source
+    from shm_ros.ros.graph_run import read_pipeline_bag
+
+    bag = tmp_path / "recording"
+    _bag(bag)
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    env = {**os.environ, "SHM_FAULT_MARK": str(marks), "SHM_FAULT": "ingest:published:2"}
+    sup = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(_config(tmp_path))],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    out = _Lines(sup)
+    try:
+        up = _wait_for(lambda: all(out.count(f"[{n}]:") for n in ("ingest", "identify", "track", "recorder")),
+                       timeout=120)
+        assert up, out.text()
+        started = time.monotonic()
+        replay = subprocess.run(_replay(bag, "--rate", "2").args, capture_output=True, text=True, timeout=400)
+        took = time.monotonic() - started
+        time.sleep(3.0)
+        sup.send_signal(signal.SIGINT)
+        sup.wait(timeout=90)
+    finally:
+        if sup.poll() is None:
+            sup.kill()
+            sup.wait()
+    text = out.text(join_timeout=10)
+    print(replay.stdout[-800:], text[-2000:])
+    assert (marks / "ingest.published").exists()
+    assert "the ingest node restarted 1 time(s)" in replay.stdout, replay.stdout + replay.stderr
+    assert replay.returncode == 1 and "lost 0" not in replay.stdout, replay.stdout
+    assert took < 200, f"the replay waited {took:.0f} s"
+    assert sup.returncode == 1 and _clean(text), text
+    assert open_source(tmp_path / "out").note == ""
+    rec = read_pipeline_bag(tmp_path / "out")
+    for ids in ([w.window_id for w in rec.windows], [e.window_id for e in rec.estimates],
+                [r["window_id"] for r in rec.tracked]):
+        assert ids and max(collections.Counter(ids).values()) == 1, ids

@@ -71,8 +71,8 @@ def _report(result) -> int:
     print(f"replayed {result.published} messages in {result.wall_s:.1f} s "
           f"({speed:.1f}x real time); acknowledged {result.acknowledged}, lost {result.lost}")
     if result.ingest_restarts:
-        print(f"the ingest node restarted {result.ingest_restarts} time(s); {result.lost_at_restarts} messages "
-              "were lost with the process that died")
+        print(f"the ingest node restarted {result.ingest_restarts} time(s); the messages lost are those the "
+              "process that died had not taken")
     if result.stopped:
         print(f"shm-ros replay: stopped by a signal after {result.published} messages; the rest of the bag "
               "was not replayed", file=sys.stderr)

@@ -38,8 +38,7 @@ class ReplayResult:
     bag_span_s: float = 0.0
     started_ns: int = 0  # system clock at the first publish
     error: str = ""  # the bag could not be read to its end (what was read has been replayed)
-    ingest_restarts: int = 0  # new ingest processes seen while replaying
-    lost_at_restarts: int = 0  # messages sent to an ingest process that died before taking them
+    ingest_restarts: int = 0  # new ingest processes seen while replaying (their losses are in lost)
     stopped: bool = False  # stopped by SIGINT/SIGTERM before the end of the bag
 
     @property
@@ -48,21 +47,23 @@ class ReplayResult:
 
 
 class Replayer(Node):
-    """Publishes the recording; counts ingest's acknowledgements. A count that goes back is a new
-    ingest process (a restart): what the old one had not acknowledged was lost with it and is
-    counted as lost at once, and the new count is taken from where the replay stands, so a replay
-    goes on after an ingest restart instead of waiting for acknowledgements that cannot come."""
+    """Publishes the recording; counts ingest's acknowledgements (how many recording messages it
+    has taken). A count that goes back is a new ingest process (a restart): what the old one took
+    is kept (its last count), the new one's count is added to it, and the messages sent before the
+    restart was seen no longer hold the flow control's credit (the dead process took those it had
+    not acknowledged with it), so a replay goes on after an ingest restart. Each message reaches at
+    most one ingest process, so published minus the sum of the counts is exactly what was lost."""
 
     def __init__(self, credit: int = 2000, namespace: str = "") -> None:
         super().__init__("shm_replay", namespace=namespace or None)
         self.credit = credit
-        self.acknowledged = 0  # messages settled: acknowledged, or lost at an ingest restart
+        self.acknowledged = 0  # taken by ingest: the dead processes' last counts + the current one's
         self.published = 0
         self.offset = 0  # ingest's count when the replay began (it may have taken other bags before)
-        self.base = 0  # settled before the current ingest process started
+        self.taken_before = 0  # the last counts of ingest processes that died
         self.last_count = 0
+        self.forgiven = 0  # messages published before the last restart was seen
         self.restarts = 0
-        self.lost_at_restarts = 0
         self.ack_seen = False
         self.create_subscription(UInt64, topics.INGEST_RECEIVED, self._on_ack, pipeline_qos())
         self.done_pub = self.create_publisher(String, topics.REPLAY_DONE, latched_qos())
@@ -72,12 +73,16 @@ class Replayer(Node):
         count = int(msg.data)
         if self.ack_seen and count < self.last_count:  # a new ingest process counts from 0
             self.restarts += 1
-            settled = max(self.offset + self.published - count, self.acknowledged)
-            self.lost_at_restarts += settled - self.acknowledged
-            self.base = settled
+            self.taken_before += self.last_count
+            self.forgiven = self.published
         self.ack_seen = True
         self.last_count = count
-        self.acknowledged = max(self.acknowledged, self.base + count)
+        self.acknowledged = self.taken_before + count
+
+    @property
+    def settled(self) -> int:
+        """Acknowledged, or sent before an ingest restart was seen (credit for flow control)."""
+        return max(self.acknowledged, self.offset + self.forgiven)
 
     def publisher(self, topic: str, msgtype: str) -> Publisher:
         pub = self.pubs.get(topic)
@@ -192,13 +197,13 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 while (delay := due - time.monotonic()) > 0:
                     rclpy.spin_once(node, timeout_sec=min(delay, 0.05))
             elif flow:
-                progress_at, progress_ack = time.monotonic(), node.acknowledged
+                progress_at, progress_ack = time.monotonic(), node.settled
                 while True:
-                    if node.acknowledged != progress_ack:
-                        progress_at, progress_ack = time.monotonic(), node.acknowledged
+                    if node.settled != progress_ack:
+                        progress_at, progress_ack = time.monotonic(), node.settled
                     elif time.monotonic() - progress_at > stall_s:
                         break
-                    acked = node.acknowledged - start_ack
+                    acked = node.settled - start_ack
                     while acked_upto < acked and sizes:
                         in_flight_bytes -= sizes.popleft()
                         acked_upto += 1
@@ -227,14 +232,19 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         if flow or node.ack_seen:
             stalled = result.error.endswith("replay stopped")
             end = time.monotonic() + (0.0 if stalled else STOPPED_DRAIN_S if result.stopped else drain_timeout_s)
+            quiet_since, seen = time.monotonic(), node.acknowledged
             while node.acknowledged - start_ack < result.published and time.monotonic() < end:
                 rclpy.spin_once(node, timeout_sec=0.05)
+                if node.acknowledged != seen:
+                    quiet_since, seen = time.monotonic(), node.acknowledged
+                if node.restarts and time.monotonic() - quiet_since > RESTART_QUIET_S:
+                    break  # after an ingest restart, what is still missing went with the dead process
                 if node.count_publishers(topics.INGEST_RECEIVED) == 0:  # ingest left: nothing more comes
                     result.error = result.error or (f"{path}: the ingest node left the graph before "
                                                     "acknowledging every message")
                     break
-            result.acknowledged = node.acknowledged - start_ack - node.lost_at_restarts
-            result.ingest_restarts, result.lost_at_restarts = node.restarts, node.lost_at_restarts
+            result.acknowledged = node.acknowledged - start_ack
+            result.ingest_restarts = node.restarts
         else:
             result.acknowledged = result.published
         result.wall_s = time.monotonic() - t0_wall
@@ -249,6 +259,7 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     return result
 
 
+RESTART_QUIET_S = 5.0  # s without new acknowledgements that end the drain after an ingest restart
 STOPPED_DRAIN_S = 10.0  # s a stopped replay waits for the acknowledgements of what it sent
 CLOCK_SETTLE_S = 1.0  # s the /clock readers must stay matched before the replay starts
 
