@@ -88,7 +88,8 @@ def _write_info(path: Path, info: dict[str, Any]) -> None:
 def _finish(path: Path, split: Path) -> None:
     """Move a closed split's file into the bag and list it there (safe to repeat after a crash)."""
     part = read_info(split)
-    assert part is not None
+    if part is None:
+        raise BagError(f"{split}: a split without metadata.yaml cannot be listed in {path}")
     for name in part.get("relative_file_paths") or []:
         if (split / name).exists():
             os.replace(split / name, path / name)
@@ -161,9 +162,7 @@ class SplitBagWriter:
         # the recovered copy takes the split's name: rename its folder and file
         final = tmp / f"{split.name}{_suffix(self.storage)}"
         os.replace(tmp / f"{tmp.name}{_suffix(self.storage)}", final)
-        info = read_info(tmp)
-        assert info is not None
-        info = _rename(info, f"{tmp.name}{_suffix(self.storage)}", final.name)
+        info = _rename(read_info(tmp) or {}, f"{tmp.name}{_suffix(self.storage)}", final.name)
         _write_info(tmp, info)
         shutil.rmtree(split)
         os.replace(tmp, split)
@@ -173,7 +172,8 @@ class SplitBagWriter:
 
     def write_cdr(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
         """Write one message and flush it to disk."""
-        assert self._writer is not None, "open() first"
+        if self._writer is None:
+            raise BagError(f"{self.path}: write before open() or after close()")
         self._writer.write_cdr(topic, msgtype, t_ns, data)
         self._writer.flush()
 
