@@ -10,6 +10,8 @@ and tracked row exactly once; the tracked rows must equal an undisturbed trackin
 estimates; the store must hold every window; no traceback; nothing left running; the exit codes
 say that something was lost (a node died) and the replay that was stopped says so.
 
+One run in CI; ``SHM_FULL=1`` runs 20 with kill points drawn from a fixed seed.
+
 Also: killing the supervisor with SIGKILL leaves no node running (and the recorder, ended by its
 parent-death signal, closes its bag); a node with a bad configuration stops the graph with its
 reason instead of being restarted in a loop.
@@ -27,7 +29,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
+from conftest import full_size
 from test_graph_faults import _signal
 from test_supervisor import _children, _identity, _Lines, _still_running, _wait_for
 
@@ -145,7 +149,18 @@ def _clean(text: str) -> bool:
     return "Traceback" not in text and "KeyboardInterrupt" not in text and "terminate called" not in text
 
 
-def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplicate_nothing(tmp_path):
+def _fault_sets() -> list[str]:
+    """The faults of each run: one fixed set in CI; with SHM_FULL=1, 20 sets whose kill points are
+    drawn from a fixed seed (the recorder's message, identify's and the store's window)."""
+    if not full_size():
+        return ["bag:write:15,identify:published:1,store:commit:1"]
+    rng = np.random.default_rng(35)
+    return [f"bag:write:{rng.integers(5, 40)},identify:published:{rng.integers(1, 3)},"
+            f"store:commit:{rng.integers(1, 3)}" for _ in range(20)]
+
+
+@pytest.mark.parametrize("fault", _fault_sets())
+def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplicate_nothing(tmp_path, fault):
     from shm_ros.core.tracking import Tracker, TrackingConfig
     from shm_ros.io.sources import open_source
     from shm_ros.ros.graph_run import read_pipeline_bag
@@ -156,8 +171,7 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
     marks.mkdir()
     store = tmp_path / "track.sqlite"
     # 1: faults while a replay runs; SIGTERM to the graph (every process) once all three fired
-    faults = {**os.environ, "SHM_FAULT_MARK": str(marks),
-              "SHM_FAULT": "bag:write:15,identify:published:1,store:commit:1"}
+    faults = {**os.environ, "SHM_FAULT_MARK": str(marks), "SHM_FAULT": fault}
     code, text, replay_code, replay_out, seen, replaying = _session(
         tmp_path, bag, faults, lambda: len(list(marks.iterdir())) == 3, signal.SIGTERM, "--rate", "1")
     print(text[-3000:], replay_out[-1000:])
