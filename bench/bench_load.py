@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -56,6 +57,13 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def ingest_idle(pid: int, seconds: float = 3.0) -> bool:
+    """The process used no CPU for ``seconds`` (it has published what it held)."""
+    before = _cpu_s(pid)
+    time.sleep(seconds)
+    return _cpu_s(pid) - before < 0.05
+
+
 def rss_slope(t_s: list[float], rss: list[float], seconds: float) -> float:
     """MB per minute of a least-squares line through the samples after the warm-up."""
     warm = max(seconds / 3, WARM_UP_S)
@@ -66,15 +74,44 @@ def rss_slope(t_s: list[float], rss: list[float], seconds: float) -> float:
     return float(np.polyfit(t[keep], r[keep], 1)[0] * 60)
 
 
+READER = r"""
+import json, sys, time
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from shm_interfaces.msg import Window
+from std_msgs.msg import String
+from shm_ros.ros import topics
+from shm_ros.ros.qos import pipeline_qos, stream_qos
+rclpy.init()
+node = rclpy.create_node("shm_bench_load_reader")
+out, state = {}, {"windows": 0, "unawaited": 0, "stop": False}
+def on_window(w):
+    state["windows"] += 1
+    for name in w.channel_names:
+        out[name] = out.get(name, 0) + int(w.n_samples)
+def on_diag(m):
+    for st in m.status:
+        if st.name == "ingest: status":
+            state["unawaited"] = int({kv.key: kv.value for kv in st.values}.get("windows_unawaited", 0))
+node.create_subscription(Window, topics.WINDOWS, on_window, stream_qos())
+node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, pipeline_qos())
+node.create_subscription(String, "shm_bench_load/stop", lambda m: state.update(stop=True), 10)
+print("ready", flush=True)
+while not state["stop"]:
+    rclpy.spin_once(node, timeout_sec=0.1)
+print(json.dumps({"out": out, **state}), flush=True)
+"""
+
+
 def run(seconds: float = 600.0) -> dict:
     import rclpy
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import Imu
-    from shm_interfaces.msg import AccelBlock, Window
+    from shm_interfaces.msg import AccelBlock
     from std_msgs.msg import String
 
     from shm_ros.ros import topics
-    from shm_ros.ros.qos import latched_qos, stream_qos
+    from shm_ros.ros.qos import latched_qos
     from shm_ros.ros.supervisor import node_process, stop_process
 
     tmp = Path(tempfile.mkdtemp(prefix="shm_bench_load_"))
@@ -89,16 +126,11 @@ def run(seconds: float = 600.0) -> dict:
     block_pub = node.create_publisher(AccelBlock, "site/daq/accel_block", qos)
     imu_pubs = [node.create_publisher(Imu, f"site/accel/i{c}", qos) for c in range(N_IMU)]
     done_pub = node.create_publisher(String, topics.REPLAY_DONE, latched_qos())
-    out: dict[str, int] = {}
-    windows = [0]
-
-    def on_window(w: Window) -> None:
-        windows[0] += 1
-        n = int(w.n_samples)
-        for name in w.channel_names:
-            out[name] = out.get(name, 0) + n
-
-    node.create_subscription(Window, topics.WINDOWS, on_window, stream_qos())
+    stop_pub = node.create_publisher(String, "shm_bench_load/stop", 10)
+    # the windows are counted in a process of its own, so that this one's publishing does not slow
+    # the reader (ingest holds windows for a slow reader)
+    reader = subprocess.Popen([sys.executable, "-c", READER], stdout=subprocess.PIPE, text=True)
+    assert reader.stdout is not None and reader.stdout.readline().strip() == "ready"
     retries = [0]
 
     def publish(pub, msg) -> None:
@@ -117,7 +149,8 @@ def run(seconds: float = 600.0) -> dict:
         end = time.monotonic() + 120
         while time.monotonic() < end and not (
                 block_pub.get_subscription_count() and all(p.get_subscription_count() for p in imu_pubs)
-                and node.count_publishers(topics.WINDOWS)):
+                and node.count_publishers(topics.WINDOWS) and stop_pub.get_subscription_count()
+                and node.count_subscribers(topics.WINDOWS)):
             rclpy.spin_once(node, timeout_sec=0.2)
         assert time.monotonic() < end, "the ingest node did not subscribe"
         rng = np.random.default_rng(1)
@@ -163,23 +196,31 @@ def run(seconds: float = 600.0) -> dict:
         wall = time.monotonic() - t_start
         cpu = _cpu_s(ingest.pid) - c_start
         done_pub.publish(String(data="load bench"))
-        end = time.monotonic() + 120
         expected = {**{n: sent for n in names}, **{f"i{c}": sent for c in range(N_IMU)}}
-        while time.monotonic() < end and out != expected:
+        end = time.monotonic() + 60
+        while time.monotonic() < end:  # ingest cuts what it holds; the last window travels
             rclpy.spin_once(node, timeout_sec=0.2)
+            if time.monotonic() > end - 50 and ingest_idle(ingest.pid):
+                break
         code, log = stop_process(ingest)
+        time.sleep(2.0)
+        stop_pub.publish(String(data="stop"))
+        counted = json.loads(reader.communicate(timeout=60)[0].strip().splitlines()[-1])
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
-        if ingest.poll() is None:
-            ingest.kill()
+        for proc in (ingest, reader):
+            if proc.poll() is None:
+                proc.kill()
     samples_in = sent * (N_BLOCK + N_IMU)
+    out = counted["out"]
     samples_out = sum(out.get(n, 0) for n in expected)
     slope = rss_slope(marks, rss, seconds)
     return {"seconds": seconds, "block_channels": N_BLOCK, "imu_streams": N_IMU, "sample_rate_hz": FS,
             "messages_per_s": round((sent / BLOCK + sent * N_IMU) / wall), "samples_in": samples_in,
             "samples_out": samples_out, "channels_short": sorted(n for n in expected if out.get(n, 0) != sent),
-            "windows": windows[0], "wall_s": round(wall, 1), "max_publish_lag_s": round(max_lag, 3),
+            "windows": counted["windows"], "windows_unawaited": counted["unawaited"], "wall_s": round(wall, 1),
+            "max_publish_lag_s": round(max_lag, 3),
             "ingest_cpu_s": round(cpu, 1), "ingest_cpu_per_s": round(cpu / wall, 3),
             "rss_mb_start": round(rss[0], 1), "rss_mb_end": round(rss[-1], 1), "rss_mb_max": round(max(rss), 1),
             "rss_slope_mb_per_min": round(slope, 3), "ingest_exit_code": code, "publish_retries": retries[0],
