@@ -1,8 +1,9 @@
 """`shm-ros replay BAG`: publish a recording through the running node graph.
 
-Exit status: 0 when the graph acknowledged every message; 1 when messages were lost (also those
-an ingest process took with it when it died and was restarted) or the replay was stopped by SIGINT
-or SIGTERM before the end of the bag (what was sent is still drained); 2 when the bag cannot be read
+Exit status: 0 when the graph acknowledged every message; 1 when messages were lost, when the
+ingest node restarted during the replay (what the process that died held is lost; the replay goes on
+with the new one) or when the replay was stopped by SIGINT or SIGTERM before the end of the bag (what
+was sent is still drained); 2 when the bag cannot be read
 (a truncated MCAP is replayed up to where it ends, then reported) or the ingest node stopped
 acknowledging.
 """
@@ -71,8 +72,9 @@ def _report(result) -> int:
     print(f"replayed {result.published} messages in {result.wall_s:.1f} s "
           f"({speed:.1f}x real time); acknowledged {result.acknowledged}, lost {result.lost}")
     if result.ingest_restarts:
-        print(f"the ingest node restarted {result.ingest_restarts} time(s); the messages lost are those the "
-              "process that died had not taken")
+        print(f"shm-ros replay: the ingest node restarted {result.ingest_restarts} time(s) during the replay: "
+              "what the process that died held (samples not yet in a published window) is lost", file=sys.stderr)
+        return 1
     if result.stopped:
         print(f"shm-ros replay: stopped by a signal after {result.published} messages; the rest of the bag "
               "was not replayed", file=sys.stderr)
