@@ -198,7 +198,7 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
     assert _clean(text2) and _still_running(seen2) == [], text2
     source = open_source(tmp_path / "out")
     assert source.note == "", source.note
-    assert len(list((tmp_path / "out").glob("*.mcap"))) >= 3  # splits: the killed one, its restart, the rerun
+    assert len(list((tmp_path / "out").glob("*.mcap"))) >= 2  # splits: the killed one, (its restart,) the rerun
     rec = read_pipeline_bag(tmp_path / "out")
     windows = [w.window_id for w in rec.windows]
     estimates = [e.window_id for e in rec.estimates]
