@@ -1,8 +1,11 @@
 """`shm-ros replay BAG`: publish a recording through the running node graph.
 
-Exit status: 0 when the graph acknowledged every message; 1 when messages were lost; 2 when the bag
-cannot be read (a truncated MCAP is replayed up to where it ends, then reported) or the ingest node
-stopped acknowledging.
+Exit status: 0 when the graph acknowledged every message; 1 when messages were lost, when the
+ingest node restarted during the replay (what the process that died held is lost; the replay goes on
+with the new one) or when the replay was stopped by SIGINT or SIGTERM before the end of the bag (what
+was sent is still drained); 2 when the bag cannot be read
+(a truncated MCAP is replayed up to where it ends, then reported) or the ingest node stopped
+acknowledging.
 """
 
 from __future__ import annotations
@@ -44,22 +47,38 @@ def run(args: argparse.Namespace) -> int:
 
     input_path(args.bag, "BAG")
     import rclpy
+    from rclpy.signals import SignalHandlerOptions
 
+    from shm_ros.ros.node_main import StopSignals
     from shm_ros.ros.replay import replay_bag
 
-    rclpy.init()
-    try:
-        result = replay_bag(args.bag, rate=args.rate, credit=args.credit, credit_bytes=args.credit_bytes,
-                            wait_s=args.wait,
-                            recording_only=not args.all_topics, progress=True, clock_hz=args.clock,
-                            clock_readers=args.clock_readers, namespace=args.namespace)
-    finally:
-        rclpy.try_shutdown()
+    with StopSignals(restore=False) as stop:
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            result = replay_bag(args.bag, rate=args.rate, credit=args.credit, credit_bytes=args.credit_bytes,
+                                wait_s=args.wait,
+                                recording_only=not args.all_topics, progress=True, clock_hz=args.clock,
+                                clock_readers=args.clock_readers, namespace=args.namespace,
+                                stop=lambda: stop.stopping)
+        finally:
+            rclpy.try_shutdown()
+        return _report(result)  # a signal from here on is too late to stop anything: noted, ignored
+
+
+def _report(result) -> int:
     for topic, why in sorted(result.skipped_topics.items()):
         print(f"skipped {topic}: {why}")
     speed = result.bag_span_s / result.wall_s if result.wall_s > 0 else float("inf")
     print(f"replayed {result.published} messages in {result.wall_s:.1f} s "
           f"({speed:.1f}x real time); acknowledged {result.acknowledged}, lost {result.lost}")
+    if result.ingest_restarts:
+        print(f"shm-ros replay: the ingest node restarted {result.ingest_restarts} time(s) during the replay: "
+              "what the process that died held (samples not yet in a published window) is lost", file=sys.stderr)
+        return 1
+    if result.stopped:
+        print(f"shm-ros replay: stopped by a signal after {result.published} messages; the rest of the bag "
+              "was not replayed", file=sys.stderr)
+        return 1
     if result.error:
         print(f"shm-ros replay: {result.error} (replayed the {result.published} messages read "
               "before it)", file=sys.stderr)

@@ -15,6 +15,7 @@ import numpy as np
 
 from shm_ros.core.timeutil import join_ns, split_ns
 from shm_ros.io.errors import BagError
+from shm_ros.io.faults import fault_point
 from shm_ros.io.sources.base import BagMessage
 from shm_ros.io.typestore import typestore
 
@@ -76,6 +77,19 @@ class BagWriter:
 
     def write_cdr(self, topic: str, msgtype: str, t_ns: int, data: bytes) -> None:
         self._writer.write(self.connection(topic, msgtype), int(t_ns), data)
+
+    def flush(self) -> None:
+        """Put what was written so far on disk, complete (MCAP: the pending chunk closed and
+        written; sqlite3: committed), so that a process killed afterwards loses none of it."""
+        storage: Any = self._writer.storage
+        if hasattr(storage, "close_chunk"):
+            if storage.chunk.msgs:
+                storage.close_chunk()
+            # a test hook: killed here, a large record is partly on disk (the file's buffer is 8 KiB)
+            fault_point("bag", "write")
+            storage.bio.flush()  # to the kernel: a killed process loses nothing (a power cut may)
+        elif hasattr(storage, "conn"):
+            storage.conn.commit()
 
     def header(self, t_ns: int) -> Any:
         sec, nsec = split_ns(t_ns)

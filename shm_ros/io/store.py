@@ -21,6 +21,7 @@ replaying the stored estimates.
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import math
@@ -40,7 +41,9 @@ from shm_ros.core.tracking.novelty import NoveltyChart
 from shm_ros.core.tracking.reference import ReferenceMode
 from shm_ros.core.types import ModalEstimate, Mode
 from shm_ros.errors import ShmError
+from shm_ros.io.atomic import DiskFullError
 from shm_ros.io.checkpoint import CheckpointError, Codec
+from shm_ros.io.faults import disk_full_point, fault_point
 
 log = logging.getLogger(__name__)
 CHECKPOINT_MAGIC = b"shm-ros-checkpoint 1\n"  # then the tracker's state (shm_ros.io.checkpoint)
@@ -247,6 +250,11 @@ class TrackStore:
                                  sensors, damp, cov, [], "iso")
 
     # -- writing --------------------------------------------------------------------------------
+    def _rollback(self) -> None:
+        if self.db.in_transaction:
+            self.db.execute("ROLLBACK")
+        self._model_key = None
+
     def record(self, est: ModalEstimate, rows: list[TrackedRow], tracker: Tracker) -> int:
         """One window in one transaction; returns its sequence number."""
         db = self.db
@@ -268,10 +276,19 @@ class TrackStore:
                 db.execute("INSERT OR REPLACE INTO checkpoint VALUES (1, ?, ?)", (seq, checkpoint_bytes(tracker)))
                 self._since_checkpoint = 0
                 self._retain(est.start_ns)
+            fault_point("store", "commit")  # a test hook: killed inside the transaction
+            disk_full_point("store", self.path)
             db.execute("COMMIT")
+        except (sqlite3.OperationalError, OSError) as exc:
+            self._rollback()
+            code = getattr(exc, "sqlite_errorcode", 0)
+            if getattr(exc, "errno", None) == errno.ENOSPC or code == sqlite3.SQLITE_FULL:
+                raise DiskFullError(errno.ENOSPC, f"{self.path}: no space left on the device: window "
+                                    f"{est.window_id} not stored; the {self.count('estimates')} windows "
+                                    "stored before are kept") from exc
+            raise
         except BaseException:
-            db.execute("ROLLBACK")
-            self._model_key = None
+            self._rollback()
             raise
         return seq
 

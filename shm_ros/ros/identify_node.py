@@ -11,6 +11,7 @@ from rclpy.publisher import Publisher
 from shm_ros.core.config import option
 from shm_ros.core.identify import IdentifyConfig, identify_window
 from shm_ros.errors import ShmError
+from shm_ros.io.faults import fault_point
 from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_to_msg, window_from_msg
 from shm_ros.ros.managed import ManagedNode
@@ -78,6 +79,7 @@ class IdentifyNode(ManagedNode):
             self.diag.publish()
             return
         self.pub.publish(estimate_to_msg(estimate, self.frame_id))
+        fault_point(self.get_name(), "published")
         self.count += 1
         freqs = ", ".join(f"{m.frequency_hz:.3f}" for m in estimate.modes)
         self.diag.report("ok", f"{len(estimate.modes)} modes in {time.perf_counter() - t0:.2f} s",

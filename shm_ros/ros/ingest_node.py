@@ -32,6 +32,7 @@ from shm_ros.core.config import option
 from shm_ros.core.diagnostics import Diagnostic, Level
 from shm_ros.core.ingest import ChannelMap, IngestConfig, IngestCore, channel_mismatches
 from shm_ros.io.bags import ACCEL_BLOCK, IMU, TEMPERATURE, topic_kind
+from shm_ros.io.faults import fault_point
 from shm_ros.io.imu_cdr import decode_imu_batch
 from shm_ros.ros import topics
 from shm_ros.ros.convert import time_to_ns, window_to_msg
@@ -79,7 +80,8 @@ class IngestNode(ManagedNode):
         self.diag.summarize(lambda: (
             "ok", f"{self.received} messages received, {self.windows_out} windows published",
             {"messages": self.received, "windows": self.windows_out,
-             "window_readers": self.window_pub.get_subscription_count()}))
+             "window_readers": self.window_pub.get_subscription_count(),
+             "windows_unawaited": self.windows_unawaited}))
         self.window_pub: Any = self.create_publisher(
             topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS, stream_qos(WINDOW_HISTORY))
         self.ack_pub = self.create_publisher(UInt64, topics.INGEST_RECEIVED, pipeline_qos())
@@ -99,6 +101,9 @@ class IngestNode(ManagedNode):
         self.received = 0
         self.acked = -1
         self.windows_out = 0
+        # windows published without waiting for a slow reader (MAX_HELD_WINDOWS held already): the
+        # drop policy's counter, on /diagnostics
+        self.windows_unawaited = 0
         self.last_stamp_ns: int | None = None
         self.last_msg_wall = time.monotonic()
         steady_timer(self, settings.discovery_period_s, self._discover)
@@ -257,12 +262,15 @@ class IngestNode(ManagedNode):
             if not self.window_pub.wait_for_all_acked(Duration(nanoseconds=int(wait_s * 1e9))):
                 if len(self.pending) <= MAX_HELD_WINDOWS:
                     return
+                self.windows_unawaited += 1
                 self.diag.report("warn", f"{len(self.pending)} windows waiting for a slow reader: "
-                                 "publishing without waiting (the slowest reader may miss some)",
-                                 topics.WINDOWS)
+                                 "publishing without waiting (the slowest reader may miss some; "
+                                 f"{self.windows_unawaited} so far)", topics.WINDOWS,
+                                 windows_unawaited=self.windows_unawaited)
             window = self.pending.popleft()
             self.window_pub.publish(window_to_msg(window, self.frame_id))
             self.windows_out += 1
+            fault_point(self.get_name(), "published")
             self.get_logger().info(f"window {window.window_id}: {window.n_samples} samples x "
                                    f"{len(window.channel_names)} channels")
 

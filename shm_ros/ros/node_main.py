@@ -1,7 +1,9 @@
-"""How every node process starts and stops: init, spin, clean exit 0 on Ctrl-C / SIGINT."""
+"""How every node process starts and stops: init, spin, and one clean stop on SIGINT or SIGTERM
+(exit code 0 when every file was closed)."""
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 from collections.abc import Callable
@@ -26,53 +28,134 @@ def overrides(parameters: dict[str, Any] | None, prefix: str = "") -> list[Param
     return out
 
 
-def _terminate(signum, frame) -> None:
-    raise KeyboardInterrupt
+#: set by a supervisor in its children's environment: the node dies with that process
+SUPERVISOR_PID_ENV = "SHM_SUPERVISOR_PID"
+#: where a node writes why it could not start (a bad configuration), for its supervisor to report
+REASON_FILE_ENV = "SHM_EXIT_REASON_FILE"
+PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def die_with_parent() -> None:
+    """When started by a supervisor (``SHM_SUPERVISOR_PID``), ask the kernel for SIGTERM when it
+    dies (``prctl(PR_SET_PDEATHSIG)``), so a supervisor killed with SIGKILL leaves no node running;
+    a supervisor already gone before this call ends the node at once."""
+    parent = os.environ.get(SUPERVISOR_PID_ENV)
+    if not parent or not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
+        raise OSError(ctypes.get_errno(), "prctl(PR_SET_PDEATHSIG) failed")
+    if os.getppid() != int(parent):  # the supervisor died before the request took effect
+        os._exit(143)
+
+
+class StopSignals:
+    """The one shutdown path of a node process: the first SIGINT or SIGTERM (one sent to this
+    process, or a terminal's Ctrl-C to the whole process group, which a supervisor then forwards)
+    asks the spin loop to end; later ones while the node closes its files are noted and ignored, so
+    nothing interrupts a write or a close. No KeyboardInterrupt is raised."""
+
+    def __init__(self, restore: bool = True) -> None:
+        self.signum = 0
+        self.repeated = 0
+        self.restore = restore
+
+    def __enter__(self) -> StopSignals:
+        # A process started in the background by a non-interactive shell inherits SIGINT as
+        # ignored; a node must still stop on it (and on SIGTERM), so install the handlers explicitly.
+        self._previous = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        # A node process keeps them to its end (``restore=False``): a signal that comes while the
+        # interpreter winds down must not raise KeyboardInterrupt inside a callback of rclpy's C++
+        # executor threads (that aborts the process: "terminate called ... error_already_set").
+        if self.restore:
+            for s, handler in self._previous.items():
+                signal.signal(s, handler)
+
+    def _on_signal(self, signum: int, frame: Any) -> None:
+        if self.signum:
+            self.repeated += 1
+        else:
+            self.signum = signum
+
+    @property
+    def stopping(self) -> bool:
+        return bool(self.signum)
+
+
+def report_stop_reason(text: str) -> None:
+    """Say why the node cannot start or go on (a bad configuration, a full disk): on stderr and,
+    under a supervisor, in its reason file."""
+    print(text, file=sys.stderr, flush=True)
+    path = os.environ.get(REASON_FILE_ENV)
+    if path:
+        with open(path, "w", encoding="utf-8") as fh:
+            fh.write(text)
 
 
 def spin(factory: Callable[[], Any], args: list[str] | None = None,
          executor_factory: Callable[[], Any] | None = None) -> int:
     """Run one node until shutdown. Callbacks run in a single-threaded executor (the
     multi-threaded one is far slower for data topics), or the one ``executor_factory`` makes; it
-    is always spun with a timeout (rclpy's EventsExecutor never runs a callback without one)."""
+    is always spun with a timeout (rclpy's EventsExecutor never runs a callback without one).
+
+    Exit code: 0 after a stop by SIGINT/SIGTERM with every file closed; 2 when the configuration is
+    bad (the reason on stderr; a supervisor does not restart it); the error's code when closing
+    failed with a :class:`ShmError` (a full disk); any other exception shows its traceback (1)."""
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    # Ctrl-C arrives as KeyboardInterrupt (not as a context shutdown), so a node can still publish
-    # what it holds (e.g. ingest's last window) before the context goes away.
-    # A process started in the background by a non-interactive shell inherits SIGINT as ignored;
-    # a node must still stop on it (and on SIGTERM), so install the handlers explicitly.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _terminate)
-    rclpy.init(args=sys.argv if args is None else args,
-               signal_handler_options=SignalHandlerOptions.NO)
+    die_with_parent()
     node = None
     code = 0
+    with StopSignals(restore=False) as stop:
+        rclpy.init(args=sys.argv if args is None else args,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        try:
+            node = factory()
+            if getattr(node, "autostart", False) and not getattr(node, "configured", True):
+                # a managed node that could not configure itself: say why and stop (a supervisor
+                # stops the graph with this reason rather than restarting it in a loop)
+                report_stop_reason(node.config_error)
+                return 2
+            executor = (executor_factory or SingleThreadedExecutor)()
+            executor.add_node(node)
+            # Wake up regularly: a signal is only handled once control is back in Python.
+            while rclpy.ok() and not stop.stopping:
+                executor.spin_once(timeout_sec=0.2)
+        except ExternalShutdownException:
+            pass
+        except ShmError as exc:  # configuration errors, a full disk: the message says what is wrong
+            report_stop_reason(str(exc))
+            code = exc.exit_code
+        finally:
+            if node is not None:
+                code = close_node(node, code)
+            rclpy.try_shutdown()
+    return code
+
+
+def close_node(node: Any, code: int) -> int:
+    """Finish the node: its ``close()`` (last outputs), then its files (``destroy_node`` tears
+    down stores and bags); a :class:`ShmError` there (a full disk) is one line and its exit code."""
+    from shm_ros.io.faults import fault_point
+
     try:
-        node = factory()
-        if getattr(node, "autostart", False) and not getattr(node, "configured", True):
-            # a managed node that could not configure itself: say why and stop (a supervisor or
-            # launch respawns it, so a file fixed meanwhile is taken up)
-            print(node.config_error, file=sys.stderr)
-            return 2
-        executor = (executor_factory or SingleThreadedExecutor)()
-        executor.add_node(node)
-        # Wake up regularly: a signal is only handled once control is back in Python.
-        while rclpy.ok():
-            executor.spin_once(timeout_sec=0.2)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ShmError as exc:  # configuration errors: the message says what is wrong
+        fault_point(node.get_name(), "close")
+        close = getattr(node, "close", None)
+        if close is not None and rclpy.ok() and getattr(node, "configured", True):
+            close()
+    except ShmError as exc:
         print(exc, file=sys.stderr)
-        code = 2
+        code = code or exc.exit_code
     finally:
-        if node is not None:
-            close = getattr(node, "close", None)
-            try:
-                if close is not None and rclpy.ok() and getattr(node, "configured", True):
-                    close()
-            except KeyboardInterrupt:
-                pass
+        try:
             node.destroy_node()
-        rclpy.try_shutdown()
+        except ShmError as exc:
+            print(exc, file=sys.stderr)
+            code = code or exc.exit_code
     return code

@@ -1,15 +1,27 @@
 """recorder: writes pipeline topics (CDR as received) into an output bag, under their fully
-qualified names (the node's namespace resolves the relative ones)."""
+qualified names (the node's namespace resolves the relative ones).
+
+Restarts lose and duplicate nothing: each start writes a new split of the same bag
+(:class:`~shm_ros.io.bag_splits.SplitBagWriter`: a split cut short by a crash is taken up first,
+every message is on disk once written), and a message that carries a window id (windows, modal
+estimates, tracked modes, predictions) is recorded once per topic and window: one published
+again after a restart upstream, or re-published for a second replay, is counted and skipped. A full
+disk stops the recording with an error naming the bag; what was recorded is kept.
+"""
 
 from __future__ import annotations
 
 import enum
+import errno
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from shm_ros.core.config import option
-from shm_ros.io.bags import BagWriter
+from shm_ros.io.atomic import DiskFullError
+from shm_ros.io.bag_splits import SplitBagWriter
+from shm_ros.io.faults import disk_full_point
 from shm_ros.ros import topics
 from shm_ros.ros.managed import ManagedNode
 from shm_ros.ros.node_main import spin
@@ -20,6 +32,20 @@ DEFAULT_TOPICS = [topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES, 
                   topics.PREDICTION, topics.VERDICT, topics.DIAGNOSTICS]
 LATCHED = {topics.POSTERIOR, topics.VERDICT}
 STREAMS = {topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES}
+#: message types whose fields begin with ``std_msgs/Header header`` and ``string window_id``
+WINDOW_KEYED = {"shm_interfaces/msg/Window", "shm_interfaces/msg/ModalEstimate", "shm_interfaces/msg/TrackedModes",
+                "shm_interfaces/msg/ResponsePrediction"}
+
+
+def window_id_of(data: bytes) -> str:
+    """The ``window_id`` of a CDR message of a :data:`WINDOW_KEYED` type, read without decoding
+    the rest (a window's samples)."""
+    end = "<" if data[1] & 1 else ">"  # encapsulation: CDR little or big endian
+    off = 4 + 8  # encapsulation header, header.stamp (sec, nanosec)
+    (n,) = struct.unpack_from(f"{end}I", data, off)  # header.frame_id, with its NUL
+    off = 4 + ((off + 4 + n - 4 + 3) & ~3)  # strings are 4-aligned (from after the encapsulation)
+    (n,) = struct.unpack_from(f"{end}I", data, off)
+    return data[off + 4:off + 3 + n].decode("utf-8", "replace")
 
 
 class Storage(enum.StrEnum):
@@ -42,11 +68,19 @@ class RecorderNode(ManagedNode):
     def setup(self) -> None:
         settings = load_config(self, RecorderNodeConfig)
         out = Path(settings.output)
-        self.writer = BagWriter(out, storage=settings.storage)
-        self.writer.__enter__()
+        self.out = out
+        self.writer: SplitBagWriter | None = SplitBagWriter(out, storage=settings.storage).open()
+        for note in self.writer.recovered:
+            self.get_logger().warning(f"{out}: {note}")
+        # (topic, window id) of what the bag holds already, earlier splits included
+        self.recorded = recorded_windows(out)
         self.count = 0
+        self.duplicates = 0
+        self.stopped = ""  # why recording stopped (a full disk)
         self.diag.summarize(lambda: (
-            "ok", f"{self.count} messages recorded to {out}", {"messages": self.count, "output": out}))
+            "error" if self.stopped else "ok", self.stopped or f"{self.count} messages recorded to {out}",
+            {"messages": self.count, "output": out, "duplicates_skipped": self.duplicates,
+             "split": self.writer.split.name if self.writer and self.writer.split else ""}))
         for topic in settings.topics:
             msgtype = topics.type_of(topic)
             if msgtype is None:
@@ -61,15 +95,66 @@ class RecorderNode(ManagedNode):
         self.get_logger().info(f"recording to {out}")
 
     def _writer_for(self, topic: str, msgtype: str):
+        keyed = msgtype in WINDOW_KEYED
+
         def write(data: bytes) -> None:
-            self.writer.write_cdr(topic, msgtype, self.get_clock().now().nanoseconds, data)
+            if self.writer is None:
+                return
+            if keyed:
+                key = (topic, window_id_of(data))
+                if key in self.recorded:
+                    self.duplicates += 1
+                    return
+            try:
+                disk_full_point(self.get_name(), self.out)
+                self.writer.write_cdr(topic, msgtype, self.get_clock().now().nanoseconds, data)
+            except OSError as exc:
+                if exc.errno != errno.ENOSPC:
+                    raise
+                self._disk_full(exc)
+            if keyed:
+                self.recorded.add(key)
             self.count += 1
         return write
 
+    def _disk_full(self, exc: OSError) -> None:
+        """Stop recording, say so, and end the node with the error (the supervisor stops the graph)."""
+        self.stopped = (f"{self.out}: no space left on the device: recording stopped; the {self.count} "
+                        "messages recorded before are kept")
+        self.get_logger().error(self.stopped)
+        self.diag.report("error", self.stopped, "recording")
+        self.diag.publish()
+        self.teardown()
+        raise DiskFullError(errno.ENOSPC, self.stopped) from exc
+
     def teardown(self) -> None:
-        """Close the bag (shutdown, cleanup): what was recorded stays readable."""
-        self.writer.__exit__(None, None, None)
-        self.get_logger().info(f"recorded {self.count} messages")
+        """Close the bag (shutdown, cleanup): what was recorded stays readable. A split that cannot
+        be closed (a full disk) stays as written; the next start of a recorder on this bag takes it up."""
+        writer, self.writer = self.writer, None
+        if writer is None:
+            return
+        try:
+            writer.close()
+        except OSError as exc:
+            if exc.errno != errno.ENOSPC:
+                raise
+            self.get_logger().error(f"{self.out}: no space left to close {writer.split}: it is kept as "
+                                    "written and taken up when a recorder next opens the bag")
+            return
+        self.get_logger().info(f"recorded {self.count} messages ({self.duplicates} duplicates skipped)")
+
+
+def recorded_windows(path: Path) -> set[tuple[str, str]]:
+    """(topic, window id) of every window-keyed message in the bag at ``path`` (none if no bag)."""
+    from shm_ros.io.bag_splits import read_info
+    from shm_ros.io.bags import read_messages
+
+    info = read_info(path) if path.is_dir() else None
+    if not info or not info.get("relative_file_paths"):
+        return set()
+    keyed = [t["topic_metadata"]["name"] for t in info.get("topics_with_message_count") or []
+             if t["topic_metadata"]["type"] in WINDOW_KEYED]
+    return {(m.topic, window_id_of(m.data)) for m in read_messages(path, keyed)} if keyed else set()
 
 
 def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> RecorderNode:

@@ -38,6 +38,8 @@ class ReplayResult:
     bag_span_s: float = 0.0
     started_ns: int = 0  # system clock at the first publish
     error: str = ""  # the bag could not be read to its end (what was read has been replayed)
+    ingest_restarts: int = 0  # new ingest processes seen while replaying (their losses are in lost)
+    stopped: bool = False  # stopped by SIGINT/SIGTERM before the end of the bag
 
     @property
     def lost(self) -> int:
@@ -45,18 +47,42 @@ class ReplayResult:
 
 
 class Replayer(Node):
+    """Publishes the recording; counts ingest's acknowledgements (how many recording messages it
+    has taken). A count that goes back is a new ingest process (a restart): what the old one took
+    is kept (its last count), the new one's count is added to it, and the messages sent before the
+    restart was seen no longer hold the flow control's credit (the dead process took those it had
+    not acknowledged with it), so a replay goes on after an ingest restart; the result counts the
+    restarts (what a dead process held is lost whatever its count said)."""
+
     def __init__(self, credit: int = 2000, namespace: str = "") -> None:
         super().__init__("shm_replay", namespace=namespace or None)
         self.credit = credit
-        self.acknowledged = 0
+        self.acknowledged = 0  # taken by ingest: the dead processes' last counts + the current one's
+        self.published = 0
+        self.offset = 0  # ingest's count when the replay began (it may have taken other bags before)
+        self.taken_before = 0  # the last counts of ingest processes that died
+        self.last_count = 0
+        self.forgiven = 0  # messages published before the last restart was seen
+        self.restarts = 0
         self.ack_seen = False
         self.create_subscription(UInt64, topics.INGEST_RECEIVED, self._on_ack, pipeline_qos())
         self.done_pub = self.create_publisher(String, topics.REPLAY_DONE, latched_qos())
         self.pubs: dict[str, Publisher] = {}
 
     def _on_ack(self, msg: UInt64) -> None:
+        count = int(msg.data)
+        if self.ack_seen and count < self.last_count:  # a new ingest process counts from 0
+            self.restarts += 1
+            self.taken_before += self.last_count
+            self.forgiven = self.published
         self.ack_seen = True
-        self.acknowledged = max(self.acknowledged, int(msg.data))
+        self.last_count = count
+        self.acknowledged = self.taken_before + count
+
+    @property
+    def settled(self) -> int:
+        """Acknowledged, or sent before an ingest restart was seen (credit for flow control)."""
+        return max(self.acknowledged, self.offset + self.forgiven)
 
     def publisher(self, topic: str, msgtype: str) -> Publisher:
         pub = self.pubs.get(topic)
@@ -88,7 +114,7 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                credit_bytes: int = 192 * 1024, wait_s: float = 10.0,
                drain_timeout_s: float = 300.0, stall_s: float = 30.0, recording_only: bool = True,
                progress: bool = False, clock_hz: float = 0.0, clock_readers: int = 0,
-               namespace: str = "") -> ReplayResult:
+               namespace: str = "", stop: Callable[[], bool] | None = None) -> ReplayResult:
     """Publish the bag at ``path``; returns counts. Needs ``rclpy.init()`` to have been called.
 
     ``rate``: 1.0 = real time, N = N x real time, 0 = as fast as the graph acknowledges.
@@ -102,6 +128,8 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     sim time) have matched; 0 = those the graph shows once they have stayed matched for
     ``CLOCK_SETTLE_S`` (a node discovered later than that takes the clock only from then on).
     ``namespace``: the graph's (``/bridge_a``); the recording's topics and the flow control go under it.
+    ``stop``: asked before each message; True (a SIGINT or SIGTERM) ends the replay there, after
+    which what was sent is drained and the graph is told the replay is done (``result.stopped``).
     """
     node = Replayer(credit, namespace)
     result = ReplayResult()
@@ -150,13 +178,16 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         t0_wall = time.monotonic()
         t0_bag: int | None = None
         last_bag = 0
-        start_ack = node.acknowledged
+        start_ack = node.offset = node.acknowledged
         last_report = t0_wall
         sizes: deque[int] = deque()  # bytes of the messages not yet acknowledged
         in_flight_bytes = 0
         acked_upto = 0
         messages = reader(list(node.pubs))
         for k, m in enumerate(_until_error(messages, result)):
+            if stop is not None and stop():
+                result.stopped = True
+                break
             t0_bag = m.receive_ns if t0_bag is None else t0_bag
             last_bag = m.receive_ns
             if clock is not None:
@@ -166,13 +197,13 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 while (delay := due - time.monotonic()) > 0:
                     rclpy.spin_once(node, timeout_sec=min(delay, 0.05))
             elif flow:
-                progress_at, progress_ack = time.monotonic(), node.acknowledged
+                progress_at, progress_ack = time.monotonic(), node.settled
                 while True:
-                    if node.acknowledged != progress_ack:
-                        progress_at, progress_ack = time.monotonic(), node.acknowledged
+                    if node.settled != progress_ack:
+                        progress_at, progress_ack = time.monotonic(), node.settled
                     elif time.monotonic() - progress_at > stall_s:
                         break
-                    acked = node.acknowledged - start_ack
+                    acked = node.settled - start_ack
                     while acked_upto < acked and sizes:
                         in_flight_bytes -= sizes.popleft()
                         acked_upto += 1
@@ -191,6 +222,7 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
                 result.started_ns = time.time_ns()
             node.pubs[m.topic].publish(m.data)
             result.published += 1
+            node.published = result.published
             if k % 200 == 0:
                 rclpy.spin_once(node, timeout_sec=0)
             if progress and time.monotonic() - last_report > 2.0:
@@ -199,14 +231,22 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
         # Drain: wait until the graph has taken everything that was sent.
         if flow or node.ack_seen:
             stalled = result.error.endswith("replay stopped")
-            end = time.monotonic() + (0.0 if stalled else drain_timeout_s)
+            end = time.monotonic() + (0.0 if stalled else STOPPED_DRAIN_S if result.stopped else drain_timeout_s)
+            quiet_since, seen = time.monotonic(), node.acknowledged
             while node.acknowledged - start_ack < result.published and time.monotonic() < end:
                 rclpy.spin_once(node, timeout_sec=0.05)
+                if node.acknowledged != seen:
+                    quiet_since, seen = time.monotonic(), node.acknowledged
+                if node.restarts and time.monotonic() - quiet_since > RESTART_QUIET_S:
+                    break  # after an ingest restart, what is still missing went with the dead process
                 if node.count_publishers(topics.INGEST_RECEIVED) == 0:  # ingest left: nothing more comes
                     result.error = result.error or (f"{path}: the ingest node left the graph before "
                                                     "acknowledging every message")
                     break
-            result.acknowledged = node.acknowledged - start_ack
+            # (after a restart the sum of the processes' counts can exceed what was sent: a count is
+            # not an id; the restart itself is what the result reports)
+            result.acknowledged = min(node.acknowledged - start_ack, result.published)
+            result.ingest_restarts = node.restarts
         else:
             result.acknowledged = result.published
         result.wall_s = time.monotonic() - t0_wall
@@ -221,6 +261,8 @@ def replay_bag(path: str | Path, *, rate: float = 0.0, credit: int = 256,
     return result
 
 
+RESTART_QUIET_S = 5.0  # s without new acknowledgements that end the drain after an ingest restart
+STOPPED_DRAIN_S = 10.0  # s a stopped replay waits for the acknowledgements of what it sent
 CLOCK_SETTLE_S = 1.0  # s the /clock readers must stay matched before the replay starts
 
 

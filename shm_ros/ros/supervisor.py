@@ -67,9 +67,22 @@ def stop_process(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, st
     return proc.returncode, out or ""
 
 
+#: respawn delays double after each restart of a node up to this, s
+MAX_RESPAWN_DELAY_S = 60.0
+#: a node that ran this long before it died starts its back-off afresh, s
+STABLE_AFTER_S = 60.0
+
+
 class Supervisor:
     """Runs each node of the plan as a child process; respawns one that dies (after the registry's
-    delay, at most ``max_restarts`` times); SIGINT stops all cleanly."""
+    delay, doubled after each restart up to ``MAX_RESPAWN_DELAY_S``, at most ``max_restarts``
+    times); SIGINT or SIGTERM stops all cleanly.
+
+    A node that exits with code 2 has a bad configuration (or a full disk): it is not restarted, the
+    graph is stopped and the node's reason is logged (exit code 2). A node that died (and was restarted or not) may
+    have lost what it held, so the exit code is then 1; 0 means every node ran until the stop and
+    closed its files. The children die with the supervisor (``SHM_SUPERVISOR_PID``: each asks the
+    kernel for a parent-death signal), so killing it with SIGKILL leaves no node running."""
 
     def __init__(self, config: GraphConfig, log=print, autostart: bool = True) -> None:
         self.config = config
@@ -78,7 +91,11 @@ class Supervisor:
         self.procs: dict[str, subprocess.Popen] = {}
         self.restarts: dict[str, int] = {n.name: 0 for n in config.nodes}
         self._due: dict[str, float] = {}  # node -> when it is respawned
+        self._started: dict[str, float] = {}  # node -> when its current process started
         self._stopping = False
+        self.failures: list[str] = []  # nodes that died while the graph ran: what may have been lost
+        self.fatal = ""  # why the graph stopped by itself (a bad configuration, a node given up)
+        self.fatal_code = 0
         self._tmp = tempfile.TemporaryDirectory(prefix="shm-ros-graph-")
 
     def _params_file(self, node: NodeLaunch) -> Path:
@@ -87,19 +104,29 @@ class Supervisor:
         path.write_text(yaml.safe_dump({f"{node.namespace}/{node.name}": {"ros__parameters": node.parameters}}))
         return path
 
+    def _reason_file(self, name: str) -> Path:
+        return Path(self._tmp.name) / f"{name}.reason"
+
     def command(self, node: NodeSpec | NodeLaunch) -> list[str]:
         launch = self.plan[node.name]
         ns = ["-r", f"__ns:={launch.namespace}"] if launch.namespace else []
         return [sys.executable, "-m", launch.module, "--ros-args", "-r", f"__node:={launch.name}", *ns,
                 "--params-file", str(self._params_file(launch))]
 
+    def _env(self, name: str) -> dict[str, str]:
+        from shm_ros.ros.node_main import REASON_FILE_ENV, SUPERVISOR_PID_ENV
+
+        return {**os.environ, SUPERVISOR_PID_ENV: str(os.getpid()), REASON_FILE_ENV: str(self._reason_file(name))}
+
     def start(self, node: NodeSpec | NodeLaunch) -> None:
-        self.procs[node.name] = subprocess.Popen(self.command(node), env=dict(os.environ))
+        self._reason_file(node.name).unlink(missing_ok=True)
+        self.procs[node.name] = subprocess.Popen(self.command(node), env=self._env(node.name))
+        self._started[node.name] = time.monotonic()
         self.log(f"[supervisor] started {node.name} (pid {self.procs[node.name].pid})")
 
     def start_all(self) -> None:
         if self.config.mode == "single":
-            self.procs["graph"] = subprocess.Popen(self.single_command(), env=dict(os.environ))
+            self.procs["graph"] = subprocess.Popen(self.single_command(), env=self._env("graph"))
             self.log(f"[supervisor] started the graph in one process (pid {self.procs['graph'].pid})")
             return
         for node in self.plan.values():
@@ -112,12 +139,17 @@ class Supervisor:
         ns = ["--namespace", self.config.namespace] if self.config.namespace else []
         return [sys.executable, "-m", "shm_ros.cli", "run", str(path), "--single-process", "--no-restart", *ns]
 
-    def poll(self) -> None:
-        """Respawn nodes that died while the graph is not being stopped."""
+    def respawn_delay(self, node: NodeLaunch, restart: int) -> float:
+        """Seconds before the ``restart``-th respawn (1, 2, ...): the node's delay, doubled each time."""
+        return min(node.respawn_delay_s * 2.0 ** (restart - 1), max(MAX_RESPAWN_DELAY_S, node.respawn_delay_s))
+
+    def poll(self) -> str:
+        """Respawn nodes that died while the graph is not being stopped; returns why the graph
+        must stop (a node with a bad configuration, or one not restarted), else ""."""
         now = time.monotonic()
         for name, node in self.plan.items():
             if self._stopping:
-                return
+                return ""
             if name in self._due:
                 if now >= self._due[name]:
                     del self._due[name]
@@ -127,17 +159,31 @@ class Supervisor:
             if proc is None or proc.poll() is None:
                 continue
             code = proc.returncode
+            if code == 2:  # a bad configuration, a full disk: restarting cannot help
+                reason_file = self._reason_file(name)
+                reason = reason_file.read_text().strip() if reason_file.exists() else ""
+                self.procs.pop(name)
+                self.fatal_code = 2
+                return f"{name} cannot go on: {reason or 'exit code 2 (a bad configuration)'}"
+            self.failures.append(f"{name} exited with {code}")
+            if now - self._started.get(name, now) >= STABLE_AFTER_S:
+                self.restarts[name] = 0
             if node.respawn and self.restarts[name] < self.config.max_restarts:
                 self.restarts[name] += 1
-                self.log(f"[supervisor] {name} exited with {code}; restarting in {node.respawn_delay_s:g} s "
+                delay = self.respawn_delay(node, self.restarts[name])
+                self.log(f"[supervisor] {name} exited with {code}; restarting in {delay:g} s "
                          f"({self.restarts[name]}/{self.config.max_restarts})")
-                self._due[name] = now + node.respawn_delay_s
+                self._due[name] = now + delay
             else:
-                self.log(f"[supervisor] {name} exited with {code}; not restarting")
                 self.procs.pop(name)
+                self.fatal_code = 1
+                return f"{name} exited with {code} and is not restarted"
+        return ""
 
-    def stop_all(self, timeout: float = 10.0) -> int:
-        """SIGINT every child, wait, escalate; 0 when all stopped cleanly."""
+    def stop_all(self, timeout: float = 20.0) -> int:
+        """SIGINT every child (a second one, as from a terminal's Ctrl-C, does no harm: a node
+        ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly (a node
+        that died earlier is in ``failures``; :meth:`run` counts it)."""
         self._stopping = True
         for proc in self.procs.values():
             if proc.poll() is None:
@@ -158,56 +204,66 @@ class Supervisor:
                 worst = 1
             if code not in (0, -signal.SIGINT, 130):
                 self.log(f"[supervisor] {name} stopped with exit code {code}")
-                worst = 1
+                worst = max(worst, 1)
         self._tmp.cleanup()
-        return worst
+        return max(worst, self.fatal_code)
 
     def run(self) -> int:
-        """Start, watch, and stop on SIGINT/SIGTERM; returns the exit code."""
-        stop = {"flag": False}
+        """Start, watch, and stop on SIGINT/SIGTERM (or when the graph cannot go on); returns the
+        exit code."""
+        from shm_ros.ros.node_main import StopSignals, die_with_parent
 
-        def _on_signal(signum, frame):
-            stop["flag"] = True
-
-        previous = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            self.start_all()
-            while not stop["flag"]:
-                self.poll()
-                time.sleep(0.2)
-        finally:
-            code = self.stop_all()
-            for s, h in previous.items():
-                signal.signal(s, h)
-        self.log("[supervisor] all nodes stopped")
+        die_with_parent()  # a supervisor run by a supervisor (single-process mode)
+        with StopSignals() as stop:
+            try:
+                self.start_all()
+                while not stop.stopping:
+                    self.fatal = self.poll()
+                    if self.fatal:
+                        self.log(f"[supervisor] {self.fatal}: stopping the graph")
+                        break
+                    time.sleep(0.2)
+            finally:
+                code = max(self.stop_all(), 1 if self.failures else 0)
+        if self.failures:
+            self.log(f"[supervisor] what a node held when it died may be lost: {'; '.join(self.failures)}")
+        self.log(f"[supervisor] all nodes stopped (exit code {code})")
         return code
 
 
 def run_single_process(config: GraphConfig, autostart: bool = True) -> int:
     """All nodes in one process and one executor (small deployments); a node that cannot configure
-    itself stops the graph (exit code 2, the reason on stderr)."""
+    itself stops the graph (exit code 2, the reason on stderr). The same stop as a node process:
+    SIGINT or SIGTERM ends the loop and every node is closed."""
     import importlib
 
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
-    rclpy.init()
-    executor = SingleThreadedExecutor()
+    from shm_ros.ros.node_main import StopSignals, close_node, die_with_parent, report_stop_reason
+
+    die_with_parent()
     nodes = []
-    try:
-        for launch in launch_plan(config, autostart):
-            node = importlib.import_module(launch.module).make_node(launch.name, launch.parameters, launch.namespace)
-            nodes.append(node)
-            if autostart and not node.configured:
-                print(node.config_error, file=sys.stderr)
-                return 2
-            executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        for node in nodes:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    code = 0
+    with StopSignals(restore=False) as stop:
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        executor = SingleThreadedExecutor()
+        try:
+            for launch in launch_plan(config, autostart):
+                node = importlib.import_module(launch.module).make_node(launch.name, launch.parameters,
+                                                                        launch.namespace)
+                nodes.append(node)
+                if autostart and not node.configured:
+                    report_stop_reason(node.config_error)
+                    return 2
+                executor.add_node(node)
+            while rclpy.ok() and not stop.stopping:
+                executor.spin_once(timeout_sec=0.2)
+        except ExternalShutdownException:
+            pass
+        finally:
+            for node in nodes:
+                code = close_node(node, code)
+            rclpy.try_shutdown()
+    return code

@@ -25,6 +25,7 @@ from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
 from shm_ros.core.tracking import Tracker, TrackingConfig
+from shm_ros.io.atomic import DiskFullError
 from shm_ros.ros import topics
 from shm_ros.ros.convert import estimate_from_msg, tracked_row_to_msg
 from shm_ros.ros.managed import ManagedNode
@@ -124,6 +125,8 @@ class TrackNode(ManagedNode):
             rows = self.tracker.add(est)
             if self.store is not None:
                 self.store.record(est, rows, self.tracker)
+        except DiskFullError:  # not one bad estimate: the store cannot take more; the node stops
+            raise
         except Exception as exc:  # one bad estimate must never take the node down
             self.diag.report("error", f"estimate not tracked: {exc}", source)
             self.diag.publish()

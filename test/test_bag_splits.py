@@ -1,0 +1,137 @@
+"""A recorder's bag survives the recorder: a writer killed in the middle of a write (the fault hook
+``SHM_FAULT=bag:write:K``, with a record large enough to be partly on disk) loses at most that
+message; the next writer takes up the split cut short, writes a new split, and the bag opens as one
+bag without salvage, every message once, in order. A full disk stops the writing with a clear
+error and keeps what was written."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+MSGTYPE = "shm_interfaces/msg/ModalEstimate"
+TOPIC = "/shm/modal_estimates"
+
+
+def _cdr(window_id: str, frame_id: str = "frame", pad: int = 0) -> bytes:
+    """A ModalEstimate message's CDR; ``pad`` sensor ids make it large."""
+    from shm_ros.io.typestore import typestore
+
+    ts = typestore()
+    T = ts.types
+    stamp = T["builtin_interfaces/msg/Time"](sec=1, nanosec=2)
+    msg = T[MSGTYPE](header=T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame_id), window_id=window_id,
+                     start=stamp, end=stamp, has_temperature=False, temperature_c=0.0, method="ssi-cov",
+                     sensor_ids=["s" * 40] * pad, modes=[], covariate_names=[],
+                     covariate_values=np.zeros(0))
+    return bytes(ts.serialize_cdr(msg, MSGTYPE))
+
+
+WRITER = """
+import sys
+from pathlib import Path
+sys.path.insert(0, {test!r})
+from test_bag_splits import _cdr, TOPIC, MSGTYPE
+from shm_ros.io.bag_splits import SplitBagWriter
+w = SplitBagWriter(Path({out!r})).open()
+for k in range({first}, {last}):
+    w.write_cdr(TOPIC, MSGTYPE, 1_000 + k, _cdr(f"w{{k:03d}}", pad=400))
+w.close()
+"""
+
+
+def _write(out: Path, first: int, last: int, fault: str = "") -> subprocess.CompletedProcess:
+    env = {**os.environ, "SHM_FAULT": fault}
+    code = WRITER.format(test=str(Path(__file__).parent), out=str(out), first=first, last=last)
+    return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+
+
+def _ids(out: Path) -> list[str]:
+    from shm_ros.io.bags import read_messages
+    from shm_ros.ros.recorder_node import window_id_of
+
+    return [window_id_of(m.data) for m in read_messages(out)]
+
+
+def test_window_id_is_read_from_the_cdr_without_decoding():
+    from shm_ros.ros.recorder_node import window_id_of
+
+    for frame in ("", "a", "ab", "abc", "abcd", "frame_äö"):
+        for wid in ("", "w1", "2024-05-01T00:00:00Z", "x" * 37):
+            assert window_id_of(_cdr(wid, frame)) == wid
+
+
+def test_a_writer_killed_mid_write_loses_only_that_message_and_the_bag_reads_as_one(tmp_path):
+    from shm_ros.io.bag_splits import SplitBagWriter, read_info
+    from shm_ros.io.sources import open_source
+
+    out = tmp_path / "bag"
+    killed = _write(out, 0, 10, fault="bag:write:6")  # dies while the 6th message is flushed
+    assert killed.returncode == -9, killed.stderr
+    split = out / "bag_0"
+    assert split.is_dir() and not (out / "metadata.yaml").exists()
+    size = sum(f.stat().st_size for f in split.glob("*.mcap"))
+    assert size > 5 * 16_000, "the first five messages must be on disk before the kill"
+    # a second writer (the restarted recorder) takes up the split cut short, then writes its own
+    w = SplitBagWriter(out).open()
+    kept = [n for n in w.recovered if "cut short" in n]
+    assert len(kept) == 1, w.recovered
+    n_kept = int(kept[0].split("cut short, ")[1].split()[0])
+    # the five flushed before the kill, and the sixth when its record reached the disk whole
+    assert n_kept in (5, 6), kept
+    assert w.split == out / "bag_2" or w.split == out / "bag_1"
+    w.write_cdr(TOPIC, MSGTYPE, 5_000, _cdr("w100"))
+    w.close()
+    assert _write(out, 200, 203).returncode == 0  # and a third start, undisturbed
+    info = read_info(out)
+    assert info is not None and len(info["relative_file_paths"]) == 3
+    assert all((out / f).exists() for f in info["relative_file_paths"])
+    assert not [p for p in out.iterdir() if p.is_dir()], "no split left unmerged"
+    source = open_source(out)
+    assert source.note == "", f"the bag must open without salvage: {source.note}"
+    ids = _ids(out)
+    assert ids == [f"w{k:03d}" for k in range(n_kept)] + ["w100", "w200", "w201", "w202"]
+    assert info["message_count"] == len(ids)
+    assert info["topics_with_message_count"][0]["message_count"] == len(ids)
+
+
+def test_a_closed_split_not_yet_merged_is_merged_once(tmp_path):
+    """A crash between closing a split and listing it: the next open lists it, once."""
+    from shm_ros.io.bag_splits import SplitBagWriter, read_info
+    from shm_ros.io.bags import BagWriter
+
+    out = tmp_path / "bag"
+    assert _write(out, 0, 3).returncode == 0
+    with BagWriter(out / "bag_1") as w:  # closed (metadata written) but never moved into the bag
+        w.write_cdr(TOPIC, MSGTYPE, 2_000, _cdr("w010"))
+    with SplitBagWriter(out) as w:
+        assert any("closed split merged" in n for n in w.recovered)
+        w.write_cdr(TOPIC, MSGTYPE, 3_000, _cdr("w020"))
+    assert _ids(out) == ["w000", "w001", "w002", "w010", "w020"]
+    assert read_info(out)["message_count"] == 5
+
+
+def test_a_full_disk_stops_the_store_with_a_clear_error_and_keeps_what_was_stored(tmp_path, monkeypatch):
+    from shm_ros.core.tracking import Tracker, TrackingConfig
+    from shm_ros.core.types import ModalEstimate, Mode
+    from shm_ros.errors import ShmError
+    from shm_ros.io.store import TrackStore
+
+    def est(k: int) -> ModalEstimate:
+        return ModalEstimate(f"w{k}", k * 10**9, (k + 1) * 10**9, ["a"], [Mode(1.0, 0.02, np.array([1.0]))])
+
+    tracker = Tracker(TrackingConfig(reference_windows=1))
+    path = tmp_path / "track.sqlite"
+    with TrackStore(path) as store:
+        for k in range(3):
+            store.record(est(k), tracker.add(est(k)), tracker)
+        monkeypatch.setenv("SHM_FAULT", "store:enospc:1")
+        with pytest.raises(ShmError, match="no space left.*w3 not stored; the 3 windows stored before are kept"):
+            store.record(est(3), tracker.add(est(3)), tracker)
+    with TrackStore(path) as store:
+        assert store.count("estimates") == 3 and not store.has("w3")

@@ -1,0 +1,319 @@
+"""Stops and crashes of a running graph lose and duplicate nothing (real node processes, real DDS).
+
+`shm-ros run` (ingest, identify, track with its store, recorder; restarts on) is fed by
+`shm-ros replay` while deterministic faults (``SHM_FAULT``, :mod:`shm_ros.io.faults`) kill a node
+at a point: the recorder in the middle of a bag write, identify after publishing a window's
+estimate, track inside its store's commit. The first replay is stopped by SIGTERM; a second replay
+of the same bag resumes. Then Ctrl-C reaches the whole process group (supervisor and nodes), as
+from a terminal. The recorded bag must open without salvage and hold every window, modal estimate
+and tracked row exactly once; the tracked rows must equal an undisturbed tracking of the same
+estimates; the store must hold every window; no traceback; nothing left running; the exit codes
+say that something was lost (a node died) and the replay that was stopped says so.
+
+One run in CI; ``SHM_FULL=1`` runs 20 with kill points drawn from a fixed seed.
+
+Also: killing the supervisor with SIGKILL leaves no node running (and the recorder, ended by its
+parent-death signal, closes its bag); a node with a bad configuration stops the graph with its
+reason instead of being restarted in a loop.
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from conftest import full_size
+from test_graph_faults import _signal
+from test_supervisor import _children, _identity, _Lines, _still_running, _wait_for
+
+FS = 100.0
+T0 = 1_714_521_600_000_000_000
+WINDOW_S = 5.0
+N_WINDOWS = 6
+STRUCTURE = """
+name: three-storey-test-frame
+kind: shear_building
+shear_building:
+  floors:
+    - {mass: 1.0e+5, stiffness: 2.0e+8}
+    - {mass: 1.0e+5, stiffness: 2.0e+8}
+    - {mass: 1.0e+5, stiffness: 2.0e+8}
+sensors:
+  - {id: f1, at: {floor: 1}, direction: x}
+  - {id: f2, at: {floor: 2}, direction: x}
+  - {id: f3, at: {floor: 3}, direction: x}
+"""
+
+
+def _bag(path: Path) -> None:
+    """N_WINDOWS windows of a two-mode response, as 0.5 s blocks of three channels."""
+    from shm_ros.io.bags import BagWriter
+
+    n = int(N_WINDOWS * WINDOW_S * FS)
+    x = _signal(np.random.default_rng(3), n)
+    with BagWriter(path) as w:
+        for k in range(0, n, 50):
+            w.accel_block("/site/daq/accel_block", T0 + int(k * 1e9 / FS), FS, ["f1", "f2", "f3"], x[k:k + 50])
+
+
+def _config(tmp_path: Path, **extra: dict) -> Path:
+    structure = tmp_path / "structure.yaml"
+    structure.write_text(STRUCTURE)
+    nodes = {"ingest": {"parameters": {"structure": str(structure), "window_s": WINDOW_S}},
+             "identify": {"parameters": {"structure": str(structure)}},
+             "track": {"parameters": {"store": str(tmp_path / "track.sqlite"), "reference_windows": 3}},
+             "recorder": {"parameters": {"output": str(tmp_path / "out")}}}
+    for name, params in extra.items():
+        nodes[name] = {"parameters": {**nodes.get(name, {}).get("parameters", {}), **params}}
+    config = tmp_path / "graph.yaml"
+    config.write_text(yaml.safe_dump({"graph": {"mode": "processes", "restart": True}, "nodes": nodes}))
+    return config
+
+
+class _Family:
+    """Every process the supervisor started (and theirs), seen while it ran: pid -> start time."""
+
+    def __init__(self, root: int) -> None:
+        self.root = root
+        self.seen: dict[int, int] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+
+    def _watch(self) -> None:
+        while not self._stop.is_set():
+            todo = [self.root]
+            while todo:
+                kids = _children(todo.pop())
+                self.seen.update(_identity(kids))
+                todo += list(kids)
+            time.sleep(0.3)
+
+    def close(self) -> dict[int, int]:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        return self.seen
+
+
+def _replay(bag: Path, *extra: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "replay", str(bag), "--wait", "90", *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _estimates_in_store(path: Path) -> int:
+    from shm_ros.io.store import TrackStore
+
+    if not path.exists():
+        return 0
+    with TrackStore(path, writer=False) as store:
+        return store.count("estimates")
+
+
+def _session(tmp_path: Path, bag: Path, env: dict[str, str], stop_when, stop_signal: int, *replay_args: str):
+    """Start the graph, replay ``bag``, and once ``stop_when()`` holds send ``stop_signal`` to the
+    graph's process group; returns (graph exit code, its output, replay exit code and output,
+    every process seen, whether the replay still ran at the stop)."""
+    sup = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(_config(tmp_path))],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                           start_new_session=True)  # its own process group, as a terminal's job
+    out = _Lines(sup)
+    family = _Family(sup.pid)
+    try:
+        up = _wait_for(lambda: all(out.count(f"[{n}]:") for n in ("ingest", "identify", "track", "recorder")),
+                       timeout=120)
+        assert up, out.text()
+        replay = _replay(bag, *replay_args)
+        assert _wait_for(stop_when, timeout=300), out.text()
+        replaying = replay.poll() is None
+        os.killpg(sup.pid, stop_signal)
+        sup.wait(timeout=90)
+        replay_out, _ = replay.communicate(timeout=120)
+    finally:
+        if sup.poll() is None:
+            os.killpg(sup.pid, signal.SIGKILL)
+            sup.wait()
+    seen = family.close()
+    return sup.returncode, out.text(join_timeout=10), replay.returncode, replay_out, seen, replaying
+
+
+def _clean(text: str) -> bool:
+    return "Traceback" not in text and "KeyboardInterrupt" not in text and "terminate called" not in text
+
+
+def _fault_sets() -> list[str]:
+    """The faults of each run: one fixed set in CI; with SHM_FULL=1, 20 sets whose kill points are
+    drawn from a fixed seed (the recorder's message, identify's and the store's window)."""
+    if not full_size():
+        return ["bag:write:15,identify:published:1,store:commit:1"]
+    rng = np.random.default_rng(35)
+    return [f"bag:write:{rng.integers(5, 40)},identify:published:{rng.integers(1, 3)},"
+            f"store:commit:{rng.integers(1, 3)}" for _ in range(20)]
+
+
+@pytest.mark.parametrize("fault", _fault_sets())
+def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplicate_nothing(tmp_path, fault):
+    from shm_ros.core.tracking import Tracker, TrackingConfig
+    from shm_ros.io.sources import open_source
+    from shm_ros.ros.graph_run import read_pipeline_bag
+
+    bag = tmp_path / "recording"
+    _bag(bag)
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    store = tmp_path / "track.sqlite"
+    # 1: faults while a replay runs; SIGTERM to the graph (every process) once all three fired
+    faults = {**os.environ, "SHM_FAULT_MARK": str(marks), "SHM_FAULT": fault}
+    code, text, replay_code, replay_out, seen, replaying = _session(
+        tmp_path, bag, faults, lambda: len(list(marks.iterdir())) == 3, signal.SIGTERM, "--rate", "1")
+    print(text[-3000:], replay_out[-1000:])
+    assert replaying and replay_code != 0, "the graph stopped during the replay: the replay must say so"
+    assert sorted(p.name for p in marks.iterdir()) == ["bag.write", "identify.published", "store.commit"]
+    assert code == 1 and "may be lost" in text and "all nodes stopped" in text, text  # nodes died: 1
+    assert _clean(text), text
+    assert len(seen) >= 4 + 1 and _still_running(seen) == [], text  # the four and the restarted recorder at least
+    if text.count("started recorder") >= 2:  # the recorder ran again before the stop: it closed the bag
+        assert open_source(tmp_path / "out").note == "", "the bag must be complete after the stop"
+        first = read_pipeline_bag(tmp_path / "out")
+        for ids in ([w.window_id for w in first.windows], [e.window_id for e in first.estimates],
+                    [r["window_id"] for r in first.tracked]):
+            assert max(collections.Counter(ids).values(), default=0) <= 1, ids
+    else:  # stopped while the recorder waited for its restart: its split cut short waits for the next
+        assert list((tmp_path / "out").glob("out_*/out_*.mcap")), "the split cut short must be kept"
+    # 2: rerun (no faults): the same bag again resumes; then Ctrl-C to the whole process group
+    code2, text2, replay_code2, replay_out2, seen2, _ = _session(
+        tmp_path, bag, dict(os.environ), lambda: _estimates_in_store(store) == N_WINDOWS and time.sleep(3) is None,
+        signal.SIGINT)
+    print(text2[-3000:], replay_out2[-1000:])
+    assert code2 == 0 and "exit code 0" in text2, text2  # nothing died, nothing lost
+    assert replay_code2 == 0 and "lost 0" in replay_out2, replay_out2
+    assert _clean(text2) and _still_running(seen2) == [], text2
+    source = open_source(tmp_path / "out")
+    assert source.note == "", source.note
+    assert len(list((tmp_path / "out").glob("*.mcap"))) >= 2  # splits: the killed one, (its restart,) the rerun
+    rec = read_pipeline_bag(tmp_path / "out")
+    windows = [w.window_id for w in rec.windows]
+    estimates = [e.window_id for e in rec.estimates]
+    tracked = [r["window_id"] for r in rec.tracked]
+    for name, ids in (("windows", windows), ("estimates", estimates), ("tracked rows", tracked)):
+        dup = [k for k, c in collections.Counter(ids).items() if c > 1]
+        assert not dup, f"{name} recorded twice: {dup}"
+        assert len(ids) == N_WINDOWS, f"{name}: {len(ids)} of {N_WINDOWS}"
+    assert set(windows) == set(estimates) == set(tracked)
+    assert _estimates_in_store(store) == N_WINDOWS
+    # the tracked rows equal those of an undisturbed tracking of the same estimates, in order
+    tracker = Tracker(TrackingConfig(reference_windows=3))
+    truth = {}
+    for est in sorted(rec.estimates, key=lambda e: e.start_ns):
+        for row in tracker.add(est):
+            truth[row.window_id] = row
+    assert set(truth) == set(tracked)
+    for r in rec.tracked:
+        want = truth[r["window_id"]]
+        assert r["mode_numbers"] == [int(k) for k in want.mode_numbers], r["window_id"]
+        np.testing.assert_allclose(r["frequencies_hz"], want.frequencies_hz, rtol=1e-12, equal_nan=True)
+
+
+def test_killing_the_supervisor_leaves_no_node_running(tmp_path):
+    from shm_ros.io.sources import open_source
+
+    config = _config(tmp_path)
+    sup = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(config)],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    out = _Lines(sup)
+    try:
+        up = _wait_for(lambda: out.count("[recorder]:") and out.count("[ingest]:"), timeout=120)
+        assert up, out.text()
+        kids = _identity(_children(sup.pid))
+        assert len(kids) == 4
+        sup.kill()
+        sup.wait()
+        gone = _wait_for(lambda: _still_running(kids) == [], timeout=30)
+    finally:
+        if sup.poll() is None:
+            sup.kill()
+    assert gone, f"left running after the supervisor was killed: {_still_running(kids)}"
+    # the recorder was ended by its parent-death signal (SIGTERM): it closed its bag
+    assert open_source(tmp_path / "out").note == ""
+
+
+def test_a_node_with_a_bad_configuration_stops_the_graph_with_its_reason(tmp_path):
+    config = _config(tmp_path, identify={"structure": str(tmp_path / "missing.yaml")})
+    started = time.monotonic()
+    run = subprocess.run([sys.executable, "-m", "shm_ros.cli", "run", str(config)],
+                         capture_output=True, text=True, timeout=180)
+    text = run.stdout + run.stderr
+    assert run.returncode == 2, text
+    assert "identify cannot go on" in text and "missing.yaml" in text, text
+    assert text.count("started identify") == 1, "not restarted"
+    assert "restarting" not in text
+    assert time.monotonic() - started < 120
+
+
+def test_a_full_disk_stops_the_recorder_and_the_graph_and_keeps_what_was_recorded(tmp_path):
+    """``recorder:enospc:5``: the recorder's 5th write fails as on a full disk."""
+    from shm_ros.io.bags import read_messages
+    from shm_ros.io.sources import open_source
+
+    config = _config(tmp_path)
+    env = {**os.environ, "SHM_FAULT": "recorder:enospc:5"}
+    run = subprocess.run([sys.executable, "-m", "shm_ros.cli", "run", str(config)],
+                         capture_output=True, text=True, timeout=180, env=env)
+    text = run.stdout + run.stderr
+    assert run.returncode == 2, text
+    assert "recorder cannot go on" in text and "no space left on the device: recording stopped; the 4 " \
+        "messages recorded before are kept" in text, text
+    assert "restarting" not in text and _clean(text), text
+    assert open_source(tmp_path / "out").note == ""
+    assert len(list(read_messages(tmp_path / "out"))) == 4
+
+
+def test_a_replay_goes_on_after_an_ingest_restart_and_counts_what_was_lost(tmp_path):
+    """Ingest killed after its second window: the replay does not wait out its drain for
+    acknowledgements that cannot come; it goes on with the restarted ingest, says that what the dead
+    process held is lost, and exits 1."""
+    from shm_ros.io.sources import open_source
+    from shm_ros.ros.graph_run import read_pipeline_bag
+
+    bag = tmp_path / "recording"
+    _bag(bag)
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    env = {**os.environ, "SHM_FAULT_MARK": str(marks), "SHM_FAULT": "ingest:published:2"}
+    sup = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(_config(tmp_path))],
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    out = _Lines(sup)
+    try:
+        up = _wait_for(lambda: all(out.count(f"[{n}]:") for n in ("ingest", "identify", "track", "recorder")),
+                       timeout=120)
+        assert up, out.text()
+        started = time.monotonic()
+        replay = subprocess.run(_replay(bag, "--rate", "2").args, capture_output=True, text=True, timeout=400)
+        took = time.monotonic() - started
+        time.sleep(3.0)
+        sup.send_signal(signal.SIGINT)
+        sup.wait(timeout=90)
+    finally:
+        if sup.poll() is None:
+            sup.kill()
+            sup.wait()
+    text = out.text(join_timeout=10)
+    print(replay.stdout[-800:], text[-2000:])
+    assert (marks / "ingest.published").exists()
+    assert "the ingest node restarted 1 time(s) during the replay" in replay.stderr, replay.stdout + replay.stderr
+    assert replay.returncode == 1, replay.stdout
+    assert took < 200, f"the replay waited {took:.0f} s"
+    assert sup.returncode == 1 and _clean(text), text
+    assert open_source(tmp_path / "out").note == ""
+    rec = read_pipeline_bag(tmp_path / "out")
+    for ids in ([w.window_id for w in rec.windows], [e.window_id for e in rec.estimates],
+                [r["window_id"] for r in rec.tracked]):
+        assert ids and max(collections.Counter(ids).values()) == 1, ids
