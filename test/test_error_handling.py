@@ -23,6 +23,7 @@ ALLOWED = {
     ("shm_ros/ros/update_node.py", "UpdateNode._poll"): "node callback guard: a failed update",
     ("shm_ros/ros/track_node.py", "TrackNode._on_estimate"): "node callback guard: one bad estimate",
     ("shm_ros/ros/predict_node.py", "PredictNode._poll"): "node callback guard: a failed prediction",
+    ("shm_ros/ros/roving_node.py", "RovingNode._execute"): "action guard: a failed estimate ends the goal",
     ("shm_ros/io/importers.py", "read_miniseed"): "ObsPy raises plain Exception for unreadable records",
     ("shm_ros/io/opensees.py", "_parameter_term"): "OpenSeesPy raises its own untyped error for an unknown tag",
     ("shm_ros/ros/managed.py", "ManagedNode.on_configure"): "lifecycle guard: a failed configure is a failed "
