@@ -1,4 +1,4 @@
-"""Model evidence by nested sampling against closed forms (issue #6, item 5)."""
+"""Model evidence by nested sampling against closed forms."""
 
 from __future__ import annotations
 

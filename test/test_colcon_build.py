@@ -1,4 +1,4 @@
-"""Issue 2: msg_defs builds the ROS-workspace way with colcon (from PyPI) and the result imports.
+"""msg_defs builds the ROS-workspace way with colcon (from PyPI) and the result imports.
 
 colcon stops descending at a folder holding a package.xml, so the repository root (the ament_python
 package shm_ros) hides msg_defs/ unless it is named as a base path too.

@@ -1,4 +1,4 @@
-"""Issue 2: two nodes in two processes exchange messages over real DDS on a clean set-up."""
+"""Two nodes in two processes exchange messages over real DDS on a clean set-up."""
 
 from __future__ import annotations
 

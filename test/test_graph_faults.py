@@ -1,4 +1,4 @@
-"""Issue 4 (ROS half), faults: recordings with injected faults replayed through real node processes
+"""Faults: recordings with injected faults replayed through real node processes
 (ingest -> identify, recorder of windows, estimates and /diagnostics) give diagnostics that name the
 topic and field of each fault, flagged samples stay in the windows (flagged, not dropped), and no
 node crashes: every process is alive after the faults and exits 0 on SIGINT.

@@ -1,4 +1,4 @@
-"""Issue 4 (ROS half): a bag replayed over DDS through real node processes yields windows holding
+"""A bag replayed over DDS through real node processes yields windows holding
 exactly the samples that went in (count, order, raw values); unrelated topics are ignored."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Acceptance on synthetic truth, pure noise and spurious-mode removal (issue #5).
+"""Acceptance on synthetic truth, pure noise and spurious-mode removal.
 
 Data come from ``synthetic_oma``: a 36-DOF chain with non-proportional damping, coloured and
 non-stationary forcing integrated at 8x the output rate and decimated, sensor noise at 2 % / 5 %

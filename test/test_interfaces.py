@@ -1,4 +1,4 @@
-"""Issue 2: every custom interface round-trips through rclpy across two processes and through
+"""Every custom interface round-trips through rclpy across two processes and through
 rosbags (write, read back, identical values), including a 6 MB Window."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""IIRS reduction to the measured floors and mode-shape expansion (issue 6 acceptance).
+"""IIRS reduction to the measured floors and mode-shape expansion.
 
 CI size: a few hundred parameter draws; ``SHM_FULL=1`` runs thousands.
 """

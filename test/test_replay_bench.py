@@ -1,4 +1,4 @@
-"""Issue 4 (ROS half), benchmark: a recording replayed over DDS into a separate ingest process with
+"""Benchmark: a recording replayed over DDS into a separate ingest process with
 flow control loses no sample (count, values, grid slots), per-sample Imu and AccelBlock.
 
 CI runs 10 s x 16 channels x 200 Hz (32,000 Imu messages), ``SHM_FULL=1`` the full 120 s (384,000

@@ -1,4 +1,4 @@
-"""Acceptance: posterior calibration on synthetic truth (issue #6).
+"""Acceptance: posterior calibration on synthetic truth.
 
 Girder (E scale and bearing stiffness) and 8-story shear building (three story-stiffness groups,
 4 instrumented floors, IIRS reduction inside the likelihood): Gaussian likelihood, 0.3-1 %

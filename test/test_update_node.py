@@ -1,4 +1,4 @@
-"""Issue 6 (node): the update node takes the track node's tracked modes over DDS (``TrackedModes``
+"""The update node takes the track node's tracked modes over DDS (``TrackedModes``
 rows of the core tracker, as the track node publishes them), updates the building model, re-runs
 (warm-started) as new windows arrive, and publishes a posterior summary close to the truth
 (separate processes). The window-by-window fallback on raw estimates (``input: estimates``) is
