@@ -179,7 +179,8 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
     assert sorted(p.name for p in marks.iterdir()) == ["bag.write", "identify.published", "store.commit"]
     assert code == 1 and "may be lost" in text and "all nodes stopped" in text, text  # nodes died: 1
     assert _clean(text), text
-    assert len(seen) >= 4 + 1 and _still_running(seen) == [], text  # the four and the restarted recorder at least
+    # the four, and the recorder again when its restart came before the stop (its back-off is 2 s)
+    assert len(seen) >= 3 + text.count("started recorder") and _still_running(seen) == [], text
     if text.count("started recorder") >= 2:  # the recorder ran again before the stop: it closed the bag
         assert open_source(tmp_path / "out").note == "", "the bag must be complete after the stop"
         first = read_pipeline_bag(tmp_path / "out")
