@@ -97,7 +97,7 @@ def test_continue_then_enough_later_with_more_noise_and_the_next_point(ros):
 def test_a_bag_replayed_through_the_live_graph_gives_the_offline_modes(ros, tmp_path):
     rec = simulate_roving(SPEC, RovingOptions(seed=2, dwell_s=40.0, n_points=3, fs=FS, tf_static=True))
     bag = write_roving_bag(rec, tmp_path / "roving_bag")
-    node = start_node(EXAMPLE, idle_flush_s=1.0)
+    node = start_node(EXAMPLE, idle_flush_s=5.0)
     robot = Robot(SPEC)
     try:
         robot.wait_for_node()
