@@ -42,6 +42,7 @@ DEPENDENCIES: dict[str, tuple[str, str | None]] = {
     "emcee": ("python3-emcee-pip", "emcee"),
     "dynesty": ("python3-dynesty-pip", "dynesty"),
     "arviz": ("python3-arviz-pip", "arviz"),
+    "arviz_stats": ("python3-arviz-stats-pip", "arviz-stats"),
     "threadpoolctl": ("python3-threadpoolctl-pip", "threadpoolctl"),
     "obspy": ("python3-obspy-pip", "obspy"),
     "dask": ("python3-dask-distributed-pip", "dask"),

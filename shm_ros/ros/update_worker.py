@@ -29,7 +29,7 @@ def init(structure: str) -> None:
 
 
 def _warm_up() -> None:
-    """Pay the chain diagnostics' one-off start (ArviZ's import and compiled kernels, about 1-10 s)
+    """Pay the chain diagnostics' one-off start (its imports, about 1 s)
     now, while the graph starts, rather than after the window that triggers the first run."""
     import numpy as np
 
