@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.stats import norm
+from scipy.special import ndtri  # the normal quantile
 
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import sensor_outputs
@@ -111,7 +111,7 @@ def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0:
     if len(events) < 2:
         raise ValueError("a cross-validated model error needs at least two calibration events")
     ids = events[0].channel_ids
-    z = float(norm.ppf(0.5 + cfg.level / 2))
+    z = float(ndtri(0.5 + cfg.level / 2))
     q: dict[str, list[np.ndarray]] = {c: [] for c in ids}
     folds: list[dict[str, Any]] = []
     pgas = [input_pga(ev, cfg) for ev in events]

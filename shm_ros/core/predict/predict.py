@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import norm
+from scipy.special import ndtri  # the normal quantile
 
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import Output, Quantity, drift_outputs, node_row, sensor_outputs
@@ -157,7 +157,7 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     mean = S1 / draws.n
     var = np.maximum(S2 / draws.n - mean ** 2, 0.0) + s0[:, None] + np.mean(rel2, axis=0)[:, None] * lms
     std = np.sqrt(var)
-    z = float(norm.ppf(0.5 + cfg.level / 2))
+    z = float(ndtri(0.5 + cfg.level / 2))
     q = (50 * (1 - cfg.level), 50 * (1 + cfg.level))
     strong = strong_motion(u[0])
 

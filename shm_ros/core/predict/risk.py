@@ -18,7 +18,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.stats import norm
+from scipy.special import ndtr  # the normal cdf
 
 from shm_ros.core.drift_limits import DriftLimits
 
@@ -29,7 +29,7 @@ def exceedance(top: np.ndarray, sigma: np.ndarray, limit: float) -> float:
     """P(|N(top, sigma^2)| > limit) averaged over draws."""
     s = np.maximum(np.asarray(sigma, float), 1e-300)
     t = np.asarray(top, float)
-    return float(np.mean(norm.sf((limit - t) / s) + norm.cdf((-limit - t) / s)))
+    return float(np.mean(ndtr(-(limit - t) / s) + ndtr((-limit - t) / s)))
 
 
 def event_risk(pred: EventPrediction, limits: DriftLimits | None = None,

@@ -6,7 +6,6 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 from shm_ros.core.models.base import AffineModel
 
@@ -38,6 +37,8 @@ def integrated_drift(upper: np.ndarray, lower: np.ndarray, fs: float, highpass_h
 
 
 def _highpass(x: np.ndarray, fs: float, hz: float = 0.2) -> np.ndarray:
+    from scipy.signal import butter, sosfiltfilt  # here: scipy.signal's import is ~1 s of a node's start
+
     return sosfiltfilt(butter(4, hz / (fs / 2), btype="high", output="sos"), x)
 
 
