@@ -21,8 +21,9 @@ from shm_ros.core.band import nominal_frequencies
 from shm_ros.core.delay import shift
 from shm_ros.core.identify import IdentifyConfig, identify_prepared
 from shm_ros.core.preprocess import Prepared, PreprocessConfig, decimate, preprocess
+from shm_ros.core.roving.carrier_mass import unloaded_frequency
 from shm_ros.core.roving.clock import estimate_clock_offset
-from shm_ros.core.roving.merge_post import GlobalMode, merge_post
+from shm_ros.core.roving.merge_post import GlobalMode, merge_post, pair_modes
 from shm_ros.core.roving.merge_pre import merge_pre
 from shm_ros.core.roving.offline import MergeMethod
 from shm_ros.core.roving.second_look import second_look
@@ -52,6 +53,7 @@ class RovingConfig:
     merge: str = MergeMethod.POST.value
     correct_clock: bool = True
     second_look: bool = True  # search a setup's diagram for merged modes it missed (second_look.py)
+    unload: bool = True  # frequencies at phi = 0 of the robot's point (carrier_mass.py), post merge only
     identify: IdentifyConfig = field(default_factory=lambda: IdentifyConfig(method="ssi-cov", uncertainty=False))
 
 
@@ -120,6 +122,8 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
         if cfg.second_look and second_look(results, modes, refs):
             modes = merge_post([r.estimate for r in results], refs)
             notes.append("a second look at the setups' diagrams found modes the automatic picking had missed")
+        if cfg.unload:
+            notes += _unload(modes, [r.estimate for r in results], refs, cut)
     else:
         band = results[0].band
         assert band is not None
@@ -128,3 +132,19 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
                                 replace(icfg, block_rows=band.block_rows))
         notes += more
     return RovingResult(cut, modes, offsets, refs, notes)
+
+
+def _unload(modes: list[GlobalMode], estimates: list, refs: list[str], cut: SetupCut) -> list[str]:
+    """Each merged mode's frequency without the robot (carrier_mass.py): the setups' frequencies
+    against the squared merged component at the robot's point (the setup's roving points)."""
+    moved = 0
+    for g, group in zip(modes, pair_modes(estimates, refs), strict=True):
+        f = [estimates[k].modes[i].frequency_hz for k, i in group.items()]
+        phi2 = [sum(g.shape.get(p, np.nan) ** 2 for p in cut.setups[k].points.values()) for k in group]
+        fit = unloaded_frequency(f, phi2)
+        if fit is not None:
+            g.notes.append(f"frequency without the robot {fit[0]:.4g} Hz (setups' mean {np.mean(f):.4g} Hz): "
+                           "the setups' frequencies fall with the squared component at the robot's point")
+            g.frequency_hz = fit[0]
+            moved += 1
+    return [f"{moved} frequencies extrapolated to the robot standing on a node (no added mass)"] if moved else []
