@@ -37,6 +37,7 @@ from shm_ros.core.roving.setups import (
     setup_channels,
 )
 from shm_ros.core.roving.transforms import TransformBuffer
+from shm_ros.core.roving.transmissibility import apply_transmissibility
 from shm_ros.core.structure import StructureSpec
 from shm_ros.errors import NoWindowsError
 
@@ -53,6 +54,8 @@ class RovingConfig:
     merge: str = MergeMethod.POST.value
     correct_clock: bool = True
     second_look: bool = True  # search a setup's diagram for merged modes it missed (second_look.py)
+    # roving components from the references' transmissibility on the merged reference shapes
+    transmissibility: bool = True
     unload: bool = True  # frequencies at phi = 0 of the robot's point (carrier_mass.py), post merge only
     identify: IdentifyConfig = field(default_factory=lambda: IdentifyConfig(method="ssi-cov", uncertainty=False))
 
@@ -122,6 +125,10 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
         if cfg.second_look and second_look(results, modes, refs):
             modes = merge_post([r.estimate for r in results], refs)
             notes.append("a second look at the setups' diagrams found modes the automatic picking had missed")
+        if cfg.transmissibility:
+            apply_transmissibility(modes, [p.data for p in preps], [p.sample_rate_hz for p in preps],
+                                   [r.estimate for r in results], refs)
+            notes.append("roving components from the references' transmissibility on the merged reference shapes")
         if cfg.unload:
             notes += _unload(modes, [r.estimate for r in results], refs, cut)
     else:
