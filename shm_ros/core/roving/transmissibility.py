@@ -27,11 +27,13 @@ import scipy.signal as sig
 
 from shm_ros.core.roving.merge_post import GlobalMode
 from shm_ros.core.types import ModalEstimate
+from shm_ros.errors import InputError
 
 __all__ = ["roving_components", "apply_transmissibility"]
 
 SEGMENT_S = 8.0
 WIDTH = 1.0  # half-band in half-power half-widths (zeta f)
+MIN_SEGMENT = 16  # samples
 OWN_TOL = 0.01  # a setup's own mode within this of the merged frequency gives that setup's frequency
 
 
@@ -40,15 +42,17 @@ def roving_components(y: np.ndarray, fs: float, n_ref: int, frequency_hz: float,
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Components (and standard errors) of the channels ``y[:, n_ref:]`` for the mode whose
     reference components (``y[:, :n_ref]``) are ``ref_shape`` (see module doc)."""
-    n = int(min(segment_s * fs, y.shape[0] // 4))
+    n = int(min(segment_s * fs, y.shape[0] // 4))  # at least 4 segments
+    nan = np.full(y.shape[1] - n_ref, np.nan)
+    if n < MIN_SEGMENT:
+        return nan, nan
     f, _, x = sig.stft(y.T, fs=fs, window="hann", nperseg=n, noverlap=n // 2, detrend="constant",
                        boundary=None, padded=False)  # (channels, bins, segments)
     band = np.abs(f - frequency_hz) <= width * max(damping, 1e-3) * frequency_hz + 0.5 * fs / n
     xr = x[:n_ref, band, :].reshape(n_ref, -1)
     xp = x[n_ref:, band, :].reshape(y.shape[1] - n_ref, -1)
     m = xr.shape[1]
-    if m <= n_ref:
-        nan = np.full(y.shape[1] - n_ref, np.nan)
+    if m <= 2 * n_ref:
         return nan, nan
     srr = xr @ xr.conj().T
     h = np.linalg.solve(srr.T, (xp @ xr.conj().T).T).T  # (roving, refs): X_p X_r^H S_rr^-1
@@ -68,20 +72,20 @@ def apply_transmissibility(modes: Sequence[GlobalMode], data: Sequence[np.ndarra
     r = len(references)
     for g in modes:
         ref = np.array([g.shape[name] for name in references])
-        ref_std = {name: g.shape_std.get(name, np.nan) for name in references}
-        shape = {name: float(v) for name, v in zip(references, ref, strict=True)}
-        std = dict(ref_std)
+        shape, std = dict(g.shape), dict(g.shape_std)  # kept where a setup is too short for spectra
         for y, rate, est in zip(data, fs, estimates, strict=True):
             if list(est.sensor_ids[:r]) != list(references):
-                raise ValueError("a setup's channels must start with the references")
+                raise InputError(f"a setup's channels {est.sensor_ids} must start with the references {references}")
             own = [m.frequency_hz for m in est.modes if abs(m.frequency_hz / g.frequency_hz - 1) <= OWN_TOL]
             f0 = min(own, key=lambda f: abs(f - g.frequency_hz)) if own else g.frequency_hz
             val, err = roving_components(y, rate, r, f0, g.damping_ratio, ref, segment_s, width)
             for name, v, e in zip(est.sensor_ids[r:], val, err, strict=True):
-                shape[name], std[name] = float(v), float(e)
-        top = max(shape.values(), key=abs)
+                if np.isfinite(v):
+                    shape[name], std[name] = float(v), float(e)
+        top = max((v for v in shape.values() if np.isfinite(v)), key=abs)
         g.shape = {k: v / top for k, v in shape.items()}
         g.shape_std = {k: v / abs(top) for k, v in std.items()}
         if g.missing_setups:
+            g.notes = [n.replace("; no shape at the points only those setups measured", "") for n in g.notes]
             g.notes.append("the roving components at every setup's points come from the references' "
                            "transmissibility, those of the setups that did not find the mode included")
