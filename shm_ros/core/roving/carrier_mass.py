@@ -5,9 +5,10 @@ every mode it stands on: to first order ``f_k = f_0 (1 - m phi(x_k)^2 / (2 M))``
 at the robot's point ``x_k`` in setup ``k`` and ``M`` the modal mass. The merged shape gives
 ``phi(x_k)`` (up to scale), so over the setups that found the mode the frequency is a straight line
 in ``phi(x_k)^2``: a least-squares fit ``f_k = f_0 - b phi(x_k)^2`` gives the unloaded ``f_0`` at
-``phi = 0`` without knowing ``m`` or ``M``. A mass only lowers a frequency, so a slope ``b <= 0`` (the
-scatter, not the robot) keeps the mean; so do fewer than ``min_setups`` setups or squared
-components spanning less than ``min_span`` (of the largest, 1).
+``phi = 0`` without knowing ``m`` or ``M``. The extrapolation is used only where the fall is seen: a
+slope ``b`` below ``min_t`` standard errors (a mass only lowers a frequency; a slope lost in the
+setups' scatter would only add that scatter), fewer than ``min_setups`` setups or squared components
+spanning less than ``min_span`` (of the largest, 1) keep the setups' mean.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ __all__ = ["unloaded_frequency"]
 
 
 def unloaded_frequency(frequencies_hz: Sequence[float], phi2: Sequence[float], min_setups: int = 4,
-                       min_span: float = 0.25) -> tuple[float, float] | None:
+                       min_span: float = 0.25, min_t: float = 2.0) -> tuple[float, float] | None:
     """``(f_0, b)`` of the fit in the module doc (``phi2`` on the merged shape's scale, max
     |component| = 1), or None when the data cannot carry it or the slope is not a fall."""
     f = np.asarray(frequencies_hz, dtype=float)
@@ -31,6 +32,9 @@ def unloaded_frequency(frequencies_hz: Sequence[float], phi2: Sequence[float], m
         return None
     design = np.column_stack([np.ones_like(x), -x])
     (f0, b), *_ = np.linalg.lstsq(design, f, rcond=None)
-    if b <= 0:
+    resid = f - design @ np.array([f0, b])
+    s2 = float(resid @ resid) / (f.size - 2)
+    se_b = np.sqrt(s2 * np.linalg.inv(design.T @ design)[1, 1])
+    if b <= min_t * se_b:
         return None
     return float(f0), float(b)
