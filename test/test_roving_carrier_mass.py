@@ -25,5 +25,6 @@ def test_a_rise_with_the_robot_or_too_little_spread_keeps_the_mean():
     assert unloaded_frequency(6.0 * (1 + 0.001 * phi2), phi2) is None  # a mass cannot raise it
     assert unloaded_frequency([6.0, 5.99, 5.98, 5.97], [0.8, 0.85, 0.9, 0.95]) is None  # span < 0.25
     assert unloaded_frequency([6.0, 5.99, 5.98], [0.0, 0.5, 1.0]) is None  # fewer than 4 setups
-    # a fall lost in the setups' scatter (slope below two standard errors)
-    assert unloaded_frequency([6.0, 5.99, 6.01, 5.99, 5.995, 6.0], [0.0, 0.2, 0.4, 0.6, 0.8, 1.0]) is None
+    # a fall lost in the setups' scatter, with a gate at two standard errors
+    scattered = ([6.0, 5.99, 6.01, 5.99, 5.995, 6.0], [0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    assert unloaded_frequency(*scattered, min_t=2.0) is None and unloaded_frequency(*scattered) is not None

@@ -5,10 +5,12 @@ every mode it stands on: to first order ``f_k = f_0 (1 - m phi(x_k)^2 / (2 M))``
 at the robot's point ``x_k`` in setup ``k`` and ``M`` the modal mass. The merged shape gives
 ``phi(x_k)`` (up to scale), so over the setups that found the mode the frequency is a straight line
 in ``phi(x_k)^2``: a least-squares fit ``f_k = f_0 - b phi(x_k)^2`` gives the unloaded ``f_0`` at
-``phi = 0`` without knowing ``m`` or ``M``. The extrapolation is used only where the fall is seen: a
-slope ``b`` below ``min_t`` standard errors (a mass only lowers a frequency; a slope lost in the
-setups' scatter would only add that scatter), fewer than ``min_setups`` setups or squared components
-spanning less than ``min_span`` (of the largest, 1) keep the setups' mean.
+``phi = 0`` without knowing ``m`` or ``M``. A mass only lowers a frequency, so a slope ``b <= 0`` (the
+scatter, not the robot) keeps the setups' mean; so do fewer than ``min_setups`` setups, squared
+components spanning less than ``min_span`` (of the largest, 1) and, if asked, a slope below
+``min_t`` standard errors. The default asks nothing more than a fall: on the girder-roving scenario
+at full size (12 setups of 120 s) a two-standard-error gate left mode 2 of seed 0 at the setups'
+mean, -0.50 % (-0.16 % with the fit), while the setups' frequencies are biased low by the robot.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ __all__ = ["unloaded_frequency"]
 
 
 def unloaded_frequency(frequencies_hz: Sequence[float], phi2: Sequence[float], min_setups: int = 4,
-                       min_span: float = 0.25, min_t: float = 2.0) -> tuple[float, float] | None:
+                       min_span: float = 0.25, min_t: float = 0.0) -> tuple[float, float] | None:
     """``(f_0, b)`` of the fit in the module doc (``phi2`` on the merged shape's scale, max
     |component| = 1), or None when the data cannot carry it or the slope is not a fall."""
     f = np.asarray(frequencies_hz, dtype=float)
@@ -35,6 +37,6 @@ def unloaded_frequency(frequencies_hz: Sequence[float], phi2: Sequence[float], m
     resid = f - design @ np.array([f0, b])
     s2 = float(resid @ resid) / (f.size - 2)
     se_b = np.sqrt(s2 * np.linalg.inv(design.T @ design)[1, 1])
-    if b <= min_t * se_b:
+    if b <= 0 or b <= min_t * se_b:
         return None
     return float(f0), float(b)
