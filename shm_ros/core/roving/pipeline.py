@@ -7,7 +7,10 @@ setups are cut where every roving sensor dwells (:func:`~shm_ros.core.roving.set
 each setup the roving sensors' clock offset against the references is estimated
 (:func:`~shm_ros.core.roving.clock.estimate_clock_offset`) and corrected; each setup is identified
 (band of interest and block rows from the nominal model, SSI-cov with the references as reference
-channels) and the setups merged (``post``, the default, or ``pre``).
+channels) and the setups merged (``post``, the default, or ``pre``). After the post merge each
+mode's roving components come from the references' transmissibility in every setup
+(:mod:`~shm_ros.core.roving.transmissibility`) and its frequency is extrapolated to the robot off the
+structure (:mod:`~shm_ros.core.roving.carrier_mass`).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from shm_ros.core.roving.setups import (
 from shm_ros.core.roving.transforms import TransformBuffer
 from shm_ros.core.roving.transmissibility import apply_transmissibility
 from shm_ros.core.structure import StructureSpec
+from shm_ros.core.types import ModalEstimate
 from shm_ros.errors import NoWindowsError
 
 __all__ = ["RovingConfig", "RovingResult", "prepare_setup", "roving_modes"]
@@ -141,7 +145,7 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
     return RovingResult(cut, modes, offsets, refs, notes)
 
 
-def _unload(modes: list[GlobalMode], estimates: list, refs: list[str], cut: SetupCut) -> list[str]:
+def _unload(modes: list[GlobalMode], estimates: list[ModalEstimate], refs: list[str], cut: SetupCut) -> list[str]:
     """Each merged mode's frequency without the robot (carrier_mass.py): the setups' frequencies
     against the squared merged component at the robot's point (the setup's roving points)."""
     moved = 0
