@@ -53,3 +53,15 @@ def run(seed: int, dwell_s: float, n_points: int, merge: str = "post", fs: float
         macs.append(float(mac(g.vector(have), rec.truth.shapes[[keys.index(p) for p in have], j])))
         cover.append(len(have) / len(visited))
     return Outcome(rec, res, errs, macs, cover)
+
+
+if __name__ == "__main__":  # per-seed figures: python test/roving_acceptance.py [full] (docs/roving.md)
+    import sys
+
+    full = sys.argv[1:] == ["full"]
+    size = dict(dwell_s=120.0, n_points=12, fs=100.0) if full else dict(dwell_s=60.0, n_points=10, fs=50.0)
+    for seed in range(10 if full else 3):
+        out = run(seed, **size)
+        print(f"| {seed} | {', '.join(f'{e:+.2f}' for e in out.freq_err_pct)} | "
+              f"{', '.join(f'{m:.4f}' for m in out.macs)} | {', '.join(f'{c:.2f}' for c in out.coverage)} | "
+              f"{1e3 * out.res.clock_offset_s:.2f} ms |", flush=True)

@@ -39,10 +39,6 @@ def test_girder_roving_acceptance(seed):
     assert abs(res.clock_offset_s - rec.clock_offset_s) < 0.002, res.clock_offset_s
     # vertical modes 1-3 within 0.5 % of the truth without the robot
     assert np.all(np.abs(out.freq_err_pct) < 0.5), out.freq_err_pct
-    # modes 1 and 3 over every visited point and reference (the references placed from the nominal
-    # model so that mode 3 is seen by both; the setups' edges guarded against the robot's ride)
-    assert out.coverage[0] == out.coverage[2] == 1.0 and out.macs[0] >= 0.98 and out.macs[2] >= 0.98, \
-        (out.coverage, out.macs)
-    # mode 2 over the points where it was merged: a guard below the acceptance's 0.98, which it
-    # misses in some seeds (docs/roving.md)
-    assert out.macs[1] >= 0.97, (out.coverage, out.macs)
+    # modes 1-3 over every visited point and reference with MAC >= 0.98 (the roving components from
+    # the references' transmissibility on the merged reference shapes: docs/roving.md)
+    assert all(c == 1.0 for c in out.coverage) and all(m >= 0.98 for m in out.macs), (out.coverage, out.macs)

@@ -7,7 +7,10 @@ setups are cut where every roving sensor dwells (:func:`~shm_ros.core.roving.set
 each setup the roving sensors' clock offset against the references is estimated
 (:func:`~shm_ros.core.roving.clock.estimate_clock_offset`) and corrected; each setup is identified
 (band of interest and block rows from the nominal model, SSI-cov with the references as reference
-channels) and the setups merged (``post``, the default, or ``pre``).
+channels) and the setups merged (``post``, the default, or ``pre``). After the post merge each
+mode's roving components come from the references' transmissibility in every setup
+(:mod:`~shm_ros.core.roving.transmissibility`) and its frequency is extrapolated to the robot off the
+structure (:mod:`~shm_ros.core.roving.carrier_mass`).
 """
 
 from __future__ import annotations
@@ -21,8 +24,9 @@ from shm_ros.core.band import nominal_frequencies
 from shm_ros.core.delay import shift
 from shm_ros.core.identify import IdentifyConfig, identify_prepared
 from shm_ros.core.preprocess import Prepared, PreprocessConfig, decimate, preprocess
+from shm_ros.core.roving.carrier_mass import unloaded_frequency
 from shm_ros.core.roving.clock import estimate_clock_offset
-from shm_ros.core.roving.merge_post import GlobalMode, merge_post
+from shm_ros.core.roving.merge_post import GlobalMode, merge_post, pair_modes
 from shm_ros.core.roving.merge_pre import merge_pre
 from shm_ros.core.roving.offline import MergeMethod
 from shm_ros.core.roving.second_look import second_look
@@ -36,7 +40,9 @@ from shm_ros.core.roving.setups import (
     setup_channels,
 )
 from shm_ros.core.roving.transforms import TransformBuffer
+from shm_ros.core.roving.transmissibility import apply_transmissibility
 from shm_ros.core.structure import StructureSpec
+from shm_ros.core.types import ModalEstimate
 from shm_ros.errors import NoWindowsError
 
 __all__ = ["RovingConfig", "RovingResult", "prepare_setup", "roving_modes"]
@@ -52,6 +58,9 @@ class RovingConfig:
     merge: str = MergeMethod.POST.value
     correct_clock: bool = True
     second_look: bool = True  # search a setup's diagram for merged modes it missed (second_look.py)
+    # roving components from the references' transmissibility on the merged reference shapes
+    transmissibility: bool = True
+    unload: bool = True  # frequencies at phi = 0 of the robot's point (carrier_mass.py), post merge only
     identify: IdentifyConfig = field(default_factory=lambda: IdentifyConfig(method="ssi-cov", uncertainty=False))
 
 
@@ -120,6 +129,12 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
         if cfg.second_look and second_look(results, modes, refs):
             modes = merge_post([r.estimate for r in results], refs)
             notes.append("a second look at the setups' diagrams found modes the automatic picking had missed")
+        if cfg.transmissibility:
+            apply_transmissibility(modes, [p.data for p in preps], [p.sample_rate_hz for p in preps],
+                                   [r.estimate for r in results], refs)
+            notes.append("roving components from the references' transmissibility on the merged reference shapes")
+        if cfg.unload:
+            notes += _unload(modes, [r.estimate for r in results], refs, cut)
     else:
         band = results[0].band
         assert band is not None
@@ -128,3 +143,19 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
                                 replace(icfg, block_rows=band.block_rows))
         notes += more
     return RovingResult(cut, modes, offsets, refs, notes)
+
+
+def _unload(modes: list[GlobalMode], estimates: list[ModalEstimate], refs: list[str], cut: SetupCut) -> list[str]:
+    """Each merged mode's frequency without the robot (carrier_mass.py): the setups' frequencies
+    against the squared merged component at the robot's point (the setup's roving points)."""
+    moved = 0
+    for g, group in zip(modes, pair_modes(estimates, refs), strict=True):
+        f = [estimates[k].modes[i].frequency_hz for k, i in group.items()]
+        phi2 = [sum(g.shape.get(p, np.nan) ** 2 for p in cut.setups[k].points.values()) for k in group]
+        fit = unloaded_frequency(f, phi2)
+        if fit is not None:
+            g.notes.append(f"frequency without the robot {fit[0]:.4g} Hz (setups' mean {np.mean(f):.4g} Hz): "
+                           "the setups' frequencies fall with the squared component at the robot's point")
+            g.frequency_hz = fit[0]
+            moved += 1
+    return [f"{moved} frequencies extrapolated to the robot standing on a node (no added mass)"] if moved else []
