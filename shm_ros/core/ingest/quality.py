@@ -95,7 +95,7 @@ def spikes(x: np.ndarray, finite: np.ndarray, k: float, rate: float) -> np.ndarr
         return np.zeros(n, bool)
     y = np.where(finite, x, np.median(x[finite]) if finite.any() else 0.0)
     padded = np.concatenate((y[:1], y[:1], y, y[-1:], y[-1:]))
-    med5 = np.partition(np.lib.stride_tricks.sliding_window_view(padded, 5), 2, axis=1)[:, 2]
+    med5 = _median5(padded, n)
     a = np.abs(y - med5)
     d = np.diff(y)
     sigma = 1.4826 * float(np.median(np.abs(d - np.median(d))))
@@ -118,3 +118,15 @@ def spikes(x: np.ndarray, finite: np.ndarray, k: float, rate: float) -> np.ndarr
     nb[1:] |= big[:-1]
     nb[:-1] |= big[1:]
     return big & ~nb & finite
+
+
+def _median5(y: np.ndarray, n: int) -> np.ndarray:
+    """Element-wise median of ``y[j:j + n]`` over j = 0..4 (finite values): a seven-exchange
+    selection network, in place (exact; several times faster than partitioning a sliding window)."""
+    p = [y[j:j + n].copy() for j in range(5)]
+    t = np.empty(n)
+    for i, j in ((0, 1), (3, 4), (0, 3), (1, 4), (1, 2), (2, 3), (1, 2)):
+        np.minimum(p[i], p[j], out=t)
+        np.maximum(p[i], p[j], out=p[j])
+        p[i], t = t, p[i]
+    return p[2]
