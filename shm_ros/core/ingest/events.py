@@ -35,11 +35,19 @@ def sta_lta(x: np.ndarray, rate: float, sta_s: float, lta_s: float) -> np.ndarra
     first = min(nl, 2 * ns)
     if n < first:
         return out
-    cs = np.vstack((np.zeros((1, x.shape[1])), np.cumsum(x * x, axis=0)))
+    cs = np.empty((n + 1, x.shape[1]))
+    cs[0] = 0.0
+    np.cumsum(x * x, axis=0, out=cs[1:])
+    # rows idx = first..n of cs, less the rows idx - ns and max(idx - nl, 0): slices of cs
     idx = np.arange(first, n + 1)
     lo = np.maximum(idx - nl, 0)
-    sta = (cs[idx] - cs[idx - ns]) / ns
-    lta = (cs[idx] - cs[lo]) / (idx - lo)[:, None]
+    top = cs[first:]
+    sta = (top - cs[first - ns: n + 1 - ns]) / ns
+    below = np.zeros_like(top)
+    j0 = max(first, nl)
+    if j0 <= n:
+        below[j0 - first:] = cs[j0 - nl: n + 1 - nl]
+    lta = (top - below) / (idx - lo)[:, None]
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(lta > 0, sta / lta, 0.0)
     out[first - 1:] = r
