@@ -101,6 +101,9 @@ def snap(t: np.ndarray, v: np.ndarray, seq: np.ndarray, grid: Grid, k0: int, tol
     k += grid.anchor_k
     snappable = resid < tolerance_ns
     n_far = int((~snappable).sum())
+    if not n_far and bool(np.all(k[1:] > k[:-1])):  # one stamp per grid point, in order (no sort)
+        return Snap(rows=k - k0, placed=np.arange(k.size), dup_rows=np.empty(0, np.int64), n_dup_differ=0,
+                    dup_t0=None, n_collide=0, collide_t0=None, n_far=0, far_t0=None)
     order = np.lexsort((seq, resid, k))
     order = order[snappable[order]]
     ks = k[order]
