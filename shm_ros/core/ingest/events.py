@@ -42,15 +42,18 @@ def sta_lta(x: np.ndarray, rate: float, sta_s: float, lta_s: float) -> np.ndarra
     idx = np.arange(first, n + 1)
     lo = np.maximum(idx - nl, 0)
     top = cs[first:]
-    sta = (top - cs[first - ns: n + 1 - ns]) / ns
-    below = np.zeros_like(top)
+    sta = out[first - 1:]  # computed in place (no temporaries of the window's size)
+    np.subtract(top, cs[first - ns: n + 1 - ns], out=sta)
+    sta /= ns
+    lta = top.copy()  # less cs[0] = 0 while idx < nl
     j0 = max(first, nl)
     if j0 <= n:
-        below[j0 - first:] = cs[j0 - nl: n + 1 - nl]
-    lta = (top - below) / (idx - lo)[:, None]
+        lta[j0 - first:] -= cs[j0 - nl: n + 1 - nl]
+    lta /= (idx - lo)[:, None]
+    positive = lta > 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.where(lta > 0, sta / lta, 0.0)
-    out[first - 1:] = r
+        sta /= lta
+    sta[~positive] = 0.0
     return out
 
 
