@@ -149,6 +149,8 @@ class _BagFeeder:
             what, sid = kind
             if what == "imu":
                 self._feed_imu(sid, run)
+            elif what == "block":
+                self._feed_blocks(run)
             else:
                 for i in range(len(run)):
                     self._feed_decoded(run.topic, run.msgtype, what, sid, run.data(i))
@@ -175,22 +177,50 @@ class _BagFeeder:
                                    f"received at {int(run.log_ns[i])} ns: {why}")
         self.core.add_accel(sid, out.stamps_ns, out.xyz, field="linear_acceleration")
 
-    def _feed_decoded(self, topic: str, msgtype: str, what: str, sid: str, data: bytes) -> None:
+    def _decode(self, topic: str, msgtype: str, data: bytes) -> tuple[Any, int] | None:
+        """A message and its header stamp (ns); None (reported) when it cannot be decoded."""
         from rosbags.serde import SerdeError
 
         try:
             m: Any = self.ts.deserialize_cdr(data, msgtype)
         except SerdeError as exc:  # one malformed message (rosbags wraps every parse error): go on
             self.core.report_error(f"{self.path}:{topic}", f"cannot decode {msgtype}: {exc}")
-            return
+            return None
         st = m.header.stamp
-        t_ns = int(st.sec) * 1_000_000_000 + int(st.nanosec)
-        if what == "block":
+        return m, int(st.sec) * 1_000_000_000 + int(st.nanosec)
+
+    def _feed_blocks(self, run: TopicMessages) -> None:
+        """A run of AccelBlocks: consecutive blocks with one rate, channel list and units go to the
+        core together (:meth:`IngestCore.add_blocks`)."""
+        topic = run.topic.lstrip("/")
+        key: tuple | None = None
+        stamps: list[int] = []
+        samples: list[np.ndarray] = []
+        for i in range(len(run)):
+            got = self._decode(run.topic, run.msgtype, run.data(i))
+            if got is None:
+                continue
+            m, t_ns = got
             if m.sample_rate_hz > 0:
                 dur = int(len(m.samples) / max(1, len(m.channel_names)) / m.sample_rate_hz * 1e9)
                 self.margin_ns = max(self.margin_ns, dur + 1_000_000_000)
             self._block_channels.update(m.channel_names)
-            self.core.add_block(t_ns, m.sample_rate_hz, list(m.channel_names), np.asarray(m.samples),
-                                m.units, topic=topic.lstrip("/"))
-        elif what == "temperature":
+            k = (m.sample_rate_hz, tuple(m.channel_names), m.units)
+            if k != key and stamps:
+                assert key is not None
+                self.core.add_blocks(stamps, key[0], key[1], samples, key[2], topic=topic)
+                stamps, samples = [], []
+            key = k
+            stamps.append(t_ns)
+            samples.append(np.asarray(m.samples))
+        if stamps:
+            assert key is not None
+            self.core.add_blocks(stamps, key[0], key[1], samples, key[2], topic=topic)
+
+    def _feed_decoded(self, topic: str, msgtype: str, what: str, sid: str, data: bytes) -> None:
+        got = self._decode(topic, msgtype, data)
+        if got is None:
+            return
+        m, t_ns = got
+        if what == "temperature":
             self.core.add_temperature(sid, t_ns, m.temperature)

@@ -253,6 +253,55 @@ class IngestCore:
                              steady=steady, plausible=not flagged[j])
         self._after_add()
 
+    def add_blocks(self, stamps_ns: Sequence[int], sample_rate_hz: float, channel_names: Sequence[str],
+                   samples: Sequence[np.ndarray], units: str = "m/s^2", topic: str = "accel_block") -> None:
+        """Blocks of one topic with one rate, channel list and units, in order (a recorded run):
+        the same windows and diagnostics as :meth:`add_block` on each in turn. Each stretch of
+        blocks that start exactly where the one before ends (a whole number of ns per sample) is
+        fed as one block when every channel is known and no value is implausible."""
+        names = [str(c) for c in channel_names]
+        period = self._block_period(sample_rate_hz, names, units)
+        i, n = 0, len(samples)
+        while i < n:
+            j, t_next = i, int(stamps_ns[i])
+            xs: list[np.ndarray] = []
+            while period and j < n and int(stamps_ns[j]) == t_next:
+                x = np.asarray(samples[j], dtype=np.float64)
+                if x.ndim != 1 or x.size == 0 or x.size % len(names):
+                    break
+                xs.append(x)
+                t_next += x.size // len(names) * period
+                j += 1
+            merged = self._merged(xs, names, units, int(stamps_ns[i]), float(sample_rate_hz)) if len(xs) > 1 else None
+            if merged is None:
+                j = i + 1
+                self.add_block(stamps_ns[i], sample_rate_hz, names, samples[i], units, topic)
+            else:
+                self.add_block(int(stamps_ns[i]), sample_rate_hz, names, merged, units, topic)
+            i = j
+
+    def _block_period(self, sample_rate_hz: float, names: list[str], units: str) -> int:
+        """The sample period (ns) of blocks that :meth:`add_blocks` may join; 0: feed one by one."""
+        rate = float(sample_rate_hz)
+        fixed = self.config.sample_rate_hz
+        if not names or any(c not in self._block_routes for c in names) or unit_factor(units or "") is None:
+            return 0
+        if not (math.isfinite(rate) and MIN_RATE_HZ <= rate <= MAX_RATE_HZ) or not (1e9 / rate).is_integer() or (
+                fixed is not None and abs(rate - fixed) > 1e-6 * fixed):
+            return 0
+        return int(1e9 / rate)
+
+    def _merged(self, xs: list[np.ndarray], names: list[str], units: str, t0: int, rate: float) -> np.ndarray | None:
+        """Contiguous blocks' samples as one (n, c) array; None when joining them could change a
+        diagnostic (an implausible value: one diagnostic per block; a rate the burst refuses)."""
+        if not self._block_rates.accepts(t0, rate, self._newest_stamp(), self.config.burst_pause_s * 1e9):
+            return None
+        merged = np.concatenate(xs).reshape(-1, len(names))
+        factor = abs(unit_factor(units or "") or 1.0)  # (the same test as add_block's)
+        if np.any((np.abs(merged) * factor > self.config.implausible_m_s2) & np.isfinite(merged)):
+            return None
+        return merged
+
     def add_temperature(self, sensor_id: str, stamp_ns: int, value_c: float, source: str | None = None) -> None:
         """One temperature sample (degrees C); a window's temperature is the mean of those inside it.
         ``source`` names it in diagnostics (default ``temperature/<sensor_id>``)."""

@@ -35,14 +35,25 @@ def sta_lta(x: np.ndarray, rate: float, sta_s: float, lta_s: float) -> np.ndarra
     first = min(nl, 2 * ns)
     if n < first:
         return out
-    cs = np.vstack((np.zeros((1, x.shape[1])), np.cumsum(x * x, axis=0)))
+    cs = np.empty((n + 1, x.shape[1]))
+    cs[0] = 0.0
+    np.cumsum(x * x, axis=0, out=cs[1:])
+    # rows idx = first..n of cs, less the rows idx - ns and max(idx - nl, 0): slices of cs
     idx = np.arange(first, n + 1)
     lo = np.maximum(idx - nl, 0)
-    sta = (cs[idx] - cs[idx - ns]) / ns
-    lta = (cs[idx] - cs[lo]) / (idx - lo)[:, None]
+    top = cs[first:]
+    sta = out[first - 1:]  # computed in place (no temporaries of the window's size)
+    np.subtract(top, cs[first - ns: n + 1 - ns], out=sta)
+    sta /= ns
+    lta = top.copy()  # less cs[0] = 0 while idx < nl
+    j0 = max(first, nl)
+    if j0 <= n:
+        lta[j0 - first:] -= cs[j0 - nl: n + 1 - nl]
+    lta /= (idx - lo)[:, None]
+    positive = lta > 0
     with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.where(lta > 0, sta / lta, 0.0)
-    out[first - 1:] = r
+        sta /= lta
+    sta[~positive] = 0.0
     return out
 
 
@@ -54,9 +65,13 @@ def detect_event(vals: np.ndarray, status: list[str], rate: float, detector: Eve
     if not usable:
         return False, 0.0
     x = vals[:, usable]
-    x = np.where(np.isfinite(x), x, np.nan)
-    x = x - np.nanmedian(x, axis=0)
-    x = np.nan_to_num(x, nan=0.0)
+    finite = np.isfinite(x)
+    if finite.all():  # (the common case: np.median is much faster than np.nanmedian along an axis)
+        x = x - np.median(x, axis=0)
+    else:
+        x = np.where(finite, x, np.nan)
+        x = x - np.nanmedian(x, axis=0)
+        x = np.nan_to_num(x, nan=0.0)
     pga = float(np.abs(x).max()) if x.size else 0.0
     trig_pga = pga >= pga_threshold
     trig_sl = False

@@ -89,6 +89,8 @@ class Snap:
     collide_t0: int | None
     n_far: int  # samples farther than the tolerance from every grid point
     far_t0: int | None
+    # every input placed, in order, on consecutive rows: those rows (``rows`` as a slice)
+    run: slice | None = None
 
 
 def snap(t: np.ndarray, v: np.ndarray, seq: np.ndarray, grid: Grid, k0: int, tolerance_ns: float) -> Snap:
@@ -101,6 +103,11 @@ def snap(t: np.ndarray, v: np.ndarray, seq: np.ndarray, grid: Grid, k0: int, tol
     k += grid.anchor_k
     snappable = resid < tolerance_ns
     n_far = int((~snappable).sum())
+    if not n_far and bool(np.all(k[1:] > k[:-1])):  # one stamp per grid point, in order (no sort)
+        rows = k - k0
+        run = slice(int(rows[0]), int(rows[-1]) + 1) if rows.size and rows[-1] - rows[0] == rows.size - 1 else None
+        return Snap(rows=rows, placed=np.arange(k.size), dup_rows=np.empty(0, np.int64), n_dup_differ=0,
+                    dup_t0=None, n_collide=0, collide_t0=None, n_far=0, far_t0=None, run=run)
     order = np.lexsort((seq, resid, k))
     order = order[snappable[order]]
     ks = k[order]

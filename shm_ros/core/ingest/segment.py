@@ -91,7 +91,7 @@ class Bursts:
             span_end = grid.edge(k0 + W)
             lim = min(span_end, fin)
             lo = span_start if self.scan_ns is None else max(span_start, self.scan_ns)
-            u = np.sort(np.concatenate([b.between(lo, lim) for b in buffers]))  # duplicates are harmless
+            u = _union([b.between(lo, lim) for b in buffers])
             if u.size:
                 prev = self.scan_last
                 seq_u = u if prev is None else np.concatenate(([prev], u))
@@ -141,3 +141,17 @@ class Bursts:
         if waiting:  # more stamps of the new burst tell its rate
             return max(first, fin) + min(self.check_interval_ns, 1_000_000_000)
         return first  # a burst starts there: open it once the stream is final past it
+
+
+def _union(parts: list[np.ndarray]) -> np.ndarray:
+    """The channels' stamps together, sorted (duplicates are harmless). Channels fed by one DAQ
+    block share their stamps: an array equal to the one before it is left out (one comparison
+    instead of sorting it in), and the merge of the ascending runs is a stable (run-aware) sort."""
+    keep: list[np.ndarray] = []
+    for p in parts:
+        if not (keep and np.array_equal(p, keep[-1])):
+            keep.append(p)
+    if len(keep) == 1:
+        u = keep[0]
+        return u if u.size < 2 or bool(np.all(u[1:] >= u[:-1])) else np.sort(u)
+    return np.sort(np.concatenate(keep) if keep else np.empty(0, np.int64), kind="stable")

@@ -77,9 +77,14 @@ def place_span(buffers: Sequence[ChannelBuffer], grid: Grid, k0: int, k1: int, r
             if t.size == 0:
                 continue
         s = snap(t, v, seq, grid, k0, tol)
-        span.vals[s.rows, c] = v[s.placed]
-        span.flags[s.rows, c] = f[s.placed]
-        span.filled[s.rows, c] = True
+        if s.run is not None:  # (the usual case: consecutive rows, every sample in order)
+            span.vals[s.run, c] = v
+            span.flags[s.run, c] = f
+            span.filled[s.run, c] = True
+        else:
+            span.vals[s.rows, c] = v[s.placed]
+            span.flags[s.rows, c] = f[s.placed]
+            span.filled[s.rows, c] = True
         if s.dup_rows.size:
             ndup = int(s.dup_rows.size)
             span.flags[s.dup_rows, c] |= np.uint8(SampleFlag.DUPLICATE_STAMP)

@@ -45,12 +45,13 @@ def make_window(ctx: WindowContext, start_ns: int, vals: np.ndarray, flags: np.n
     status = ["dropped" if dropped[c] else "ok" for c in range(C)]
     end_ns = start_ns + int(round(n * 1e9 / grid_rate))
     where = f"[{ns_to_iso(start_ns)}, {ns_to_iso(end_ns)})"
+    columns = vals.T.copy()  # each channel's samples contiguous for the checks
     for c in range(C):
         name = ctx.names[c]
         if dropped[c]:
             notes.append(f"{name}: dropped (too few samples)")
             continue
-        q = assess_channel(vals[:, c], grid_rate, dead_ptp=cfg.dead_ptp_m_s2, clip_run=cfg.clip_run,
+        q = assess_channel(columns[c], grid_rate, dead_ptp=cfg.dead_ptp_m_s2, clip_run=cfg.clip_run,
                            saturation=cfg.saturation_m_s2, spike_k=cfg.spike_k, noisy_fraction=cfg.noisy_fraction)
         status[c] = q.status
         n_nan = int(q.nan.sum())
