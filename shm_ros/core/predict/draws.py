@@ -55,6 +55,18 @@ class PosteriorDraws:
             return np.tile([me.rel2_at(c, pga) for c in channels], (self.n, 1))
         return np.stack([self.rel2_mean() if c is None else self.rel2_for(c) for c in channels], axis=1)
 
+    def at_amplitude(self, pga: float) -> PosteriorDraws:
+        """These draws centred on the equivalent-linear parameters of an event of input PGA ``pga``
+        (the learnt model error's, :meth:`.ModelError.theta_at`): every draw moved by the same
+        factors as the MAP, so the posterior's spread is kept; unchanged without them."""
+        from dataclasses import replace
+
+        target = None if self.model_error is None else self.model_error.theta_at(pga)
+        if target is None:
+            return self
+        shift = target / self.theta_map
+        return replace(self, theta=self.theta * shift[None, :], theta_map=target)
+
     def with_model_error(self, model_error: ModelError) -> PosteriorDraws:
         """These draws with the cross-validated model error (the JSON's ``error_model`` says so)."""
         from dataclasses import replace

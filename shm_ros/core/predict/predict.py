@@ -118,6 +118,8 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     fs, dt = record.fs, 1.0 / record.fs
     draws = draws if draws is not None else nominal_draws(model, cfg.relative_error)
     u, y, n_pre = prepare(record, cfg)
+    pga = float(np.max(np.abs(u[0]))) if u.shape[1] else 0.0
+    draws = draws.at_amplitude(pga)  # the equivalent-linear parameters of this event's amplitude
     spec = prediction_outputs(model, record.channel_ids)
     outs = [o for o, _ in spec]
     nm = len(record.channel_ids)
@@ -138,7 +140,6 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     accel = np.array([q == "acceleration" for _, q in spec])
     s0[nm:] = np.where(accel[nm:], np.mean(s0[:nm]) if nm else 0.0, 0.0)
     lms = local_mean_square(y_map, fs, cfg.envelope_s)
-    pga = float(np.max(np.abs(u[0]))) if N else 0.0
     rel2 = draws.rel2_event([*record.channel_ids, *[None] * (len(outs) - nm)], pga)  # (n_draws, o)
 
     rng = event_rng(cfg.seed, record.window_id)
