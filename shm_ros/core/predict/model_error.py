@@ -62,6 +62,8 @@ class ModelError:
     thetas: list[list[float]]
     distance_rel2: dict[str, float] = field(default_factory=dict)
     unmeasured_rel2: float = 0.0  # at least this for outputs no channel reads (the folds' typical error)
+    # per parameter the spread of ln(equivalent-linear parameter) about the interpolation (held-out events)
+    log_spread: list[float] = field(default_factory=list)
     folds: list[dict[str, Any]] = field(default_factory=list)
     method: str = "leave-one-event-out"
 
@@ -95,7 +97,8 @@ class ModelError:
                 "distance_relative_error": {k: float(np.sqrt(v)) for k, v in self.distance_rel2.items()},
                 "calibration_pgas_m_s2": list(self.pgas), "equivalent_linear_parameters": self.thetas,
                 "calibration_pga_max_m_s2": self.pga_max,
-                "unmeasured_relative_error": float(np.sqrt(self.unmeasured_rel2)), "folds": self.folds}
+                "unmeasured_relative_error": float(np.sqrt(self.unmeasured_rel2)),
+                "log_parameter_spread": list(self.log_spread), "folds": self.folds}
 
 
 def _mean(d: dict[str, float]) -> float:
@@ -191,10 +194,12 @@ def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0:
     folds: list[dict[str, Any]] = []
     excess: dict[str, list[tuple[float, float]]] = {c: [] for c in ids}
     held_out: dict[str, list[float]] = {c: [] for c in ids}
+    dev = []
     for i, ev in enumerate(events):
         others = [k for k in range(len(events)) if k != i]
         theta = _interpolate([pgas[k] for k in others], [list(thetas[k]) for k in others], pgas[i])
         assert theta is not None
+        dev.append(np.log(thetas[i] / theta))
         r2 = _relative_errors(model, ev, theta, cfg, z)
         d = ModelError({}, [pgas[k] for k in others], []).distance(pgas[i])
         for c, v in r2.items():
@@ -206,8 +211,9 @@ def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0:
                       "equivalent_linear_parameters": [float(x) for x in thetas[i]]})
     slope = {c: _slope(v) for c, v in excess.items()}
     unmeasured = _mean({c: _geometric_mean(v) for c, v in held_out.items()})
+    spread = [float(x) for x in np.sqrt(np.mean(np.square(dev), axis=0))]
     return ModelError(floor, [float(p) for p in pgas], [[float(x) for x in th] for th in thetas], slope,
-                      unmeasured, folds)
+                      unmeasured, spread, folds)
 
 
 def _geometric_mean(values: list[float]) -> float:

@@ -119,7 +119,9 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     draws = draws if draws is not None else nominal_draws(model, cfg.relative_error)
     u, y, n_pre = prepare(record, cfg)
     pga = float(np.max(np.abs(u[0]))) if u.shape[1] else 0.0
-    draws = draws.at_amplitude(pga)  # the equivalent-linear parameters of this event's amplitude
+    # the equivalent-linear parameters of this event's amplitude and their spread over events
+    draws = draws.at_amplitude(pga, np.random.default_rng(
+        np.random.SeedSequence([int(cfg.seed), zlib.crc32(record.window_id.encode()), 1])))
     spec = prediction_outputs(model, record.channel_ids)
     outs = [o for o, _ in spec]
     nm = len(record.channel_ids)
