@@ -50,6 +50,8 @@ from .config import PredictConfig
 from .record import EventRecord
 from .signals import local_mean_square, prepare, strong_motion
 
+_FOLD_DRAWS = 24  # parameter draws of a held-out event (its spread, module doc)
+
 
 @dataclass
 class ModelError:
@@ -157,18 +159,22 @@ def fit_theta(model: AffineModel, events: list[EventRecord], theta0: np.ndarray,
 
 def _relative_errors(model: AffineModel, ev: EventRecord, theta: np.ndarray, cfg: PredictConfig, z: float
                      ) -> dict[str, float]:
-    """Per channel the ``level`` quantile of ``q(t)`` (module doc) of ``ev`` predicted at ``theta``."""
+    """Per channel the ``level`` quantile of ``q(t)`` (module doc) of ``ev`` predicted at ``theta``
+    (d,) or with the draws ``theta`` (n, d): their mean, less their variance."""
     u, y, n_pre = prepare(ev, cfg)
-    yh = responses(model, theta, ev, cfg)
+    th = np.atleast_2d(theta)
+    outs = sensor_outputs(model, ev.channel_ids)
+    Y = np.concatenate([b for _, b in batch_responses(model, th, u, 1.0 / ev.fs, outs, chunk=32)])
+    yh, vpar = Y.mean(axis=0), Y.var(axis=0)
     lms = local_mean_square(yh, ev.fs, cfg.envelope_s)
     strong = strong_motion(u[0])
     out = {}
     for c, cid in enumerate(ev.channel_ids):
         r = y[:, c] - yh[c]
         s0 = float(np.nanvar(r[:n_pre])) if np.isfinite(r[:n_pre]).sum() > 1 else 0.0
-        rs, ms = r[strong], lms[c, strong]
+        rs, ms, vs = r[strong], lms[c, strong], vpar[c, strong]
         ok = np.isfinite(rs) & (ms > 0)
-        qc = np.maximum(0.0, (rs[ok] ** 2 / z ** 2 - s0) / ms[ok])
+        qc = np.maximum(0.0, (rs[ok] ** 2 / z ** 2 - s0 - vs[ok]) / ms[ok])
         if qc.size:
             out[cid] = float(np.quantile(qc, cfg.level))
     return out
@@ -194,14 +200,15 @@ def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0:
     folds: list[dict[str, Any]] = []
     excess: dict[str, list[tuple[float, float]]] = {c: [] for c in ids}
     held_out: dict[str, list[float]] = {c: [] for c in ids}
-    dev = []
+    others = [[k for k in range(len(events)) if k != i] for i in range(len(events))]
+    centre = [_interpolate([pgas[k] for k in o], [list(thetas[k]) for k in o], pgas[i]) for i, o in enumerate(others)]
+    dev = np.array([np.log(thetas[i] / c) for i, c in enumerate(centre)])
+    spread = [float(x) for x in np.sqrt(np.mean(np.square(dev), axis=0))]
+    rng = np.random.default_rng(0)
     for i, ev in enumerate(events):
-        others = [k for k in range(len(events)) if k != i]
-        theta = _interpolate([pgas[k] for k in others], [list(thetas[k]) for k in others], pgas[i])
-        assert theta is not None
-        dev.append(np.log(thetas[i] / theta))
-        r2 = _relative_errors(model, ev, theta, cfg, z)
-        d = ModelError({}, [pgas[k] for k in others], []).distance(pgas[i])
+        th = np.asarray(centre[i]) * np.exp(np.asarray(spread) * rng.standard_normal((_FOLD_DRAWS, len(spread))))
+        r2 = _relative_errors(model, ev, th, cfg, z)
+        d = ModelError({}, [pgas[k] for k in others[i]], []).distance(pgas[i])
         for c, v in r2.items():
             excess[c].append((d, v - floor[c]))
             held_out[c].append(v)
@@ -211,7 +218,6 @@ def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0:
                       "equivalent_linear_parameters": [float(x) for x in thetas[i]]})
     slope = {c: _slope(v) for c, v in excess.items()}
     unmeasured = _mean({c: _geometric_mean(v) for c, v in held_out.items()})
-    spread = [float(x) for x in np.sqrt(np.mean(np.square(dev), axis=0))]
     return ModelError(floor, [float(p) for p in pgas], [[float(x) for x in th] for th in thetas], slope,
                       unmeasured, spread, folds)
 
