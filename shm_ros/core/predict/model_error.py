@@ -50,8 +50,6 @@ from .config import PredictConfig
 from .record import EventRecord
 from .signals import local_mean_square, prepare, strong_motion
 
-_FOLD_DRAWS = 24  # parameter draws of a held-out event (its spread, module doc)
-
 
 @dataclass
 class ModelError:
@@ -159,22 +157,18 @@ def fit_theta(model: AffineModel, events: list[EventRecord], theta0: np.ndarray,
 
 def _relative_errors(model: AffineModel, ev: EventRecord, theta: np.ndarray, cfg: PredictConfig, z: float
                      ) -> dict[str, float]:
-    """Per channel the ``level`` quantile of ``q(t)`` (module doc) of ``ev`` predicted at ``theta``
-    (d,) or with the draws ``theta`` (n, d): their mean, less their variance."""
+    """Per channel the ``level`` quantile of ``q(t)`` (module doc) of ``ev`` predicted at ``theta``."""
     u, y, n_pre = prepare(ev, cfg)
-    th = np.atleast_2d(theta)
-    outs = sensor_outputs(model, ev.channel_ids)
-    Y = np.concatenate([b for _, b in batch_responses(model, th, u, 1.0 / ev.fs, outs, chunk=32)])
-    yh, vpar = Y.mean(axis=0), Y.var(axis=0)
+    yh = responses(model, theta, ev, cfg)
     lms = local_mean_square(yh, ev.fs, cfg.envelope_s)
     strong = strong_motion(u[0])
     out = {}
     for c, cid in enumerate(ev.channel_ids):
         r = y[:, c] - yh[c]
         s0 = float(np.nanvar(r[:n_pre])) if np.isfinite(r[:n_pre]).sum() > 1 else 0.0
-        rs, ms, vs = r[strong], lms[c, strong], vpar[c, strong]
+        rs, ms = r[strong], lms[c, strong]
         ok = np.isfinite(rs) & (ms > 0)
-        qc = np.maximum(0.0, (rs[ok] ** 2 / z ** 2 - s0 - vs[ok]) / ms[ok])
+        qc = np.maximum(0.0, (rs[ok] ** 2 / z ** 2 - s0) / ms[ok])
         if qc.size:
             out[cid] = float(np.quantile(qc, cfg.level))
     return out
@@ -204,9 +198,8 @@ def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0:
     centre = [_interpolate([pgas[k] for k in o], [list(thetas[k]) for k in o], pgas[i]) for i, o in enumerate(others)]
     dev = np.array([np.log(thetas[i] / c) for i, c in enumerate(centre)])
     spread = [float(x) for x in np.sqrt(np.mean(np.square(dev), axis=0))]
-    rng = np.random.default_rng(0)
     for i, ev in enumerate(events):
-        th = np.asarray(centre[i]) * np.exp(np.asarray(spread) * rng.standard_normal((_FOLD_DRAWS, len(spread))))
+        th = np.asarray(centre[i])
         r2 = _relative_errors(model, ev, th, cfg, z)
         d = ModelError({}, [pgas[k] for k in others[i]], []).distance(pgas[i])
         for c, v in r2.items():
