@@ -159,13 +159,16 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     peaks = np.empty((draws.n, len(outs)))
     tops = np.empty((draws.n, len(outs)))
     sigs = np.empty((draws.n, len(outs)))
-    for theta, idx in ((draws.theta, np.arange(nm)), (spread.theta, np.arange(nm, len(outs)))):
+    everything = np.arange(len(outs))
+    parts = [(draws.theta, everything)] if np.array_equal(spread.theta, draws.theta) else \
+        [(draws.theta, everything[:nm]), (spread.theta, everything[nm:])]  # one pass when no spread
+    for theta, idx in parts:
         if not idx.size:
             continue
+        h = np.isin(hidden, idx)
         for a, Y in batch_responses(model, theta, u, dt, [outs[i] for i in idx], chunk=cfg.chunk,
                                     threads=cfg.threads):
-            if idx[0] == nm and hidden.size:
-                Y[:, hidden - nm] += corr[None]
+            Y[:, hidden[h] - idx[0]] += corr[h][None]
             S1[idx] += Y.sum(axis=0)
             S2[idx] += np.einsum("bon,bon->on", Y, Y)
             b = a + Y.shape[0]
