@@ -55,6 +55,24 @@ class PosteriorDraws:
             return np.tile([me.rel2_at(c, pga) for c in channels], (self.n, 1))
         return np.stack([self.rel2_mean() if c is None else self.rel2_for(c) for c in channels], axis=1)
 
+    def at_amplitude(self, pga: float, rng: np.random.Generator | None = None) -> PosteriorDraws:
+        """These draws centred on the equivalent-linear parameters of an event of input PGA ``pga``
+        (the learnt model error's, :meth:`.ModelError.theta_at`): every draw moved by the same
+        factors as the MAP; with ``rng``, then by a lognormal factor per parameter of the
+        calibration events' spread about them (``log_spread``: a new event's equivalent-linear
+        parameters differ from the interpolation as the held-out events' did); unchanged without
+        them."""
+        from dataclasses import replace
+
+        me = self.model_error
+        target = None if me is None else me.theta_at(pga)
+        if me is None or target is None:
+            return self
+        theta = self.theta * (target / self.theta_map)[None, :]
+        if rng is not None and me.log_spread and self.n > 1:
+            theta = theta * np.exp(np.asarray(me.log_spread)[None, :] * rng.standard_normal(theta.shape))
+        return replace(self, theta=theta, theta_map=target)
+
     def with_model_error(self, model_error: ModelError) -> PosteriorDraws:
         """These draws with the cross-validated model error (the JSON's ``error_model`` says so)."""
         from dataclasses import replace

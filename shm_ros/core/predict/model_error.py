@@ -1,22 +1,36 @@
-"""The model error of a prediction, learnt out of sample over the calibration events.
+"""The model error of a prediction, learnt out of sample over the calibration events, and the
+equivalent-linear parameters of an event of a given amplitude.
 
-A calibration's own residual (its in-sample NRMS) understates the error of a prediction: the
-parameters were fitted to those very records. Here every calibration event is left out in turn
-(leave-one-event-out cross-validation): the model's parameters are fitted by least squares to the
-other events (log factors from the posterior's MAP, :func:`fit_theta`), and the left-out event is
-predicted. Its residual ``r(t)``, the pre-event noise variance ``s0`` and the local mean square of
-the prediction ``m(t)`` give, per strong-motion sample, the relative error variance that would just
-put the sample inside the band ``+- z sqrt(s0 + r^2 m(t))``:
+A structure that yields or whose damping grows with the shaking is, for a linear model, a different
+linear structure in every event: the best fit of each calibration event alone (its *equivalent-linear
+parameters*, :func:`fit_theta` from the posterior's MAP) moves with the event's input PGA (more
+damping and softer springs in the strong events, the elastic structure in the weak ones). A
+prediction therefore centres the posterior's draws on the parameters of its own amplitude: the
+calibration events' fits interpolated in log parameter over log PGA, held at the nearest calibration
+event's outside their range (no extrapolation of a trend the events did not show; see ``theta_at``).
+
+A calibration's own residual understates the error of a prediction. Every calibration event is
+left out in turn (leave-one-event-out cross-validation): it is predicted at the parameters the
+*other* events give for its PGA, and its residual ``r(t)``, the pre-event noise variance ``s0`` and
+the local mean square of the prediction ``m(t)`` give, per strong-motion sample, the relative error
+variance that would just put the sample inside the band ``+- z sqrt(s0 + r^2 m(t))``:
 
     q(t) = max(0, (r(t)^2 / z^2 - s0) / m(t)).
 
-Per fold, the ``level`` quantile of ``q`` is the ``r^2`` whose band would have held ``level`` of that
-left-out event's strong-motion samples; the channel's model-error term is their geometric mean over
-the folds (a typical event's band holds ``level``; the events' scatter about it is their own). Where the
-folds show it (three or more events, slope beyond two standard errors), ``r^2`` follows the input's
-PGA as a power law (``amplitude_slope``; an event far stronger than the calibration's is more
-nonlinear), else it is constant. Unmeasured floors and drift ratios take the mean over the channels
-(the same term, through the model, see :mod:`.predict`).
+The ``level`` quantile of ``q`` is the ``r^2`` whose band would have held ``level`` of that event's
+strong-motion samples. The same quantile of each event at its own fit is the model class's floor
+``a`` (what no choice of parameters removes: torsion read by sensors off the centre of mass,
+unmodelled coupling); the left-out events' excess over it grows with how far their PGA lies from the
+other events' (the equivalent-linear parameters of one amplitude describe another the worse the
+further apart they are). Per channel
+
+    r^2(pga) = a + b D(pga)^2,   D = |ln(pga / nearest calibration PGA)|,
+
+``a`` the geometric mean of the events' own floors, ``b`` the least-squares slope of the folds'
+excess ``r_i^2 - a`` over ``D_i^2`` (through the origin, not below zero). An event between or at the
+calibration events' PGAs gets the floor plus the interpolation's share; one far outside their range
+the wider band its distance calls for. Unmeasured floors and drift ratios take the mean over the
+channels (the same term, through the model, see :mod:`.predict`).
 """
 
 from __future__ import annotations
@@ -36,32 +50,70 @@ from .config import PredictConfig
 from .record import EventRecord
 from .signals import local_mean_square, prepare, strong_motion
 
-_MIN_FOLDS_FOR_SLOPE = 3
-
 
 @dataclass
 class ModelError:
-    """Per channel the relative error variance ``rel2`` at the reference PGA ``pga_ref``; ``rel2``
-    of another event is ``rel2 (pga / pga_ref) ** amplitude_slope``."""
+    """Per channel the relative error variance: ``rel2`` (the floor ``a``) plus ``distance_rel2``
+    (``b``) times the squared log-PGA distance to the nearest calibration event; the calibration
+    events' input PGAs ``pgas`` and equivalent-linear parameters ``thetas`` (one row per event)."""
 
     rel2: dict[str, float]
-    pga_ref: float
-    amplitude_slope: float = 0.0
-    pga_max: float = 0.0  # the strongest calibration event's input PGA
+    pgas: list[float]
+    thetas: list[list[float]]
+    distance_rel2: dict[str, float] = field(default_factory=dict)
+    unmeasured_rel2: float = 0.0  # at least this for outputs no channel reads (the folds' typical error)
+    # per parameter the spread of ln(equivalent-linear parameter) about the interpolation (held-out events)
+    log_spread: list[float] = field(default_factory=list)
     folds: list[dict[str, Any]] = field(default_factory=list)
     method: str = "leave-one-event-out"
 
+    @property
+    def pga_max(self) -> float:
+        """The strongest calibration event's input PGA."""
+        return float(max(self.pgas)) if self.pgas else 0.0
+
+    def distance(self, pga: float) -> float:
+        """``|ln(pga / nearest calibration PGA)|`` (0 without a PGA)."""
+        p = np.asarray([x for x in self.pgas if x > 0], float)
+        return float(np.min(np.abs(np.log(pga / p)))) if pga > 0 and p.size else 0.0
+
     def rel2_at(self, channel: str | None, pga: float) -> float:
-        base = self.rel2.get(channel, float(np.mean(list(self.rel2.values())))) if channel else \
-            float(np.mean(list(self.rel2.values())))
-        if self.amplitude_slope and pga > 0 and self.pga_ref > 0:
-            base *= (pga / self.pga_ref) ** self.amplitude_slope
-        return float(base)
+        """``a + b D^2`` of ``channel``; an output no channel reads (None) the channels' mean, at
+        least ``unmeasured_rel2``."""
+        d2 = self.distance(pga) ** 2
+        if channel is None:
+            return max(self.unmeasured_rel2, _mean(self.rel2) + _mean(self.distance_rel2) * d2)
+        a = self.rel2.get(channel, _mean(self.rel2))
+        return float(a + self.distance_rel2.get(channel, _mean(self.distance_rel2)) * d2)
+
+    def theta_at(self, pga: float) -> np.ndarray | None:
+        """The equivalent-linear parameters of an event of input PGA ``pga``: the calibration
+        events' interpolated in log over log PGA, held at the nearest event's outside their range
+        (None without them)."""
+        return _interpolate(self.pgas, self.thetas, pga)
 
     def to_json(self) -> dict[str, Any]:
         return {"method": self.method, "relative_error": {k: float(np.sqrt(v)) for k, v in self.rel2.items()},
-                "pga_ref_m_s2": self.pga_ref, "amplitude_slope": self.amplitude_slope,
-                "calibration_pga_max_m_s2": self.pga_max, "folds": self.folds}
+                "distance_relative_error": {k: float(np.sqrt(v)) for k, v in self.distance_rel2.items()},
+                "calibration_pgas_m_s2": list(self.pgas), "equivalent_linear_parameters": self.thetas,
+                "calibration_pga_max_m_s2": self.pga_max,
+                "unmeasured_relative_error": float(np.sqrt(self.unmeasured_rel2)),
+                "log_parameter_spread": list(self.log_spread), "folds": self.folds}
+
+
+def _mean(d: dict[str, float]) -> float:
+    return float(np.mean(list(d.values()))) if d else 0.0
+
+
+def _interpolate(pgas: list[float], thetas: list[list[float]], pga: float) -> np.ndarray | None:
+    if not thetas:
+        return None
+    th = np.log(np.asarray(thetas, float))
+    if len(pgas) == 1 or pga <= 0:
+        return np.exp(th.mean(axis=0))
+    order = np.argsort(pgas)
+    x = np.log(np.maximum(np.asarray(pgas, float)[order], 1e-12))
+    return np.exp(np.array([np.interp(np.log(pga), x, th[order, k]) for k in range(th.shape[1])]))
 
 
 def input_pga(record: EventRecord, cfg: PredictConfig) -> float:
@@ -103,65 +155,75 @@ def fit_theta(model: AffineModel, events: list[EventRecord], theta0: np.ndarray,
     return np.asarray(theta0, float) * np.exp(sol.x)
 
 
+def _relative_errors(model: AffineModel, ev: EventRecord, theta: np.ndarray, cfg: PredictConfig, z: float
+                     ) -> dict[str, float]:
+    """Per channel the ``level`` quantile of ``q(t)`` (module doc) of ``ev`` predicted at ``theta``."""
+    u, y, n_pre = prepare(ev, cfg)
+    yh = responses(model, theta, ev, cfg)
+    lms = local_mean_square(yh, ev.fs, cfg.envelope_s)
+    strong = strong_motion(u[0])
+    out = {}
+    for c, cid in enumerate(ev.channel_ids):
+        r = y[:, c] - yh[c]
+        s0 = float(np.nanvar(r[:n_pre])) if np.isfinite(r[:n_pre]).sum() > 1 else 0.0
+        rs, ms = r[strong], lms[c, strong]
+        ok = np.isfinite(rs) & (ms > 0)
+        qc = np.maximum(0.0, (rs[ok] ** 2 / z ** 2 - s0) / ms[ok])
+        if qc.size:
+            out[cid] = float(np.quantile(qc, cfg.level))
+    return out
+
+
 def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0: np.ndarray,
                           config: PredictConfig | None = None) -> ModelError:
-    """The model error of :mod:`this module <.model_error>` from ``events`` (at least two, sharing
-    their channels), starting every fit from ``theta0`` (the posterior's MAP)."""
+    """The model error and equivalent-linear parameters of :mod:`this module <.model_error>` from
+    ``events`` (at least two, sharing their channels), every fit started from ``theta0`` (the
+    posterior's MAP)."""
     cfg = (config or PredictConfig()).validate()
     if len(events) < 2:
         raise ValueError("a cross-validated model error needs at least two calibration events")
     ids = events[0].channel_ids
-    z = float(ndtri(0.5 + cfg.level / 2))
-    q: dict[str, list[np.ndarray]] = {c: [] for c in ids}
-    folds: list[dict[str, Any]] = []
-    pgas = [input_pga(ev, cfg) for ev in events]
-    for i, ev in enumerate(events):
+    for ev in events:
         if ev.channel_ids != ids:
             raise ValueError(f"window {ev.window_id}: channels {ev.channel_ids} differ from {ids}")
-        theta = fit_theta(model, events[:i] + events[i + 1:], theta0, cfg)
-        u, y, n_pre = prepare(ev, cfg)
-        yh = responses(model, theta, ev, cfg)
-        lms = local_mean_square(yh, ev.fs, cfg.envelope_s)
-        strong = strong_motion(u[0])
-        fold: dict[str, Any] = {"window_id": ev.window_id, "pga_m_s2": pgas[i], "relative_error": {}}
-        for c, cid in enumerate(ids):
-            r = y[:, c] - yh[c]
-            s0 = float(np.nanvar(r[:n_pre])) if np.isfinite(r[:n_pre]).sum() > 1 else 0.0
-            rs, ms = r[strong], lms[c, strong]
-            ok = np.isfinite(rs) & (ms > 0)
-            qc = np.maximum(0.0, (rs[ok] ** 2 / z ** 2 - s0) / ms[ok])
-            q[cid].append(qc)
-            fold["relative_error"][cid] = float(np.sqrt(np.quantile(qc, cfg.level))) if qc.size else None
-        folds.append(fold)
-    rel2 = {c: _typical([float(np.quantile(x, cfg.level)) for x in v if x.size]) for c, v in q.items()}
-    slope = _amplitude_slope(folds, pgas)
-    pga_ref = float(np.exp(np.mean(np.log(np.maximum(pgas, 1e-12)))))
-    return ModelError(rel2, pga_ref, slope, float(max(pgas)), folds)
+    z = float(ndtri(0.5 + cfg.level / 2))
+    pgas = [input_pga(ev, cfg) for ev in events]
+    thetas = [fit_theta(model, [ev], theta0, cfg) for ev in events]
+    own = [_relative_errors(model, ev, th, cfg, z) for ev, th in zip(events, thetas, strict=True)]
+    floor = {c: _geometric_mean([o[c] for o in own if c in o]) for c in ids}
+    folds: list[dict[str, Any]] = []
+    excess: dict[str, list[tuple[float, float]]] = {c: [] for c in ids}
+    held_out: dict[str, list[float]] = {c: [] for c in ids}
+    others = [[k for k in range(len(events)) if k != i] for i in range(len(events))]
+    centre = [_interpolate([pgas[k] for k in o], [list(thetas[k]) for k in o], pgas[i]) for i, o in enumerate(others)]
+    dev = np.array([np.log(thetas[i] / c) for i, c in enumerate(centre)])
+    spread = [float(x) for x in np.sqrt(np.mean(np.square(dev), axis=0))]
+    for i, ev in enumerate(events):
+        th = np.asarray(centre[i])
+        r2 = _relative_errors(model, ev, th, cfg, z)
+        d = ModelError({}, [pgas[k] for k in others[i]], []).distance(pgas[i])
+        for c, v in r2.items():
+            excess[c].append((d, v - floor[c]))
+            held_out[c].append(v)
+        folds.append({"window_id": ev.window_id, "pga_m_s2": pgas[i], "distance": d,
+                      "relative_error": {c: float(np.sqrt(v)) for c, v in r2.items()},
+                      "own_fit_relative_error": {c: float(np.sqrt(v)) for c, v in own[i].items()},
+                      "equivalent_linear_parameters": [float(x) for x in thetas[i]]})
+    slope = {c: _slope(v) for c, v in excess.items()}
+    unmeasured = _mean({c: _geometric_mean(v) for c, v in held_out.items()})
+    return ModelError(floor, [float(p) for p in pgas], [[float(x) for x in th] for th in thetas], slope,
+                      unmeasured, spread, folds)
 
 
-def _typical(values: list[float]) -> float:
-    """The geometric mean of the folds' ``r^2`` (the band holds ``level`` of a typical event's
-    samples; the folds' scatter is the events' own)."""
+def _geometric_mean(values: list[float]) -> float:
+    """The geometric mean of the positive ``r^2`` (a typical event's; the scatter is the events' own)."""
     v = np.asarray([x for x in values if x > 0], float)
     return float(np.exp(np.mean(np.log(v)))) if v.size else 0.0
 
 
-def _amplitude_slope(folds: list[dict[str, Any]], pgas: list[float]) -> float:
-    """Slope of log r^2 over log PGA across the folds, where it differs from 0 by two standard
-    errors (three folds at least); else 0."""
-    if len(folds) < _MIN_FOLDS_FOR_SLOPE or min(pgas) <= 0:
-        return 0.0
-    r = [np.mean([v for v in f["relative_error"].values() if v]) for f in folds]
-    if min(r) <= 0:
-        return 0.0
-    x, yv = np.log(pgas), 2 * np.log(r)
-    if np.ptp(x) < 1e-6:
-        return 0.0
-    A = np.column_stack([np.ones_like(x), x])
-    coef, res, *_ = np.linalg.lstsq(A, yv, rcond=None)
-    dof = len(x) - 2
-    if dof < 1:
-        return 0.0
-    s2 = float(np.sum((yv - A @ coef) ** 2)) / dof
-    se = float(np.sqrt(s2 / np.sum((x - x.mean()) ** 2)))
-    return float(coef[1]) if abs(coef[1]) > 2 * se else 0.0
+def _slope(points: list[tuple[float, float]]) -> float:
+    """Least-squares slope through the origin of the excess ``r^2 - a`` over ``D^2``, not below 0."""
+    d2 = np.asarray([p[0] ** 2 for p in points], float)
+    e = np.asarray([p[1] for p in points], float)
+    den = float(np.sum(d2 ** 2))
+    return max(0.0, float(np.sum(d2 * e)) / den) if den > 0 else 0.0

@@ -4,8 +4,15 @@ For the nominal model, the MAP and every posterior draw the response comes from 
 time-domain solver (:mod:`shm_ros.core.response`, batched by :mod:`.batch`), from rest at the
 window's start after the baseline correction of every record (:mod:`.signals`). The
 posterior-predictive distribution of a channel at a sample is the mixture over draws of
-``N(y_draw(t), sigma_draw^2(t))`` (error model: :mod:`.draws`); its mean and variance are exact
-and the band is mean +- z std. Peak intervals are quantiles of each draw's peak of
+``N(y_draw(t), sigma_draw^2(t))`` (error model: :mod:`.draws`); the band is its centre +- z times
+its exact second moment about the centre. The centre is the draws' mean, or, with a model error
+learnt over calibration events (:mod:`.model_error`), the response at the event's own
+equivalent-linear parameters (the MAP moved to the event's input PGA; the draws are moved with
+it): the mean of draws with different frequencies is a smeared response no draw resembles. The
+measured channels' error term was learnt out of sample on those very channels (it holds the
+parameters' event-to-event scatter); the outputs no channel reads (unmeasured floors, drift
+ratios) have no record to learn it from, so their draws also carry the calibration events'
+spread of equivalent-linear parameters through the model. Peak intervals are quantiles of each draw's peak of
 ``y_draw + e_draw`` plus one error draw at its time (see ``_peaks``). Unmeasured floors and
 interstory drifts are outputs of the same model (every floor is a DOF of the full model); with
 ``unmeasured: expanded`` (default) the unmeasured floors' accelerations also get the measured
@@ -118,6 +125,12 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     fs, dt = record.fs, 1.0 / record.fs
     draws = draws if draws is not None else nominal_draws(model, cfg.relative_error)
     u, y, n_pre = prepare(record, cfg)
+    pga = float(np.max(np.abs(u[0]))) if u.shape[1] else 0.0
+    # the equivalent-linear parameters of this event's amplitude (the measured channels' draws) and,
+    # for the outputs no channel reads, their spread over events as well (see the module doc)
+    spread = draws.at_amplitude(pga, np.random.default_rng(
+        np.random.SeedSequence([int(cfg.seed), zlib.crc32(record.window_id.encode()), 1])))
+    draws = draws.at_amplitude(pga)
     spec = prediction_outputs(model, record.channel_ids)
     outs = [o for o, _ in spec]
     nm = len(record.channel_ids)
@@ -138,7 +151,6 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     accel = np.array([q == "acceleration" for _, q in spec])
     s0[nm:] = np.where(accel[nm:], np.mean(s0[:nm]) if nm else 0.0, 0.0)
     lms = local_mean_square(y_map, fs, cfg.envelope_s)
-    pga = float(np.max(np.abs(u[0]))) if N else 0.0
     rel2 = draws.rel2_event([*record.channel_ids, *[None] * (len(outs) - nm)], pga)  # (n_draws, o)
 
     rng = event_rng(cfg.seed, record.window_id)
@@ -147,15 +159,26 @@ def _predict_event(model: AffineModel, record: EventRecord, draws: PosteriorDraw
     peaks = np.empty((draws.n, len(outs)))
     tops = np.empty((draws.n, len(outs)))
     sigs = np.empty((draws.n, len(outs)))
-    for a, Y in batch_responses(model, draws.theta, u, dt, outs, chunk=cfg.chunk, threads=cfg.threads):
-        Y[:, hidden] += corr[None]
-        S1 += Y.sum(axis=0)
-        S2 += np.einsum("bon,bon->on", Y, Y)
-        b = a + Y.shape[0]
-        tops[a:b], sigs[a:b] = _peaks(Y, s0, rel2[a:b], lms)
-        peaks[a:b] = np.abs(tops[a:b] + sigs[a:b] * rng.standard_normal(tops[a:b].shape))
-    mean = S1 / draws.n
-    var = np.maximum(S2 / draws.n - mean ** 2, 0.0) + s0[:, None] + np.mean(rel2, axis=0)[:, None] * lms
+    everything = np.arange(len(outs))
+    parts = [(draws.theta, everything)] if np.array_equal(spread.theta, draws.theta) else \
+        [(draws.theta, everything[:nm]), (spread.theta, everything[nm:])]  # one pass when no spread
+    for theta, idx in parts:
+        if not idx.size:
+            continue
+        h = np.isin(hidden, idx)
+        for a, Y in batch_responses(model, theta, u, dt, [outs[i] for i in idx], chunk=cfg.chunk,
+                                    threads=cfg.threads):
+            Y[:, hidden[h] - idx[0]] += corr[h][None]
+            S1[idx] += Y.sum(axis=0)
+            S2[idx] += np.einsum("bon,bon->on", Y, Y)
+            b = a + Y.shape[0]
+            tops[a:b, idx], sigs[a:b, idx] = _peaks(Y, s0[idx], rel2[a:b][:, idx], lms[idx])
+            peaks[a:b, idx] = np.abs(tops[a:b, idx] + sigs[a:b, idx] * rng.standard_normal((b - a, idx.size)))
+    # the centre: with a learnt model error the response at the event's equivalent-linear
+    # parameters, else the draws' mean; the band's variance is the draws' second moment about it
+    mean = y_map if draws.model_error is not None else S1 / draws.n
+    second = S2 / draws.n - 2 * mean * S1 / draws.n + mean ** 2
+    var = np.maximum(second, 0.0) + s0[:, None] + np.mean(rel2, axis=0)[:, None] * lms
     std = np.sqrt(var)
     z = float(ndtri(0.5 + cfg.level / 2))
     q = (50 * (1 - cfg.level), 50 * (1 + cfg.level))
