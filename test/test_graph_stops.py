@@ -146,6 +146,15 @@ def _session(tmp_path: Path, bag: Path, env: dict[str, str], stop_when, stop_sig
     return sup.returncode, out.text(join_timeout=10), replay.returncode, replay_out, seen, replaying
 
 
+def _settle(count, quiet_s: float = 5.0, timeout_s: float = 60.0) -> None:
+    """Wait until ``count()`` has not changed for ``quiet_s`` (at most ``timeout_s``)."""
+    end, last, since = time.monotonic() + timeout_s, count(), time.monotonic()
+    while time.monotonic() < end and time.monotonic() - since < quiet_s:
+        time.sleep(0.5)
+        if (now := count()) != last:
+            last, since = now, time.monotonic()
+
+
 def _announced_running(text: str) -> list[int]:
     """The pids the supervisor said it started ("started <node> (pid N)") that still run a node."""
     left = []
@@ -315,7 +324,7 @@ def test_a_replay_goes_on_after_an_ingest_restart_and_counts_what_was_lost(tmp_p
         started = time.monotonic()
         replay = subprocess.run(_replay(bag, "--rate", "2").args, capture_output=True, text=True, timeout=400)
         took = time.monotonic() - started
-        time.sleep(3.0)
+        _settle(lambda: out.count("[identify]: window"))  # identify done with what reached it
         sup.send_signal(signal.SIGINT)
         sup.wait(timeout=90)
     finally:
@@ -331,6 +340,9 @@ def test_a_replay_goes_on_after_an_ingest_restart_and_counts_what_was_lost(tmp_p
     assert sup.returncode == 1 and _clean(text), text
     assert open_source(tmp_path / "out").note == ""
     rec = read_pipeline_bag(tmp_path / "out")
+    # every window and estimate once; tracked rows once too, and there are some when the three
+    # reference windows reached track (a loaded machine may start the new ingest after the last block)
     for ids in ([w.window_id for w in rec.windows], [e.window_id for e in rec.estimates],
                 [r["window_id"] for r in rec.tracked]):
-        assert ids and max(collections.Counter(ids).values()) == 1, ids
+        assert max(collections.Counter(ids).values(), default=1) == 1, ids
+    assert rec.windows and rec.estimates and (rec.tracked or len(rec.estimates) < 3), rec.estimates
