@@ -236,7 +236,7 @@ class IngestCore:
         # stamps ascend, by steps of one period (no clock jump inside), and which of its columns
         # hold an implausible value (|x * factor * sign| = |x| |factor| exactly)
         steady = float(1e9 / rate) + 1.0 <= self.config.clock_jump_s * 1e9  # steps are rounded to 1 ns
-        flagged = np.any((np.abs(x) * abs(factor) > self.config.implausible_m_s2) & np.isfinite(x), axis=0)
+        flagged = self._implausible_columns(x, factor)
         for j, name in enumerate(names):
             routes = self._block_routes.get(name)
             if routes is None:
@@ -297,10 +297,13 @@ class IngestCore:
         if not self._block_rates.accepts(t0, rate, self._newest_stamp(), self.config.burst_pause_s * 1e9):
             return None
         merged = np.concatenate(xs).reshape(-1, len(names))
-        factor = abs(unit_factor(units or "") or 1.0)  # (the same test as add_block's)
-        if np.any((np.abs(merged) * factor > self.config.implausible_m_s2) & np.isfinite(merged)):
+        if self._implausible_columns(merged, unit_factor(units or "") or 1.0).any():
             return None
         return merged
+
+    def _implausible_columns(self, x: np.ndarray, factor: float) -> np.ndarray:
+        """Which columns of ``x`` (in units scaled to m/s^2 by ``factor``) hold an implausible value."""
+        return np.any((np.abs(x) * abs(factor) > self.config.implausible_m_s2) & np.isfinite(x), axis=0)
 
     def add_temperature(self, sensor_id: str, stamp_ns: int, value_c: float, source: str | None = None) -> None:
         """One temperature sample (degrees C); a window's temperature is the mean of those inside it.
