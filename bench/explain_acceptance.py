@@ -104,6 +104,15 @@ def _stories(where: str | None) -> set[int]:
     return out
 
 
+def _where_right(where: str | None, truth: dict) -> bool:
+    """``where`` names a damaged story, or the whole structure when every story was damaged."""
+    damaged = set(truth["effect"]["magnitudes"]["stories"])
+    named = _stories(where)
+    if not named and str(where or "").strip() == "EI":
+        return damaged == set(range(int(truth.get("building", {}).get("stories", -1))))
+    return bool(named & damaged)
+
+
 def _time_right(entry: dict, truth: dict) -> bool:
     """The effect's time between the event before the change and the first event after it."""
     k = truth.get("effect", {}).get("change_event")
@@ -145,8 +154,7 @@ def judge(row: Row, v: dict, truth: dict) -> dict:
     if row.rule in ("right_name", "stiffness_loss", "damper_loss"):
         ok = first is not None and first["name"] in row.expected[:1] and _confident(first)
         if row.rule == "stiffness_loss":
-            ok = ok and _time_right(first, truth) and bool(_stories(first.get("where")) &
-                                                        set(truth["effect"]["magnitudes"]["stories"]))
+            ok = ok and _time_right(first, truth) and _where_right(first.get("where"), truth)
         if row.rule == "damper_loss" and first is not None and _confident(first):
             dam = set(truth["effect"]["magnitudes"]["stories"])
             ok = first["name"] == "damper_stiffness" or (

@@ -25,6 +25,26 @@ def event_ingest(spec: Any) -> Any:
     return IngestConfig(event_detector=EventDetector.EITHER) if spec.input_sensor_ids() else None
 
 
+def keep_input_driven(window: Any, est: Any) -> int:
+    """Keep the modes of an input-output estimate that carry the measured input to the sensors
+    (:mod:`shm_ros.core.input_driven`); the number left out. Output-only estimates are kept whole."""
+    from shm_ros.core.input_driven import MIN_SHARE, input_shares
+
+    names = list(window.channel_names)
+    if est.method != "ssi-io" or window.input_channel not in names or not est.modes:
+        return 0
+    outs = [names.index(s) for s in est.sensor_ids if s in names and s != window.input_channel]
+    if not outs:
+        return 0
+    shares = input_shares(window.samples[:, names.index(window.input_channel)], window.samples[:, outs],
+                          window.sample_rate_hz, np.array([m.frequency_hz for m in est.modes]),
+                          np.array([m.damping_ratio for m in est.modes]))
+    kept = [m for m, s in zip(est.modes, shares, strict=True) if s >= MIN_SHARE]
+    left_out = len(est.modes) - len(kept)
+    est.modes = kept
+    return left_out
+
+
 def _stderr(prog: str) -> Callable[[str], None]:
     return lambda text: print(f"{prog}: note: {text}", file=sys.stderr)
 
@@ -55,15 +75,24 @@ def tracked_observations_from_bag(bag: str, spec: Any, observed: list[str], wind
     if not windows:
         raise NoWindowsError(f"{bag}: no usable window in the recording")
     estimates = []
+    dropped = 0
     with threadpool_limits(1, "blas"):  # same result whatever the machine's thread count
         for w in windows:
             try:
-                estimates.append(identify_window(w))
+                est = identify_window(w)
             except (ValueError, np.linalg.LinAlgError) as exc:
                 note(f"window {w.window_id}: not identified ({exc})")
+                continue
+            dropped += keep_input_driven(w, est)
+            estimates.append(est)
     if not estimates:
         raise NoWindowsError(f"{bag}: none of its {len(windows)} window(s) could be identified")
     note(f"windows identified with {', '.join(sorted({e.method for e in estimates}))}")
+    if dropped:
+        from shm_ros.core.input_driven import MIN_SHARE
+
+        note(f"{dropped} identified mode(s) left out: each carries less than {MIN_SHARE:.0%} of the "
+             "recorded response from the measured input (noise or an unmeasured input)")
     try:  # the tracker's defaults, as `shm-ros track`
         return observations_from_tracking(estimates, observed)
     except NoTrackedModes as exc:  # few windows (a handful of events) never stop the analysis

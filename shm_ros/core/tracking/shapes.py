@@ -20,10 +20,14 @@ def shapes_on(est: ModalEstimate, sensors: list[str]) -> np.ndarray:
 
 
 def mac_table(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """MAC of every row of ``a`` against every row of ``b`` on their common finite sensors."""
+    """MAC of every row of ``a`` against every row of ``b`` on their common finite sensors.
+
+    Two common sensors at least: one sensor of several in common says nothing about the shapes
+    (0). A structure with a single sensor has shapes that say nothing at all: their MAC is 1 and
+    the frequencies alone tell the modes apart."""
     if a.shape[0] == 0 or b.shape[0] == 0:
         return np.zeros((a.shape[0], b.shape[0]))
-    return np.asarray(modal_mac(a[:, None, :], b[None, :, :], min_common=2))
+    return np.asarray(modal_mac(a[:, None, :], b[None, :, :], min_common=min(2, a.shape[-1])))
 
 
 def aligned(shape: np.ndarray, ref: np.ndarray) -> np.ndarray:
