@@ -58,3 +58,12 @@ def test_no_step_on_clean_or_transient_softening(results):
 def test_in_vocabulary_sparse_kinds_are_named(results):
     right = [k for k in IN_VOCABULARY.values() if results[k].get("ok")]
     assert len(right) >= 2, {k: results[k].get("names") for k in IN_VOCABULARY.values()}
+
+
+def test_the_judge_takes_a_whole_structure_step_only_when_every_story_was_damaged():
+    from bench.explain_acceptance import _where_right
+
+    two = {"building": {"stories": 2}, "effect": {"magnitudes": {"stories": [0, 1]}}}
+    one = {"building": {"stories": 2}, "effect": {"magnitudes": {"stories": [1]}}}
+    assert _where_right("EI", two) and not _where_right("EI", one)
+    assert _where_right("EI:2", one) and not _where_right("EI:1", one) and _where_right("EI:1,EI:2", one)

@@ -19,6 +19,9 @@ import scipy.signal as sig
 
 #: a mode that adds less than this share of every output channel's variance is not input-driven
 MIN_SHARE = 0.02
+#: a record whose modes carry less than this share of every channel's variance from the input is
+#: not driven by it (ambient vibration beside a ground sensor): its modes are not judged by it
+MIN_DRIVEN = 0.5
 
 
 def modal_signals(u: np.ndarray, fs: float, frequency_hz: np.ndarray, damping: np.ndarray) -> np.ndarray:
@@ -34,21 +37,21 @@ def modal_signals(u: np.ndarray, fs: float, frequency_hz: np.ndarray, damping: n
 
 
 def input_shares(u: np.ndarray, y: np.ndarray, fs: float, frequency_hz: np.ndarray, damping: np.ndarray
-                 ) -> np.ndarray:
+                 ) -> tuple[np.ndarray, float]:
     """Share of the output variance each mode carries from the input ``u`` (n,) to ``y`` (n, p)
-    (see the module's text); 0 for a mode that adds nothing."""
+    (see the module's text; 0 for a mode that adds nothing), and the largest share of a channel's
+    variance that the input and the modes taken explain together."""
     k = len(frequency_hz)
     shares = np.zeros(k)
-    if k == 0:
-        return shares
     u = u - u.mean()
     y = y - y.mean(axis=0)
     var = np.sum(y ** 2, axis=0)
-    if not np.all(var > 0) or not np.any(u):
-        return shares
+    if k == 0 or not np.all(var > 0) or not np.any(u):
+        return shares, 0.0
     x = modal_signals(u, fs, frequency_hz, damping)
     x /= np.maximum(np.linalg.norm(x, axis=0), 1e-300)
     q = (u / np.linalg.norm(u))[:, None]  # the direct (feed-through) term is always in
+    explained = np.sum((q.T @ y) ** 2, axis=0) / var
     left = list(range(k))
     while left:
         bases, gains = [], []
@@ -64,4 +67,5 @@ def input_shares(u: np.ndarray, y: np.ndarray, fs: float, frequency_hz: np.ndarr
         if shares[j] < MIN_SHARE:
             break
         q = np.column_stack([q, bases[best]])
-    return shares
+        explained = explained + gains[best]
+    return shares, float(np.max(explained))

@@ -27,8 +27,9 @@ def event_ingest(spec: Any) -> Any:
 
 def keep_input_driven(window: Any, est: Any) -> int:
     """Keep the modes of an input-output estimate that carry the measured input to the sensors
-    (:mod:`shm_ros.core.input_driven`); the number left out. Output-only estimates are kept whole."""
-    from shm_ros.core.input_driven import MIN_SHARE, input_shares
+    (:mod:`shm_ros.core.input_driven`); the number left out. Output-only estimates, and records the
+    input does not drive (ambient vibration beside a ground sensor), are kept whole."""
+    from shm_ros.core.input_driven import MIN_DRIVEN, MIN_SHARE, input_shares
 
     names = list(window.channel_names)
     if est.method != "ssi-io" or window.input_channel not in names or not est.modes:
@@ -36,9 +37,11 @@ def keep_input_driven(window: Any, est: Any) -> int:
     outs = [names.index(s) for s in est.sensor_ids if s in names and s != window.input_channel]
     if not outs:
         return 0
-    shares = input_shares(window.samples[:, names.index(window.input_channel)], window.samples[:, outs],
+    shares, driven = input_shares(window.samples[:, names.index(window.input_channel)], window.samples[:, outs],
                           window.sample_rate_hz, np.array([m.frequency_hz for m in est.modes]),
                           np.array([m.damping_ratio for m in est.modes]))
+    if driven < MIN_DRIVEN:
+        return 0
     kept = [m for m, s in zip(est.modes, shares, strict=True) if s >= MIN_SHARE]
     left_out = len(est.modes) - len(kept)
     est.modes = kept
