@@ -105,7 +105,8 @@ def _stories(where: str | None) -> set[int]:
 
 
 def _where_right(where: str | None, truth: dict) -> bool:
-    """``where`` names a damaged story, or the whole structure when every story was damaged."""
+    """``where`` names a damaged story (a story whose damper was lost), or the whole structure when
+    every story was."""
     damaged = set(truth["effect"]["magnitudes"]["stories"])
     named = _stories(where)
     if not named and str(where or "").strip() == "EI":
@@ -156,9 +157,8 @@ def judge(row: Row, v: dict, truth: dict) -> dict:
         if row.rule == "stiffness_loss":
             ok = ok and _time_right(first, truth) and _where_right(first.get("where"), truth)
         if row.rule == "damper_loss" and first is not None and _confident(first):
-            dam = set(truth["effect"]["magnitudes"]["stories"])
             ok = first["name"] == "damper_stiffness" or (
-                first["name"] == "stiffness_change_at_time" and bool(_stories(first.get("where")) & dam))
+                first["name"] == "stiffness_change_at_time" and _where_right(first.get("where"), truth))
         out["held_out_fall"] = held_out_fall(v)
     elif row.rule == "null":
         ok = not named

@@ -309,11 +309,12 @@ def hessian(post: EventPosterior, u: np.ndarray, h: np.ndarray, axes: list[int] 
     H = np.zeros((d, d))
     if grad is not None:
         grad.append(np.array([(f[1 + 2 * i] - f[2 + 2 * i]) / (2 * h[i]) for i in range(d)]))
-    for i in range(d):
-        H[i, i] = (f[1 + 2 * i] - 2 * f[0] + f[2 + 2 * i]) / h[i] ** 2
-    for k, (i, j) in enumerate(pairs):
-        a = 1 + 2 * d + 4 * k
-        H[i, j] = H[j, i] = (f[a] - f[a + 1] - f[a + 2] + f[a + 3]) / (4 * h[i] * h[j])
+    with np.errstate(invalid="ignore"):  # a point off the prior (-inf) leaves NaN: the callers judge it
+        for i in range(d):
+            H[i, i] = (f[1 + 2 * i] - 2 * f[0] + f[2 + 2 * i]) / h[i] ** 2
+        for k, (i, j) in enumerate(pairs):
+            a = 1 + 2 * d + 4 * k
+            H[i, j] = H[j, i] = (f[a] - f[a + 1] - f[a + 2] + f[a + 3]) / (4 * h[i] * h[j])
     return H
 
 
@@ -388,8 +389,15 @@ def laplace(post: EventPosterior, u: np.ndarray, f: float) -> Laplace:
     at_bound = [j for j in range(post.nb, d) if u[j] < 1e-3 or u[j] > 1 - 1e-3]
     if at_bound:
         inner_ax = [j for j in range(d) if j not in at_bound]
-        Hi = -hessian(post, u, h, inner_ax)
-        require_finite("Laplace evidence: the Hessian at the MAP (parameters inside their range)", Hi)
+        # the inner effect axes a step inside the box, as for H (a step past a bound is off the prior)
+        ui = u.copy()
+        eff = [j for j in inner_ax if j >= post.nb]
+        ui[eff] = np.clip(u[eff], 2.01 * h[eff], 1 - 2.01 * h[eff])
+        Hi = -hessian(post, ui, h, inner_ax)
+        require_finite("Laplace evidence: the Hessian's diagonal at the MAP (parameters inside their range)",
+                       np.diag(Hi))
+        if not np.all(np.isfinite(Hi)):  # a corner point fell outside the prior: keep the diagonal
+            Hi = np.diag(np.where(np.isfinite(np.diag(Hi)), np.diag(Hi), 1.0 / h[inner_ax] ** 2))
         wi = np.linalg.eigvalsh(Hi) if inner_ax else np.zeros(0)
         wi = np.maximum(wi, 1e-12 * max(float(np.max(np.abs(wi), initial=0.0)), 1e-300))
         log_z = f + 0.5 * len(inner_ax) * math.log(2 * math.pi) - 0.5 * float(np.sum(np.log(wi)))
