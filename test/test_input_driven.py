@@ -83,3 +83,16 @@ def test_a_single_sensor_structure_is_tracked_by_frequency():
     freqs = res.observations.frequencies_hz
     assert freqs.shape[1] == 2, freqs
     np.testing.assert_allclose(np.sort(freqs, axis=1)[:, 0], fs)
+
+
+def test_a_handful_of_events_keeps_one_mode_through_a_drop_when_a_neighbour_is_seen_once():
+    """Five events, one sensor: the mode drops 10 % after the second (damage); in the third a
+    neighbouring mode (a lateral one, seen once) lies within the clustering cut-off of the mode's
+    first two frequencies. The drop is still one tracked mode; the neighbour, seen once, is none."""
+    fs = [[4.79], [4.80], [4.36, 4.56], [4.33], [4.32]]
+    ests = [ModalEstimate(f"w{i}", i, i + 1, ["f1"], [Mode(f, 0.05, np.array([1.0]), 1.0) for f in row])
+            for i, row in enumerate(fs)]
+    res = track(ests, TrackingConfig(reference_windows=5, min_presence=0.4))
+    freqs = res.observations.frequencies_hz
+    assert freqs.shape[1] == 1, freqs
+    np.testing.assert_allclose(freqs[:, 0], [4.79, 4.80, 4.36, 4.33, 4.32])

@@ -123,8 +123,13 @@ def _split_shared_windows(labels: np.ndarray, d: np.ndarray, win: np.ndarray, de
 def _merge_disjoint(labels: np.ndarray, d: np.ndarray, win: np.ndarray, cutoff: float) -> np.ndarray:
     """The converse: two neighbouring clusters that (almost) never share a window and whose mean
     distance is below three cut-offs are one mode whose frequency varied more than the cut-off
-    (amplitude softening between earthquakes, a season)."""
+    (amplitude softening between earthquakes, damage, a season). "Almost": in 10 % of the smaller
+    one's windows; in a record of fewer than ten windows (a handful of events, where 10 % is less than
+    one window and a neighbouring mode seen once joins a cluster by chance), in one window while both
+    hold three or more. In a window both hold, the member that lies farther from its own cluster
+    leaves and stands alone."""
     labels = labels.copy()
+    few = np.unique(win).size < 10
     while True:
         labs = np.unique(labels)
         best, pair = 3 * cutoff, None
@@ -133,14 +138,23 @@ def _merge_disjoint(labels: np.ndarray, d: np.ndarray, win: np.ndarray, cutoff: 
             for b in labs[i + 1:]:
                 mb = np.flatnonzero(labels == b)
                 shared = np.intersect1d(win[ma], win[mb]).size
-                if shared > 0.1 * min(np.unique(win[ma]).size, np.unique(win[mb]).size):
+                na, nb = np.unique(win[ma]).size, np.unique(win[mb]).size
+                if shared > max(0.1 * min(na, nb), 1.0 if few and min(na, nb) >= 3 else 0.0):
                     continue
                 dist = float(np.mean(d[np.ix_(ma, mb)]))
                 if dist < best:
                     best, pair = dist, (a, b)
         if pair is None:
             return labels
-        labels[labels == pair[1]] = pair[0]
+        a, b = pair
+        ma, mb = np.flatnonzero(labels == a), np.flatnonzero(labels == b)
+        for w in np.intersect1d(win[ma], win[mb]):
+            # each member's mean distance to the rest of its own cluster: the worse fit leaves
+            cands = [(float(np.mean(d[k, own[own != k]])) if own.size > 1 else 0.0, int(k))
+                     for own in (ma, mb) for k in own[win[own] == w]]
+            for _, k in sorted(cands)[1:]:
+                labels[k] = labels.max() + 1
+        labels[labels == b] = a
 
 
 def model_modes(spec: StructureSpec, sensors: list[str], n_modes: int = 8,
