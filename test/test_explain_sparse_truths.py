@@ -14,10 +14,10 @@ Thresholds (binomial, a method meeting the acceptance's rates passes with >= 99 
 * breathing crack (outside the vocabulary, >= 90 % acceptable): P(X = 0 | n=1, p=0.9) = 0.1 > 1 %,
   so one campaign cannot be judged at 99 %; it is run (a verdict) and not counted.
 
-The in-vocabulary figure is not met at this code (development figures in docs/explain.md's log:
-the nominal planar model's time-domain fit leaves NRMS near 100 % on these buildings and the
-per-event modal path pairs one or two modes), so that test is marked as an expected failure
-(strict: it turns red when it starts passing, to be promoted).
+The in-vocabulary figure is not met at this code: on seed 0 only the stiffness loss is named
+(development figures over seeds 0-3 in docs/explain.md, "Input-driven modes": stiffness loss 4/4,
+damper loss 3/4, amplitude damping 1/4, hysteretic and soil 0/4), so that test is marked as an
+expected failure (strict: it turns red when it starts passing, to be promoted).
 """
 
 from __future__ import annotations
