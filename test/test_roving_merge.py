@@ -14,6 +14,7 @@ from shm_ros.core.preprocess import PreprocessConfig, preprocess
 from shm_ros.core.roving.clock import estimate_clock_offset
 from shm_ros.core.roving.merge_post import merge_post, pair_modes
 from shm_ros.core.roving.merge_pre import merge_pre
+from shm_ros.core.roving.offline import merge_arrays
 from shm_ros.core.types import ModalEstimate, Mode
 
 REFS = ["r1", "r2"]
@@ -119,6 +120,24 @@ def test_post_merge_of_real_setups_matches_the_truth(building_setups):
                                        ).estimate)
     merged = merge_post(ests, refs)
     _check_against_truth(merged, names, truth)
+
+
+def test_merge_from_arrays_takes_the_roving_components_from_the_transmissibility(building_setups):
+    """The offline merge from arrays runs the tf pipeline's transmissibility step: roving channels
+    given before the references, components on the merged reference shape with the fit's std."""
+    sets, chans, refs, fs, truth, names = building_setups
+    sets = [y[:, ::-1] for y in sets]  # the roving channels first, as a recording may list them
+    chans = [ch[::-1] for ch in chans]
+    with so.single_blas_thread():
+        modes, notes = merge_arrays(sets, chans, refs, fs, CFG)
+        plain, _ = merge_arrays(sets, chans, refs, fs, CFG, transmissibility=False)
+    assert any("transmissibility" in n for n in notes)
+    _check_against_truth(modes, names, truth)
+    roving = [n for n in names if n not in refs]
+    for g, h in zip(modes[:3], plain[:3], strict=True):
+        std = np.array([g.shape_std[n] for n in roving])
+        assert np.isfinite(std).all() and (std > 0).all() and (std < 0.05).all(), std
+        assert not np.allclose(g.vector(roving), h.vector(roving), rtol=0, atol=1e-9)
 
 
 def test_pre_merge_of_real_setups_matches_the_truth(building_setups):

@@ -7,13 +7,12 @@ from then on, the samples whose filtered tf position lies at that point (the rul
 :func:`~shm_ros.core.roving.setups.cut_setups`) form the setup, with the clock offset corrected as
 offline. Each :meth:`LiveRoving.advise` identifies it and merges it with the setups already finished.
 
-**Shape std at the point.** The point's component of a mode is the reference's component times the
-transmissibility ``H = S_rp / S_rr`` at the mode's frequency (``r`` the reference with the largest
-component of that mode). Its random error over ``n_d`` independent spectral averages is
-``|H| sqrt(1 - gamma^2) / (|gamma| sqrt(2 n_d))`` (Bendat & Piersol, *Random Data*, 4th ed., eq. 9.90;
-``gamma^2`` the coherence), on the global scale times the reference's global component; it shrinks
-with the dwell and grows with the sensors' noise. It is combined in quadrature with the merge's own
-``shape_std`` at the point (the reference scale's standard error).
+**Shape std at the point.** The point's component of a mode and its standard error come from the
+references' transmissibility over the setup so far, the step the offline merge uses
+(:func:`~shm_ros.core.roving.transmissibility.roving_components`: the roving channel's short-time
+spectra fitted on all references' over the bins around the mode, times the merged reference shape);
+the fit's standard error shrinks with the dwell and grows with the sensors' noise. It is combined in
+quadrature with the merge's own ``shape_std`` at the point.
 
 **Global modes.** :meth:`LiveRoving.result` runs the offline pipeline
 (:func:`~shm_ros.core.roving.pipeline.roving_modes`) on everything received, so a recording replayed
@@ -25,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import scipy.signal as sig
 from scipy.optimize import linear_sum_assignment
 
 from shm_ros.core.band import nominal_frequencies
@@ -36,6 +34,7 @@ from shm_ros.core.roving.merge_post import GlobalMode, merge_post
 from shm_ros.core.roving.pipeline import AXIS, RovingConfig, RovingResult, prepare_setup, roving_modes
 from shm_ros.core.roving.setups import cut_setups, sensor_track, setup_channels
 from shm_ros.core.roving.transforms import TransformBuffer
+from shm_ros.core.roving.transmissibility import roving_components
 from shm_ros.core.structure import StructureSpec
 from shm_ros.core.types import ModalEstimate
 from shm_ros.errors import InputError
@@ -247,21 +246,14 @@ class LiveRoving:
 
     def _point_std(self, g: GlobalMode, y: np.ndarray, fs: float) -> float:
         """The point's shape std of mode ``g`` (module doc): transmissibility error and merge std."""
-        k = int(np.argmax([abs(g.shape[r]) for r in self.references]))
-        r, col = y[:, k], y[:, len(self.references)]
         nper = int(round(self.advice.segment_s * fs))
         if y.shape[0] < self.advice.min_segments * nper:
             return float("nan")
-        f, prr = sig.welch(r, fs, nperseg=nper)
-        _, ppp = sig.welch(col, fs, nperseg=nper)
-        _, prp = sig.csd(r, col, fs, nperseg=nper)
-        i = int(np.argmin(np.abs(f - g.frequency_hz)))
-        h = abs(prp[i]) / prr[i]
-        coh = min(max(abs(prp[i]) ** 2 / (prr[i] * ppp[i]), 1e-12), 1.0)
-        n_d = y.shape[0] / nper  # independent averages (non-overlapping segments)
-        std_t = h * abs(g.shape[self.references[k]]) * np.sqrt(1 - coh) / (np.sqrt(coh) * np.sqrt(2 * n_d))
+        ref = np.array([g.shape[r] for r in self.references])
+        _, err = roving_components(y[:, :len(self.references) + 1], fs, len(self.references), g.frequency_hz,
+                                   g.damping_ratio, ref, segment_s=self.advice.segment_s)
         std_m = g.shape_std.get(self._point, np.nan)
-        return float(np.hypot(std_t, std_m if np.isfinite(std_m) else 0.0))
+        return float(np.hypot(err[0], std_m if np.isfinite(std_m) else 0.0))
 
     def measured_and_candidates(self) -> tuple[list[str], list[str]]:
         """The references and visited points (this one included), and the points not visited yet."""
