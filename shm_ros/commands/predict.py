@@ -77,7 +77,8 @@ def predict_windows(model: Any, windows: list, posterior: Any, config: Any, cali
     ``calibration``: the windows the posterior was calibrated on (two or more: the model error is
     learnt from them by leave-one-event-out cross-validation; ``model_error``: that error already
     learnt, :func:`learn_model_error`); ``limits``: the structure's drift limits (each event's drift
-    risk, for models with drift ratios)."""
+    risk, for models with drift ratios; the out-of-calibration warnings whenever a model error was
+    learnt)."""
     import numpy as np
 
     from shm_ros.core.predict import draws_from_posterior, event_from_window, predict_event
@@ -98,7 +99,9 @@ def predict_windows(model: Any, windows: list, posterior: Any, config: Any, cali
         except (ValueError, np.linalg.LinAlgError) as exc:
             errors.append(f"window {w.window_id}: {exc}")
             continue
-        if any(c.quantity == "drift_ratio" for c in p.channels):
+        if model_error is not None or any(c.quantity == "drift_ratio" for c in p.channels):
+            # drift exceedance where the model has drift ratios; the PGA check wherever calibration
+            # events were given (a model without story heights still has an input PGA)
             p.risk = event_risk(p, limits)
             p.notes.extend(p.risk["warnings"])
         preds.append(p)
