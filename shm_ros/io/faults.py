@@ -10,6 +10,8 @@ kill: the write there fails with ``ENOSPC`` (a full disk) instead.
 Points: ``bag:write`` (a bag writer flushing a message: a large record is partly on disk when the
 process dies; the recorder flushes every message), ``identify:published``
 (after publishing the estimate of a window), ``ingest:published`` (after publishing a window),
+``update:published``, ``predict:published`` and ``explain:published`` (after publishing a
+posterior, a prediction, a verdict),
 ``store:commit`` (inside the track store's transaction of a window, before its commit),
 ``<any node>:close`` (on a stop, before the node closes its files), ``recorder:enospc`` and
 ``store:enospc`` (the next write fails as on a full disk). Without ``SHM_FAULT`` every call reads

@@ -29,6 +29,7 @@ from rclpy.publisher import Publisher
 from shm_ros.core.config import option
 from shm_ros.core.explain.config import ExplainConfig
 from shm_ros.core.explain.timedomain import TimeDomainConfig
+from shm_ros.io.faults import fault_point
 from shm_ros.ros import explain_worker, topics
 from shm_ros.ros.convert import tracked_row_from_msg, window_from_msg
 from shm_ros.ros.managed import ManagedNode
@@ -233,6 +234,7 @@ class ExplainNode(ManagedNode):
         if state != self.last.get(name):
             self.last[name] = state
             self.pub.publish(verdict_to_msg(verdict))
+            fault_point(self.get_name(), "published")  # a test hook: killed after a verdict
             self.get_logger().info(f"verdict from {count} {unit}: {text}")
         return accepted
 

@@ -28,6 +28,7 @@ from rclpy.publisher import Publisher
 
 from shm_ros.core.config import option
 from shm_ros.core.predict import PredictConfig
+from shm_ros.io.faults import fault_point
 from shm_ros.ros import predict_worker, topics
 from shm_ros.ros.convert import ns_to_time, window_from_msg
 from shm_ros.ros.managed import ManagedNode
@@ -162,6 +163,7 @@ class PredictNode(ManagedNode):
                 self.diag.report("error", f"prediction failed: {exc}", "prediction")
             else:
                 self.pub.publish(prediction_to_msg(pred))
+                fault_point(self.get_name(), "published")  # a test hook: killed after a prediction
                 self.done += 1
                 if self.settings.output_dir:
                     self.results.append((pred, row, self.future_model))

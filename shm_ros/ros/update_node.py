@@ -34,6 +34,7 @@ from rclpy.publisher import Publisher
 
 from shm_ros.core.bayes.update import Posterior, UpdateConfig
 from shm_ros.core.config import option
+from shm_ros.io.faults import fault_point
 from shm_ros.ros import topics, update_worker
 from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg, tracked_row_from_msg
 from shm_ros.ros.managed import ManagedNode
@@ -157,6 +158,7 @@ class UpdateNode(ManagedNode):
     def _publish(self, posterior: Posterior, n: int, took: float) -> None:
         self.posterior = posterior
         self.pub.publish(posterior_to_msg(posterior.summary_record(self.spec.name)))
+        fault_point(self.get_name(), "published")  # a test hook: killed after publishing a posterior
         if self.output_dir is not None:
             from shm_ros.io.posterior_files import write_posterior
 
