@@ -4,9 +4,13 @@ stamps of their diagnostics and the recorder's log times), not in wall time."""
 
 from __future__ import annotations
 
-import numpy as np
+import time
+from pathlib import Path
 
+import numpy as np
 from ros_helpers.graph import node_process, replay, running
+
+from shm_ros.io.errors import BagError
 
 FS = 50.0
 T0 = 1_714_521_600_000_000_000  # 2024-05-01T00:00:00Z: years before any wall time of a test run
@@ -20,6 +24,21 @@ sensors:
   - {id: f1, at: {floor: 1}, direction: x}
   - {id: f2, at: {floor: 2}, direction: x}
 """
+
+
+def _windows_written(out: Path) -> int:
+    """Windows in the recorder's open split: every message is on disk once written, and the
+    split, cut short as it is, is read up to its last complete message."""
+    from shm_ros.io.sources import open_source
+
+    count = 0
+    try:
+        for split in (p for p in out.glob("out_*") if p.is_dir()):
+            for m in open_source(split).messages():
+                count += m.topic == "/shm/windows"
+    except (BagError, OSError, ValueError):  # the end of what is written so far
+        pass
+    return count
 
 
 def test_nodes_on_sim_time_see_the_recordings_time(tmp_path):
@@ -37,6 +56,11 @@ def test_nodes_on_sim_time_see_the_recordings_time(tmp_path):
     recorder = node_process("recorder", {"output": str(out), "topics": ["/shm/windows", "/diagnostics"], **sim})
     with running(ingest, recorder, subscribers={"/shm/windows": 1}, publishers={"/shm/ingest/received": 1}):
         rep = replay(tmp_path / "bag", "--clock", "--clock-readers", "2")
+        # the replay ends when ingest has acknowledged the samples; the last window may still be on
+        # its way to the recorder: stop the nodes once it is in the open split (or after 60 s)
+        end = time.monotonic() + 60
+        while _windows_written(out) < 4 and time.monotonic() < end:
+            time.sleep(0.5)
     assert rep.returncode == 0, rep.stdout + rep.stderr
 
     end = T0 + int(SPAN_S * 1e9)
