@@ -14,8 +14,12 @@ fraction of an output channel's variance it added when it was taken, the largest
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import scipy.signal as sig
+
+from shm_ros.core.types import ModalEstimate, Window
 
 #: a mode that adds less than this share of every output channel's variance is not input-driven
 MIN_SHARE = 0.02
@@ -69,3 +73,23 @@ def input_shares(u: np.ndarray, y: np.ndarray, fs: float, frequency_hz: np.ndarr
         q = np.column_stack([q, bases[best]])
         explained = explained + gains[best]
     return shares, float(np.max(explained))
+
+
+def input_driven_modes(window: Window, est: ModalEstimate) -> tuple[ModalEstimate, int]:
+    """``est`` with only the modes that carry the window's measured input to its sensors, and the
+    number left out. Output-only estimates, and records the input does not drive (ambient vibration
+    beside a ground sensor, :data:`MIN_DRIVEN`), are kept whole."""
+    names = list(window.channel_names)
+    if est.method != "ssi-io" or window.input_channel not in names or not est.modes:
+        return est, 0
+    outs = [names.index(s) for s in est.sensor_ids if s in names and s != window.input_channel]
+    if not outs:
+        return est, 0
+    shares, driven = input_shares(window.samples[:, names.index(window.input_channel)],
+                                  window.samples[:, outs], window.sample_rate_hz,
+                                  np.array([m.frequency_hz for m in est.modes]),
+                                  np.array([m.damping_ratio for m in est.modes]))
+    if driven < MIN_DRIVEN:
+        return est, 0
+    kept = [m for m, s in zip(est.modes, shares, strict=True) if s >= MIN_SHARE]
+    return replace(est, modes=kept), len(est.modes) - len(kept)

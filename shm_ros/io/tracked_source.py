@@ -25,29 +25,6 @@ def event_ingest(spec: Any) -> Any:
     return IngestConfig(event_detector=EventDetector.EITHER) if spec.input_sensor_ids() else None
 
 
-def keep_input_driven(window: Any, est: Any) -> int:
-    """Keep the modes of an input-output estimate that carry the measured input to the sensors
-    (:mod:`shm_ros.core.input_driven`); the number left out. Output-only estimates, and records the
-    input does not drive (ambient vibration beside a ground sensor), are kept whole."""
-    from shm_ros.core.input_driven import MIN_DRIVEN, MIN_SHARE, input_shares
-
-    names = list(window.channel_names)
-    if est.method != "ssi-io" or window.input_channel not in names or not est.modes:
-        return 0
-    outs = [names.index(s) for s in est.sensor_ids if s in names and s != window.input_channel]
-    if not outs:
-        return 0
-    shares, driven = input_shares(window.samples[:, names.index(window.input_channel)], window.samples[:, outs],
-                          window.sample_rate_hz, np.array([m.frequency_hz for m in est.modes]),
-                          np.array([m.damping_ratio for m in est.modes]))
-    if driven < MIN_DRIVEN:
-        return 0
-    kept = [m for m, s in zip(est.modes, shares, strict=True) if s >= MIN_SHARE]
-    left_out = len(est.modes) - len(kept)
-    est.modes = kept
-    return left_out
-
-
 def _stderr(prog: str) -> Callable[[str], None]:
     return lambda text: print(f"{prog}: note: {text}", file=sys.stderr)
 
@@ -64,6 +41,7 @@ def tracked_observations_from_bag(bag: str, spec: Any, observed: list[str], wind
 
     from shm_ros.core.bayes.tracked import observations_from_tracking
     from shm_ros.core.identify import identify_window
+    from shm_ros.core.input_driven import input_driven_modes
     from shm_ros.core.tracking import TrackingConfig
     from shm_ros.core.tracking.batch import NoTrackedModes
     from shm_ros.io.recording import windows_from_bag
@@ -86,7 +64,8 @@ def tracked_observations_from_bag(bag: str, spec: Any, observed: list[str], wind
             except (ValueError, np.linalg.LinAlgError) as exc:
                 note(f"window {w.window_id}: not identified ({exc})")
                 continue
-            dropped += keep_input_driven(w, est)
+            est, left_out = input_driven_modes(w, est)
+            dropped += left_out
             estimates.append(est)
     if not estimates:
         raise NoWindowsError(f"{bag}: none of its {len(windows)} window(s) could be identified")
