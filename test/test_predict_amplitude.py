@@ -45,3 +45,15 @@ def test_draws_move_with_the_map_and_keep_their_spread():
     moved = spread.at_amplitude(0.4, np.random.default_rng(0)).theta
     assert np.allclose(moved[:, 1], 2.0 * theta[:, 1]) and not np.allclose(moved[:, 0], theta[:, 0])
     assert PosteriorDraws(theta, np.array([1.0, 1.0])).at_amplitude(0.4, np.random.default_rng(0)).theta is theta
+
+
+def test_error_grows_no_further_than_the_folds_were_held_out():
+    # two calibration events 12 % apart: both folds at D_f = ln(0.92 / 0.82); an event 30 % stronger
+    # than the strongest gets the held-out folds' error, not (D / D_f)^2 = 6 times their excess
+    d_f = np.log(0.92 / 0.82)
+    me = ModelError({"a": 0.1}, [0.82, 0.92], [[1.0, 1.0], [1.0, 1.0]], {"a": 0.05 / d_f ** 2},
+                    distance_max=d_f)
+    assert np.isclose(me.rel2_at("a", 0.92 * 1.3), 0.15)
+    assert np.isclose(me.rel2_at("a", 0.92 * np.exp(d_f / 2)), 0.1 + 0.05 / 4)  # inside: the trend
+    assert np.isclose(me.rel2_at(None, 10.0), 0.15)
+    assert me.to_json()["distance_max"] == d_f and _error().to_json()["distance_max"] is None

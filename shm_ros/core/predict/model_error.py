@@ -28,9 +28,16 @@ further apart they are). Per channel
 
 ``a`` the geometric mean of the events' own floors, ``b`` the least-squares slope of the folds'
 excess ``r_i^2 - a`` over ``D_i^2`` (through the origin, not below zero). An event between or at the
-calibration events' PGAs gets the floor plus the interpolation's share; one far outside their range
-the wider band its distance calls for. Unmeasured floors and drift ratios take the mean over the
-channels (the same term, through the model, see :mod:`.predict`).
+calibration events' PGAs gets the floor plus the interpolation's share; one further out the wider
+band its distance calls for, up to the largest distance a fold was held out at (``D`` is taken at
+most that far, ``distance_max``). Beyond it the folds say nothing about how the error grows: the
+equivalent-linear parameters are held at the nearest event's there rather than extrapolated, and
+the error is not extrapolated either (the out-of-calibration warning says the event lies there,
+:mod:`.risk`). Without that ceiling two calibration events of close PGAs (both folds at one small
+distance ``D_f``) would widen a later event's band by ``(D / D_f)^2`` - a factor 6 for an event 30 %
+stronger than two events 12 % apart - from a slope the folds never measured. Unmeasured floors and
+drift ratios take the mean over the channels (the same term, through the model, see
+:mod:`.predict`).
 """
 
 from __future__ import annotations
@@ -66,6 +73,7 @@ class ModelError:
     log_spread: list[float] = field(default_factory=list)
     folds: list[dict[str, Any]] = field(default_factory=list)
     method: str = "leave-one-event-out"
+    distance_max: float = float("inf")  # the largest distance a fold was held out at (``D`` goes no further)
 
     @property
     def pga_max(self) -> float:
@@ -78,9 +86,9 @@ class ModelError:
         return float(np.min(np.abs(np.log(pga / p)))) if pga > 0 and p.size else 0.0
 
     def rel2_at(self, channel: str | None, pga: float) -> float:
-        """``a + b D^2`` of ``channel``; an output no channel reads (None) the channels' mean, at
-        least ``unmeasured_rel2``."""
-        d2 = self.distance(pga) ** 2
+        """``a + b D^2`` of ``channel``, ``D`` at most ``distance_max``; an output no channel reads
+        (None) the channels' mean, at least ``unmeasured_rel2``."""
+        d2 = min(self.distance(pga), self.distance_max) ** 2
         if channel is None:
             return max(self.unmeasured_rel2, _mean(self.rel2) + _mean(self.distance_rel2) * d2)
         a = self.rel2.get(channel, _mean(self.rel2))
@@ -96,9 +104,13 @@ class ModelError:
         return {"method": self.method, "relative_error": {k: float(np.sqrt(v)) for k, v in self.rel2.items()},
                 "distance_relative_error": {k: float(np.sqrt(v)) for k, v in self.distance_rel2.items()},
                 "calibration_pgas_m_s2": list(self.pgas), "equivalent_linear_parameters": self.thetas,
-                "calibration_pga_max_m_s2": self.pga_max,
+                "calibration_pga_max_m_s2": self.pga_max, "distance_max": _finite(self.distance_max),
                 "unmeasured_relative_error": float(np.sqrt(self.unmeasured_rel2)),
                 "log_parameter_spread": list(self.log_spread), "folds": self.folds}
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 def _mean(d: dict[str, float]) -> float:
@@ -212,7 +224,7 @@ def cross_validated_error(model: AffineModel, events: list[EventRecord], theta0:
     slope = {c: _slope(v) for c, v in excess.items()}
     unmeasured = _mean({c: _geometric_mean(v) for c, v in held_out.items()})
     return ModelError(floor, [float(p) for p in pgas], [[float(x) for x in th] for th in thetas], slope,
-                      unmeasured, spread, folds)
+                      unmeasured, spread, folds, distance_max=max(f["distance"] for f in folds))
 
 
 def _geometric_mean(values: list[float]) -> float:
