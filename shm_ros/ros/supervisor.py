@@ -204,10 +204,14 @@ class Supervisor:
 
     def stop_all(self, timeout: float = 20.0) -> int:
         """SIGINT every child (a second one, as from a terminal's Ctrl-C, does no harm: a node
-        ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly (a node
-        that died earlier is in ``failures``, and in ``lost`` when it may have lost what it held;
-        :meth:`run` counts it)."""
+        ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly and no
+        node that died earlier may have lost what it held (those are in ``lost``, every death in
+        ``failures``)."""
         self._stopping = True
+        for name, proc in self.procs.items():  # died just before the stop, not yet seen by poll()
+            if name not in self._due and proc.poll() is not None and self.config.mode != "single":
+                self.failures.append(f"{name} exited with {proc.returncode}")
+                self.died[name] = self.died.get(name, 0) + 1
         self.lost = [name for name in self.died if self._may_have_lost(name)]
         for proc in self.procs.values():
             if proc.poll() is None:
@@ -215,6 +219,8 @@ class Supervisor:
         worst = 0
         end = time.monotonic() + timeout
         for name, proc in self.procs.items():
+            if name in self.died and proc.returncode is not None:  # died before the stop: in ``lost``
+                continue
             try:
                 code = proc.wait(timeout=max(end - time.monotonic(), 0.1))
             except subprocess.TimeoutExpired:
@@ -230,7 +236,7 @@ class Supervisor:
                 self.log(f"[supervisor] {name} stopped with exit code {code}")
                 worst = max(worst, 1)
         self._tmp.cleanup()
-        return max(worst, self.fatal_code)
+        return max(worst, self.fatal_code, 1 if self.lost else 0)
 
     def run(self) -> int:
         """Start, watch, and stop on SIGINT/SIGTERM (or when the graph cannot go on); returns the
@@ -249,7 +255,6 @@ class Supervisor:
                     time.sleep(0.2)
             finally:
                 code = self.stop_all()
-        code = max(code, 1 if self.lost else 0)
         lost = [f for f in self.failures if f.split()[0] in self.lost]
         if lost:
             self.log(f"[supervisor] what a node held when it died may be lost: {'; '.join(lost)}")
