@@ -10,8 +10,11 @@ rows, ingest's windows). The faulted run must end as the undisturbed one: the sa
 posterior within 0.1 posterior sd, the same prediction (the undisturbed run has every node in one
 process: less start-up, and the results do not depend on the layout); the recorded bag opens
 without salvage and holds every window, modal estimate, tracked row and prediction once, and the
-posterior and verdict once each; the graph exits 0 (every killed node came back and lost nothing: the exit code says that
-nothing was lost) and nothing is left running. Samplers as short as the namespaces test's (150 steps).
+posterior and verdict once each; the graph exits 0 (every killed node came back and lost nothing:
+the exit code says that nothing was lost) and nothing is left running. Samplers as short as the
+namespaces test's (150 steps).
+With ``SHM_FULL=1`` the same bag is then replayed again into a fresh graph on the same store and
+output bag: nothing recorded twice, the same results.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from __future__ import annotations
 import collections
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -27,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from conftest import full_size
 from test_graph_stops import _announced_running, _clean, _Family, _replay
 from test_supervisor import _Lines, _still_running, _wait_for
 
@@ -72,7 +77,8 @@ def _graph(sim: Path, work: Path, env: dict[str, str],
     """Run the graph on the recording until update, predict and explain are done with it (their
     restarted processes, when killed), then Ctrl-C to the supervisor; (exit code, its output, the
     replay's output, every process seen)."""
-    work.mkdir()
+    work.mkdir(exist_ok=True)  # a rerun: the same store and output bag
+    (work / "prediction" / "prediction.json").unlink(missing_ok=True)
     config = _config(work, sim / "structure.yaml", mode)
     sup = subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "run", str(config)], stdout=subprocess.PIPE,
                            stderr=subprocess.STDOUT, text=True, env=env)
@@ -134,9 +140,20 @@ def test_update_predict_and_explain_killed_after_publishing_come_back_with_the_s
     assert _clean(text), text
     assert len(seen) >= 10 and _still_running(seen) == [] and _announced_running(text) == [], text
 
-    ref, got = _bag(tmp_path / "reference"), _bag(tmp_path / "faulted")
-    # every window's outputs exactly once; the posterior and the verdict once each (a restarted node
-    # publishing the same result again is recorded once)
+    ref = _bag(tmp_path / "reference")
+    _same_results(ref, _bag(tmp_path / "faulted"))
+    if full_size():  # a rerun of the same bag on the same store and output bag changes nothing
+        code, text, replay_out, seen = _graph(sim, tmp_path / "faulted", dict(os.environ))
+        print(text[-3000:], replay_out[-500:])
+        assert code == 0 and _clean(text) and _still_running(seen) == [], text
+        skipped = re.search(r"\[recorder\]: recorded \d+ messages \((\d+) duplicates skipped\)", text)
+        assert skipped and int(skipped.group(1)) >= 3 * N_WINDOWS, text  # windows, estimates, rows again
+        _same_results(ref, _bag(tmp_path / "faulted"))
+
+
+def _same_results(ref, got) -> None:
+    """Every window's outputs once in both bags; the posterior and the verdict once each (a node
+    publishing the same result again is recorded once); ``got``'s results equal ``ref``'s."""
     for rec in (ref, got):
         for name, ids in (("windows", [w.window_id for w in rec.windows]),
                           ("estimates", [e.window_id for e in rec.estimates]),
