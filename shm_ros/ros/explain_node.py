@@ -46,7 +46,8 @@ from shm_ros.ros.worker_pool import WorkerPool
 class ExplainNodeConfig:
     structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
     min_windows: int = option(24, "tracked windows received before the first run")
-    min_new_windows: int = option(144, "new tracked windows before the next run (144: a day of 10-minute windows)")
+    min_new_windows: int = option(144, "tracked windows between runs: the next run comes when the count "
+                                  "reaches min_windows + k x this (144: a day of 10-minute windows)")
     output_dir: str | None = option(None, "directory of verdict.json and report.html, rewritten after "
                                     "every run (unset: not written); the event series' in its 'events' folder")
     events: str = option("auto", "explain the event windows in the time domain: auto (when the structure "

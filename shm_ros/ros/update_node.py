@@ -62,7 +62,8 @@ class UpdateNodeConfig:
                         "shm/tracked_modes) or estimates (shm/modal_estimates, without a track node)",
                         choices=UpdateInput)
     min_windows: int = option(10, "windows received before the first run")
-    min_new_windows: int = option(10, "new windows received before the next run")
+    min_new_windows: int = option(10, "windows between runs: the next run comes when the count of "
+                                  "windows received reaches min_windows + k x this, on every window by then")
     output_dir: str | None = option(None, "directory of posterior.json, rewritten after every run "
                                     "(unset: not written)")
 
