@@ -4,13 +4,8 @@ stamps of their diagnostics and the recorder's log times), not in wall time."""
 
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import numpy as np
-from ros_helpers.graph import node_process, replay, running
-
-from shm_ros.io.errors import BagError
+from ros_helpers.graph import node_process, replay, running, wait_for_windows
 
 FS = 50.0
 T0 = 1_714_521_600_000_000_000  # 2024-05-01T00:00:00Z: years before any wall time of a test run
@@ -24,21 +19,6 @@ sensors:
   - {id: f1, at: {floor: 1}, direction: x}
   - {id: f2, at: {floor: 2}, direction: x}
 """
-
-
-def _windows_written(out: Path) -> int:
-    """Windows in the recorder's open split: every message is on disk once written, and the
-    split, cut short as it is, is read up to its last complete message."""
-    from shm_ros.io.sources import open_source
-
-    count = 0
-    try:
-        for split in (p for p in out.glob("out_*") if p.is_dir()):
-            for m in open_source(split).messages():
-                count += m.topic == "/shm/windows"
-    except (BagError, OSError, ValueError):  # the end of what is written so far
-        pass
-    return count
 
 
 def test_nodes_on_sim_time_see_the_recordings_time(tmp_path):
@@ -58,9 +38,7 @@ def test_nodes_on_sim_time_see_the_recordings_time(tmp_path):
         rep = replay(tmp_path / "bag", "--clock", "--clock-readers", "2")
         # the replay ends when ingest has acknowledged the samples; the last window may still be on
         # its way to the recorder: stop the nodes once it is in the open split (or after 60 s)
-        end = time.monotonic() + 60
-        while _windows_written(out) < 4 and time.monotonic() < end:
-            time.sleep(0.5)
+        wait_for_windows(out, 4)
     assert rep.returncode == 0, rep.stdout + rep.stderr
 
     end = T0 + int(SPAN_S * 1e9)

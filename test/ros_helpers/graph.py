@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -105,6 +106,33 @@ def running(*procs: subprocess.Popen, subscribers: dict[str, int] | None = None,
 def replay(bag: Path, *extra: str, timeout: float = 300.0) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "shm_ros.cli", "replay", str(bag), *extra],
                           capture_output=True, text=True, timeout=timeout)
+
+
+def windows_written(out: Path) -> int:
+    """Windows in a running recorder's bag so far: every message is on disk once written, and the
+    open split, cut short as it is, is read up to its last complete message."""
+    from shm_ros.io.errors import BagError
+    from shm_ros.io.sources import open_source
+
+    count = 0
+    for split in sorted(p for p in out.glob("*") if p.suffix in (".mcap", ".db3")):  # the recorder's splits
+        try:
+            for m in open_source(split).messages():
+                count += m.topic == "/shm/windows"
+        except (BagError, OSError, ValueError):  # the end of what is written so far
+            pass
+    return count
+
+
+def wait_for_windows(out: Path, n: int, timeout: float = 15.0) -> None:
+    """Until ``n`` windows are in the running recorder's bag at ``out`` (or ``timeout`` s): a replay
+    ends when ingest has acknowledged the samples, and the last window may still be on its way to
+    the recorder; stopping the nodes before it arrives would lose it. An MCAP split being written
+    reads here only up to its last complete chunk, so the wait often runs to its timeout: a bound
+    well above a message's delivery time on a loaded machine (under a second)."""
+    end = time.monotonic() + timeout
+    while windows_written(out) < n and time.monotonic() < end:
+        time.sleep(0.5)
 
 
 def recorded_windows(bag: Path) -> list:
