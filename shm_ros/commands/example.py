@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import json
 import multiprocessing
 import shutil
 import sys
@@ -142,7 +143,45 @@ def run_part(name: str, files: Any, sc: Any, settings: dict[str, dict[str, Any]]
                                 track=settings["track"], update=settings["update"],
                                 predict=settings.get("predict"), explain=settings.get("explain"),
                                 expected_predictions=events if "predict" in settings else None,
+                                posterior_windows=settings["update"]["min_windows"]
+                                if "calibration_windows" in (settings.get("predict") or {}) else None,
                                 timeout_s=1800.0, log=lambda s: _log(f"{name}: {s}"))
+
+
+def calibration_files(part: dict[str, Any], out: Path) -> list[str]:
+    """With ``predict: {calibrate_on_earlier_events: N}`` the part is calibrated as a monitoring
+    system would be before its later earthquakes: the update node runs once, on the windows before
+    the first later earthquake (ambient windows and the first N earthquakes' windows, modal), and the
+    windows of the first N earthquakes, read from the recording, are written as window files
+    (``out/calibration``) and given to the predict node as ``calibration_windows`` (the time domain,
+    where the input is measured: each event's least-squares fit from the posterior's MAP and the
+    model error learnt out of sample, leave one event out). The later earthquakes are predicted.
+    Returns the calibration events' window ids (also in ``out/calibration/events.json``)."""
+    from shm_ros.errors import InputError
+    from shm_ros.io.recording import windows_from_bag
+    from shm_ros.io.structure import load_structure
+    from shm_ros.io.window_files import save_window, window_filename
+
+    pred = part["settings"].get("predict")
+    n = int((pred or {}).pop("calibrate_on_earlier_events", 0) or 0)
+    if not n:
+        return []
+    sc = part["scenario"]
+    quakes = sorted(int(e["window"]) for e in sc.earthquakes)
+    if n < 2 or len(quakes) <= n:
+        raise InputError(f"predict: calibrate_on_earlier_events: {n} needs two or more, and fewer than the "
+                         f"scenario's {len(quakes)} earthquakes (the later ones are predicted)")
+    part["settings"]["update"]["min_windows"] = quakes[n]  # one run, before the first later earthquake
+    windows, _ = windows_from_bag(part["files"].bag, load_structure(part["files"].structure), sc.window_s)
+    (out / "calibration").mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i in quakes[:n]:
+        paths.append(str(out / "calibration" / window_filename(i, windows[i])))
+        save_window(paths[-1], windows[i])
+    pred["calibration_windows"] = paths
+    ids = [windows[i].window_id for i in quakes[:n]]
+    (out / "calibration" / "events.json").write_text(json.dumps(ids))
+    return ids
 
 
 def run(args: argparse.Namespace) -> int:
@@ -180,6 +219,7 @@ def run(args: argparse.Namespace) -> int:
         study = pool.submit(study_job, g["stage"].tracking.observations, str(g["files"].structure),
                             dict(doc["girder"].get("study") or {}), str(out / "girder" / "study"))
     b = parts["building"]
+    b["calibration"] = calibration_files(b, out / "building")
     b["graph"] = run_part("building", b["files"], b["scenario"], b["settings"], out / "building")
     b["stage"] = write_stage_files(out / "building", b["graph"], b["settings"], doc)
     study_rows = None
