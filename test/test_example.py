@@ -64,9 +64,10 @@ def _frequency_errors(part_dir) -> dict[int, list[float]]:
     return out
 
 
-def _building_scores(part_dir, pred: dict, calibrating: set[str]) -> dict[str, list[float]]:
-    """Per predicted (not calibrating) earthquake: median over the measured channels of NRMS, of the
-    oracle's NRMS and of the strong-motion coverage."""
+def _building_scores(part_dir, pred: dict, calibrating: set[str]) -> dict[str, np.ndarray]:
+    """The predicted (not calibrating) earthquakes' scores as test_predict_bands.py pools them: per
+    event and measured channel the NRMS and the oracle's NRMS (events x channels), per event the
+    median strong-motion coverage over its measured channels."""
     from predict_bands import _oracle
 
     from shm_ros.core.models import build_model
@@ -82,17 +83,17 @@ def _building_scores(part_dir, pred: dict, calibrating: set[str]) -> dict[str, l
     by_id = {w.window_id: w for w in windows}
     events = [event_from_window(by_id[e["window_id"]], model) for e in later]
     cfg = PredictConfig(n_draws=0, seed=0)
-    theta_map = draws_from_posterior(load_posterior(part_dir / "update"), model, 0, np.random.default_rng(0),
-                                     cfg.relative_error).theta_map
+    theta_map = draws_from_posterior(load_posterior(part_dir / "calibration" / "posterior"), model, 0,
+                                     np.random.default_rng(0), cfg.relative_error).theta_map
     od = _oracle(model, events, theta_map, cfg)
-    out: dict[str, list[float]] = {"nrms": [], "oracle": [], "coverage": []}
+    out: dict[str, list] = {"nrms": [], "oracle": [], "coverage": []}
     for e, ev in zip(later, events, strict=True):
         measured = [c for c in e["channels"] if c["measured"]]
         oracle = predict_event(model, ev, od, cfg)
-        out["nrms"].append(float(np.median([c["nrms_pct"] for c in measured])))
-        out["oracle"].append(float(np.median([oracle.channel(c["name"]).scores["nrms_pct"] for c in measured])))
+        out["nrms"].append([c["nrms_pct"] for c in measured])
+        out["oracle"].append([oracle.channel(c["name"]).scores["nrms_pct"] for c in measured])
         out["coverage"].append(float(np.median([c["coverage_95_strong"] for c in measured])))
-    return out
+    return {k: np.asarray(v, float) for k, v in out.items()}
 
 
 def test_example_runs_every_node_and_reports(tmp_path):
@@ -120,12 +121,14 @@ def test_example_runs_every_node_and_reports(tmp_path):
     pred = json.loads((b / "prediction" / "prediction.json").read_text())
     assert len(pred["events"]) == 5 and pred["model"] == "updated" and len(pred["table3"]) == 5
     calibrating = set(json.loads((b / "calibration" / "events.json").read_text()))
-    post = json.loads((b / "update" / "posterior.json").read_text())
-    assert len(calibrating) == 2 and post["n_windows"] == 6  # the ambient windows and the first two earthquakes
+    assert len(calibrating) == 2 and "building: posteriors from update: 1 (last from 6 windows)" in run.stdout
+    td = json.loads((b / "calibration" / "posterior" / "posterior.json").read_text())
+    assert td["provenance"]["config"]["calibration"]["likelihood"] == "time", td["provenance"]
     sc = _building_scores(b, pred, calibrating)
     nrms, oracle, coverage = (float(np.median(sc[k])) for k in ("nrms", "oracle", "coverage"))
-    print(f"building, predicted earthquakes: NRMS {np.round(sc['nrms'], 1).tolist()} % (median {nrms:.1f} %), "
-          f"oracle {np.round(sc['oracle'], 1).tolist()} % (median {oracle:.1f} %), strong-motion coverage "
+    per_event = {k: np.round(np.median(sc[k], axis=1), 1).tolist() for k in ("nrms", "oracle")}
+    print(f"building, predicted earthquakes: NRMS per event {per_event['nrms']} % (median over events and channels "
+          f"{nrms:.1f} %), oracle {per_event['oracle']} % ({oracle:.1f} %), strong-motion coverage "
           f"{np.round(sc['coverage'], 3).tolist()} (median {coverage:.3f})")
     assert nrms <= max(25.0, oracle + 5.0), sc
     assert 0.85 <= coverage <= 0.99, sc

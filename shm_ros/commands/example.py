@@ -151,11 +151,12 @@ def run_part(name: str, files: Any, sc: Any, settings: dict[str, dict[str, Any]]
 def calibration_files(part: dict[str, Any], out: Path) -> list[str]:
     """With ``predict: {calibrate_on_earlier_events: N}`` the part is calibrated as a monitoring
     system would be before its later earthquakes: the update node runs once, on the windows before
-    the first later earthquake (ambient windows and the first N earthquakes' windows, modal), and the
+    the first later earthquake (the ambient windows' modes, and the first N earthquakes'), and the
     windows of the first N earthquakes, read from the recording, are written as window files
-    (``out/calibration``) and given to the predict node as ``calibration_windows`` (the time domain,
-    where the input is measured: each event's least-squares fit from the posterior's MAP and the
-    model error learnt out of sample, leave one event out). The later earthquakes are predicted.
+    (``out/calibration``): the time-domain step calibrates on them
+    (:mod:`~shm_ros.commands.example_calibration`, its posterior in ``out/calibration/posterior``)
+    and the predict node, given that posterior and these windows as ``calibration_windows``, learns
+    the model error out of sample (leave one event out) and predicts the later earthquakes.
     Returns the calibration events' window ids (also in ``out/calibration/events.json``)."""
     from shm_ros.errors import InputError
     from shm_ros.io.recording import windows_from_bag
@@ -179,6 +180,7 @@ def calibration_files(part: dict[str, Any], out: Path) -> list[str]:
         paths.append(str(out / "calibration" / window_filename(i, windows[i])))
         save_window(paths[-1], windows[i])
     pred["calibration_windows"] = paths
+    pred["posterior"] = str(out / "calibration" / "posterior")
     ids = [windows[i].window_id for i in quakes[:n]]
     (out / "calibration" / "events.json").write_text(json.dumps(ids))
     return ids
@@ -186,6 +188,7 @@ def calibration_files(part: dict[str, Any], out: Path) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from shm_ros.commands.checks import input_file, output_dir
+    from shm_ros.commands.example_calibration import finish_calibration, start_calibration
     from shm_ros.commands.example_outputs import study_job, write_report, write_stage_files
     from shm_ros.errors import InputError, ShmError
 
@@ -220,7 +223,9 @@ def run(args: argparse.Namespace) -> int:
                             dict(doc["girder"].get("study") or {}), str(out / "girder" / "study"))
     b = parts["building"]
     b["calibration"] = calibration_files(b, out / "building")
+    job = start_calibration(b, doc["building"], _log)  # the time-domain step, beside the graph
     b["graph"] = run_part("building", b["files"], b["scenario"], b["settings"], out / "building")
+    finish_calibration(job)
     b["stage"] = write_stage_files(out / "building", b["graph"], b["settings"], doc)
     study_rows = None
     if study is not None:

@@ -92,6 +92,15 @@ def write_stage_files(out: Path, graph: Any, settings: dict[str, dict[str, Any]]
     return st
 
 
+def _posterior_line(folder: Path) -> str:
+    """``: name MAP +- std, ...`` of the posterior in ``folder`` (empty without one)."""
+    f = folder / "posterior.json"
+    if not f.is_file():
+        return ": no time-domain posterior"
+    params = json.loads(f.read_text())["parameters"]
+    return ": " + ", ".join(f"{k} {v['map']:.4f} ± {v['std']:.4f}" for k, v in params.items())
+
+
 def later_events(payload: dict[str, Any], calibration: list[str]) -> dict[str, str]:
     """Per earthquake predicted out of sample (not among ``calibration``): the medians over its
     measured channels of NRMS and strong-motion coverage of the 95 % band, and its warnings."""
@@ -183,8 +192,8 @@ def write_report(out: Path, parts: dict[str, dict[str, Any]], study: dict[str, A
         **{f"building: {k}": v for k, v in b["stage"].facts.items()},
     }
     if prediction is not None and b.get("calibration"):
-        facts["building: calibration earthquakes (ambient windows and these, the model error learnt out of "
-              "sample)"] = ", ".join(b["calibration"])
+        facts["building: calibration earthquakes (time domain; prior: the ambient windows' modal posterior)"] = (
+            ", ".join(b["calibration"]) + _posterior_line(out / "building" / "calibration" / "posterior"))
         facts.update(later_events(prediction.payload, b["calibration"]))
     if study is not None:
         facts["Table 1 sweep"] = f"{len(study['rows'])} configurations in {study['wall_s']:.0f} s"
