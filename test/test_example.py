@@ -123,7 +123,7 @@ def test_example_runs_every_node_and_reports(tmp_path):
     calibrating = set(json.loads((b / "calibration" / "events.json").read_text()))
     assert len(calibrating) == 2 and "building: posteriors from update: 1 (last from 6 windows)" in run.stdout
     td = json.loads((b / "calibration" / "posterior" / "posterior.json").read_text())
-    assert td["provenance"]["config"]["calibration"]["likelihood"] == "time", td["provenance"]
+    assert td["provenance"]["configuration"]["calibration"]["likelihood"] == "time", td["provenance"]
     sc = _building_scores(b, pred, calibrating)
     nrms, oracle, coverage = (float(np.median(sc[k])) for k in ("nrms", "oracle", "coverage"))
     per_event = {k: np.round(np.median(sc[k], axis=1), 1).tolist() for k in ("nrms", "oracle")}
