@@ -44,8 +44,8 @@ class PredictionSection:
         if len(later) < len(events) and later:
             ms = [_measured(e) for e in later]
             outside = ", ".join(e["window_id"] for e in later if (e.get("risk") or {}).get("outside_calibration"))
-            intro += (f" {len(events) - len(later)} of them calibrated the model error (leave one event out); the "
-                      f"{len(later)} later one(s), predicted out of sample: median NRMS "
+            intro += (f" {len(events) - len(later)} of them are calibration events (the model error learnt from "
+                      f"them); the {len(later)} later one(s), predicted out of sample: median NRMS "
                       f"{_fmt(_median([c.get('nrms_pct') for m in ms for c in m]))} %, strong-motion coverage of "
                       f"the 95 % band {_fmt3(_median([_median([c.get('coverage_95_strong') for c in m]) for m in ms]))}"
                       f" (median over events){'; outside what the calibration saw: ' + outside if outside else ''}.")
