@@ -9,7 +9,10 @@ profile over it (a smoke-test size).
   update -> explain (+ recorder);
 * building: an eight-story building with a measured ground input, ambient windows then earthquakes,
   replayed through ingest -> identify -> track -> update -> predict (+ recorder); the predict node
-  waits for the update node's posterior and predicts the floors' responses to the measured input.
+  waits for the posterior and predicts the floors' responses to the measured input. With
+  ``calibrate_on_earlier_events`` (the packaged file: 2) the earlier earthquakes calibrate in the
+  time domain beside the graph, the update node's modal posterior as the prior
+  (:func:`calibration_files`), and the later ones are predicted.
 
 Each graph is separate processes over DDS; the stages overlap as data flows. While the building's
 graph runs, the bridge paper's Table 1 sweep (``shm-ros update --study``) runs on the girder's
