@@ -9,7 +9,10 @@ profile over it (a smoke-test size).
   update -> explain (+ recorder);
 * building: an eight-story building with a measured ground input, ambient windows then earthquakes,
   replayed through ingest -> identify -> track -> update -> predict (+ recorder); the predict node
-  waits for the update node's posterior and predicts the floors' responses to the measured input.
+  waits for the posterior and predicts the floors' responses to the measured input. With
+  ``calibrate_on_earlier_events`` (the packaged file: 2) the earlier earthquakes calibrate in the
+  time domain beside the graph, the update node's modal posterior as the prior
+  (:func:`calibration_files`), and the later ones are predicted.
 
 Each graph is separate processes over DDS; the stages overlap as data flows. While the building's
 graph runs, the bridge paper's Table 1 sweep (``shm-ros update --study``) runs on the girder's
@@ -24,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import json
 import multiprocessing
 import shutil
 import sys
@@ -142,11 +146,52 @@ def run_part(name: str, files: Any, sc: Any, settings: dict[str, dict[str, Any]]
                                 track=settings["track"], update=settings["update"],
                                 predict=settings.get("predict"), explain=settings.get("explain"),
                                 expected_predictions=events if "predict" in settings else None,
+                                posterior_windows=settings["update"]["min_windows"]
+                                if "calibration_windows" in (settings.get("predict") or {}) else None,
                                 timeout_s=1800.0, log=lambda s: _log(f"{name}: {s}"))
+
+
+def calibration_files(part: dict[str, Any], out: Path) -> list[str]:
+    """With ``predict: {calibrate_on_earlier_events: N}`` the part is calibrated as a monitoring
+    system would be before its later earthquakes: the update node runs once, on the windows before
+    the first later earthquake (the ambient windows' modes, and the first N earthquakes'), and the
+    windows of the first N earthquakes, read from the recording, are written as window files
+    (``out/calibration``): the time-domain step calibrates on them
+    (:mod:`~shm_ros.commands.example_calibration`, its posterior in ``out/calibration/posterior``)
+    and the predict node, given that posterior and these windows as ``calibration_windows``, learns
+    the model error out of sample (leave one event out) and predicts the later earthquakes.
+    Returns the calibration events' window ids (also in ``out/calibration/events.json``)."""
+    from shm_ros.errors import InputError
+    from shm_ros.io.recording import windows_from_bag
+    from shm_ros.io.structure import load_structure
+    from shm_ros.io.window_files import save_window, window_filename
+
+    pred = part["settings"].get("predict")
+    n = int((pred or {}).pop("calibrate_on_earlier_events", 0) or 0)
+    if not n:
+        return []
+    sc = part["scenario"]
+    quakes = sorted(int(e["window"]) for e in sc.earthquakes)
+    if n < 2 or len(quakes) <= n:
+        raise InputError(f"predict: calibrate_on_earlier_events: {n} needs two or more, and fewer than the "
+                         f"scenario's {len(quakes)} earthquakes (the later ones are predicted)")
+    part["settings"]["update"]["min_windows"] = quakes[n]  # one run, before the first later earthquake
+    windows, _ = windows_from_bag(part["files"].bag, load_structure(part["files"].structure), sc.window_s)
+    (out / "calibration").mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i in quakes[:n]:
+        paths.append(str(out / "calibration" / window_filename(i, windows[i])))
+        save_window(paths[-1], windows[i])
+    pred["calibration_windows"] = paths
+    pred["posterior"] = str(out / "calibration" / "posterior")
+    ids = [windows[i].window_id for i in quakes[:n]]
+    (out / "calibration" / "events.json").write_text(json.dumps(ids))
+    return ids
 
 
 def run(args: argparse.Namespace) -> int:
     from shm_ros.commands.checks import input_file, output_dir
+    from shm_ros.commands.example_calibration import finish_calibration, start_calibration
     from shm_ros.commands.example_outputs import study_job, write_report, write_stage_files
     from shm_ros.errors import InputError, ShmError
 
@@ -180,7 +225,10 @@ def run(args: argparse.Namespace) -> int:
         study = pool.submit(study_job, g["stage"].tracking.observations, str(g["files"].structure),
                             dict(doc["girder"].get("study") or {}), str(out / "girder" / "study"))
     b = parts["building"]
+    b["calibration"] = calibration_files(b, out / "building")
+    job = start_calibration(b, doc["building"], _log)  # the time-domain step, beside the graph
     b["graph"] = run_part("building", b["files"], b["scenario"], b["settings"], out / "building")
+    finish_calibration(job)
     b["stage"] = write_stage_files(out / "building", b["graph"], b["settings"], doc)
     study_rows = None
     if study is not None:

@@ -92,6 +92,30 @@ def write_stage_files(out: Path, graph: Any, settings: dict[str, dict[str, Any]]
     return st
 
 
+def _posterior_line(folder: Path) -> str:
+    """``: name MAP +- std, ...`` of the posterior in ``folder`` (empty without one)."""
+    f = folder / "posterior.json"
+    if not f.is_file():
+        return ": no time-domain posterior"
+    params = json.loads(f.read_text())["parameters"]
+    return ": " + ", ".join(f"{k} {v['map']:.4f} ± {v['std']:.4f}" for k, v in params.items())
+
+
+def later_events(payload: dict[str, Any], calibration: list[str]) -> dict[str, str]:
+    """Per earthquake predicted out of sample (not among ``calibration``): the medians over its
+    measured channels of NRMS and strong-motion coverage of the 95 % band, and its warnings."""
+    out = {}
+    for ev in payload.get("events", []):
+        if ev["window_id"] in calibration:
+            continue
+        m = [c for c in ev["channels"] if c["measured"]]
+        warn = "; ".join((ev.get("risk") or {}).get("warnings") or [])
+        out[f"building: predicted {ev['window_id']} (input PGA {ev['input_pga_m_s2']:.2f} m/s²)"] = (
+            f"NRMS {np.median([c['nrms_pct'] for c in m]):.1f} %, strong-motion coverage "
+            f"{np.median([c['coverage_95_strong'] for c in m]):.3f}" + (f"; warning: {warn}" if warn else ""))
+    return out
+
+
 def study_job(obs: Any, structure: str, sampler: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """The bridge paper's Table 1 sweep (``shm-ros update --study``) on tracked modes; writes
     ``study.json`` and ``study.txt`` into ``out_dir``. Runs in a worker process."""
@@ -167,6 +191,10 @@ def write_report(out: Path, parts: dict[str, dict[str, Any]], study: dict[str, A
                     f"ground input g0, simulated (seed {bs.seed}); nodes ingest, identify, track, update, predict",
         **{f"building: {k}": v for k, v in b["stage"].facts.items()},
     }
+    if prediction is not None and b.get("calibration"):
+        facts["building: calibration earthquakes (time domain; prior: the ambient windows' modal posterior)"] = (
+            ", ".join(b["calibration"]) + _posterior_line(out / "building" / "calibration" / "posterior"))
+        facts.update(later_events(prediction.payload, b["calibration"]))
     if study is not None:
         facts["Table 1 sweep"] = f"{len(study['rows'])} configurations in {study['wall_s']:.0f} s"
     facts["wall time"] = f"{time.monotonic() - t0:.0f} s"

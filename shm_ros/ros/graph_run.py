@@ -152,16 +152,18 @@ def replay_through_graph(bag: str | Path, structure: str | Path, workdir: str | 
                          explain: dict | None = None, expected_predictions: int | None = None,
                          expected_events: int | None = None, timeout_s: float = 600.0,
                          log: Callable[[str], None] = print, namespace: str = "",
-                         single_process: bool = False) -> GraphRun:
+                         single_process: bool = False, posterior_windows: int | None = None) -> GraphRun:
     """Start the analysis nodes and a recorder as processes, replay ``bag``, wait until every
-    window is identified (and tracked, and in a posterior, and ``expected_predictions`` predicted,
-    when those nodes run, and explained by the explain node: every window, or with ``expected_events``
-    that many event windows in the time domain), stop, collect."""
+    window is identified (and tracked, and in a posterior - or in one of ``posterior_windows``
+    windows when the update node is set to run on the first windows only -, and
+    ``expected_predictions`` predicted, when those nodes run, and explained by the explain node: every
+    window, or with ``expected_events`` that many event windows in the time domain), stop, collect."""
     nodes = analysis_nodes(structure, window_s, identify=identify, track=track, update=update, predict=predict,
                            explain=explain)
     return run_graph(bag, nodes, workdir, expected_windows=expected_windows,
                      expected_predictions=expected_predictions, expected_events=expected_events,
-                     timeout_s=timeout_s, log=log, namespace=namespace, single_process=single_process)
+                     timeout_s=timeout_s, log=log, namespace=namespace, single_process=single_process,
+                     posterior_windows=posterior_windows)
 
 
 def _explains_events(node: NodeSpec) -> bool:
@@ -189,7 +191,8 @@ def for_replay(nodes: list[NodeSpec]) -> list[NodeSpec]:
 def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
               expected_windows: int | None = None, expected_predictions: int | None = None,
               expected_events: int | None = None, timeout_s: float = 600.0,
-              log: Callable[[str], None] = print, namespace: str = "", single_process: bool = False) -> GraphRun:
+              log: Callable[[str], None] = print, namespace: str = "", single_process: bool = False,
+              posterior_windows: int | None = None) -> GraphRun:
     """Start ``nodes`` and a recorder (in ``namespace``, e.g. ``/bridge_a``, when given; all in one
     process with ``single_process``), replay ``bag`` into that namespace, wait until the graph is
     done with it (see :func:`replay_through_graph`), stop, collect."""
@@ -222,12 +225,12 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
         watcher = Node("shm_graph_watch", namespace=namespace or None)
         mine = status_prefix(namespace)
         seen: dict[str, set[str]] = {"estimates": set(), "tracked": set(), "predicted": set()}
-        posterior_windows = [0]
+        posterior_seen = [0]
         explained_windows = [0]
         explained_events = [0]
 
         def on_posterior(m: Any) -> None:
-            posterior_windows[0] = max(posterior_windows[0], int(m.n_windows))
+            posterior_seen[0] = max(posterior_seen[0], int(m.n_windows))
 
         watcher.create_subscription(topics.message_class(topics.TYPES[topics.MODAL_ESTIMATES]),
                                     topics.MODAL_ESTIMATES, lambda m: seen["estimates"].add(m.window_id),
@@ -293,7 +296,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                 return False
             return (len(seen["estimates"]) >= expected_windows
                     and ("track" not in kinds or len(seen["tracked"]) >= expected_windows)
-                    and ("update" not in kinds or posterior_windows[0] >= expected_windows)
+                    and ("update" not in kinds or posterior_seen[0] >= (posterior_windows or expected_windows))
                     and ("predict" not in kinds or len(seen["predicted"]) >= (expected_predictions or 0))
                     and ("explain" not in kinds or (explained_windows[0] >= expected_windows if expected_events is None
                                                     else explained_events[0] >= expected_events)))
@@ -315,7 +318,7 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
                 break
         log(f"identified {len(seen['estimates'])} windows"
             + (f", tracked {len(seen['tracked'])}" if "track" in kinds else "")
-            + (f", posterior from {posterior_windows[0]} windows" if "update" in kinds else "")
+            + (f", posterior from {posterior_seen[0]} windows" if "update" in kinds else "")
             + (f", predicted {len(seen['predicted'])}" if "predict" in kinds else "")
             + (f", explained {explained_windows[0]}" if "explain" in kinds else "")
             + (f", {explained_events[0]} events explained" if expected_events is not None else ""))
