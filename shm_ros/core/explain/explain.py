@@ -58,6 +58,10 @@ from .whiteness import residual_whiteness
 
 Progress = Callable[[str, float], None]
 SPARSE_WINDOWS = 40  # fewer training windows: sparse records (a few events), every candidate is tried
+# held-out blocks of a campaign of days: a third of a day, so that every n-th block (n = 4) goes round
+# the times of day, and a change the training windows place only within a held-out block (its time is
+# free across it) is followed by other held-out blocks, which judge it (scoring.judged_windows)
+BLOCK_S = 86400.0 / 3
 
 
 # -- baseline ----------------------------------------------------------------------------------------
@@ -72,7 +76,7 @@ def split(times_s: np.ndarray, config: ExplainConfig) -> np.ndarray:
     elif W < SPARSE_WINDOWS:  # sparse records (events days apart): every n-th event, interleaved
         block = np.arange(W)
     elif times_s[-1] - times_s[0] >= 4 * 86400.0:
-        block = ((times_s - times_s[0]) // 86400.0).astype(int)
+        block = ((times_s - times_s[0]) // BLOCK_S).astype(int)
     else:
         block = np.arange(W) // max(W // 8, 1)
     return (block % config.held_out_every) != config.held_out_every - 1
