@@ -189,7 +189,7 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
                     epoch: float, config: ExplainConfig) -> None:
     """The reported parameters (MAP and 95 % intervals) of the accepted effects, refitted on every
     window, training and held-out: the held-out windows have done their part (the acceptance) and
-    hold information the parameters need (a change inside a held-out day is placed only by its
+    hold information the parameters need (a change inside a held-out block is placed only by its
     windows). With several effects, one pass of backfitting: each refitted on top of the others at
     their latest values, so that the first, fitted alone, gives back what it took of the second's
     misfit (a step fitted before a knee takes some of the cold spell). A change time is searched over

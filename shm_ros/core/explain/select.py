@@ -6,7 +6,9 @@ A candidate is accepted when all three hold:
    largest gain over all candidates on clean replicates (no effect, the simulator's default model-form
    error), calibrated once offline by ``bench/calibrate_explain.py`` and shipped as
    ``threshold.json`` next to this module (``provisional`` there until the calibration has run);
-2. the frequency misfit on the **held-out windows** (never used in the fit) is smaller with it;
+2. the frequency misfit on the **held-out windows** (never used in the fit) is smaller with it; for an
+   effect that starts at a moment (a change time) the training windows place only within a held-out
+   block, on the other held-out windows, with it and without it alike (:func:`held_out_pair`);
 3. the 95 % interval of its **key parameter** excludes the value at which it is the nominal model.
 
 Accepted candidates within ``tie_nats`` of the most supported one, or whose best fits are within
