@@ -85,8 +85,8 @@ def test_clean_table_raises_no_alarm():
 def test_held_out_blocks_and_threshold_file():
     t = np.arange(8 * 144) * 600.0
     train = split(t, ExplainConfig())
-    assert 0.7 < train.mean() < 0.8  # every 4th day held out
-    assert not train[3 * 144:4 * 144].any() and train[:3 * 144].all()
+    assert 0.7 < train.mean() < 0.8  # every 4th block (a third of a day) held out
+    assert not train[3 * 48:4 * 48].any() and train[:3 * 48].all() and train[4 * 48:7 * 48].all()
     th = shipped_threshold()
     assert th["log_bayes_factor"] > 0 and "command" in th
 

@@ -10,7 +10,7 @@ from shm_ros.core.config import option
 @dataclass
 class ExplainConfig:
     held_out_every: int = option(4, "every n-th block of windows is held out of the fit and scores it")
-    block_windows: int = option(0, "windows per block (0: one day of windows, or W / 8 if shorter)")
+    block_windows: int = option(0, "windows per block (0: a third of a day of windows, or W / 8 if shorter)")
     threshold: float | None = option(None, "log Bayes factor a candidate must clear (unset: the shipped "
                                      "calibration, threshold.json)")
     tie_nats: float = option(2.0, "accepted candidates within this many nats of the best are reported together")

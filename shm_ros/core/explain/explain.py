@@ -11,8 +11,10 @@ fit ratio); each reads and adds fields of the run.
    frequencies (MAP: their priors and per-mode model-form offsets of unknown scale) and then kept
    fixed: the per-mode offsets absorb constant misfit, and the mean part of the candidates'
    likelihood integrates out a linearised re-calibration (:mod:`.likelihood`).
-2. **Split.** Windows fall in blocks (a day, or W/8 windows); every ``held_out_every``-th block is
-   held out of every fit and scores it afterwards.
+2. **Split.** Windows fall in blocks (a third of a day, or W/8 windows); every ``held_out_every``-th
+   block is held out of every fit and scores it afterwards. An effect that starts at a moment the
+   training windows place only within a held-out block is judged on the other held-out windows
+   (:func:`.scoring.judged_windows`).
 3. **Locate** (:mod:`.locate`, when present) proposes candidates and groups from the residuals;
    without it every registered candidate is tried on its default groups.
 4. **Fit** every proposal (:mod:`.fit`: MAP, evidence by importance sampling, intervals, prior
@@ -58,21 +60,26 @@ from .whiteness import residual_whiteness
 
 Progress = Callable[[str, float], None]
 SPARSE_WINDOWS = 40  # fewer training windows: sparse records (a few events), every candidate is tried
+# held-out blocks of a campaign of days: a third of a day, so that every n-th block (n = 4) goes round
+# the times of day, and a change the training windows place only within a held-out block (its time is
+# free across it) is followed by other held-out blocks, which judge it (scoring.judged_windows)
+BLOCK_S = 86400.0 / 3
 
 
 # -- baseline ----------------------------------------------------------------------------------------
 
 def split(times_s: np.ndarray, config: ExplainConfig) -> np.ndarray:
-    """Training mask (W,): every ``held_out_every``-th block of windows is held out (a block: a day of
-    windows, W/8 windows of a shorter campaign, or one window of sparse records, fewer than
-    ``SPARSE_WINDOWS``: held-out events interleaved with the training ones)."""
+    """Training mask (W,): every ``held_out_every``-th block of windows is held out (a block: a third
+    of a day of windows (``BLOCK_S``) in campaigns of four days or more, else W/8 windows, or one
+    window of sparse records, fewer than ``SPARSE_WINDOWS``: held-out events interleaved with the
+    training ones)."""
     W = len(times_s)
     if config.block_windows > 0:
         block = np.arange(W) // config.block_windows
     elif W < SPARSE_WINDOWS:  # sparse records (events days apart): every n-th event, interleaved
         block = np.arange(W)
     elif times_s[-1] - times_s[0] >= 4 * 86400.0:
-        block = ((times_s - times_s[0]) // 86400.0).astype(int)
+        block = ((times_s - times_s[0]) // BLOCK_S).astype(int)
     else:
         block = np.arange(W) // max(W // 8, 1)
     return (block % config.held_out_every) != config.held_out_every - 1

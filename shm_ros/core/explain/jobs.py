@@ -12,7 +12,7 @@ from .config import ExplainConfig
 from .fit import FitResult, fit
 from .form_check import form_gain
 from .likelihood import CandidateLikelihood
-from .scoring import damping_scores, scores
+from .scoring import damping_scores, judged_windows, scores
 from .surrogate import Surrogate
 from .types import CandidateResult
 
@@ -42,6 +42,10 @@ class Job:
     def gain(self, theta: np.ndarray) -> np.ndarray:
         d, dd = self.deltas(theta, self.train)
         return self.lik.gain(d, dd)
+
+    def reference_deltas(self):
+        """The changes of the model the candidate is compared with (the nominal model: none)."""
+        return None, None
 
 
 class OnTopJob(Job):
@@ -73,6 +77,11 @@ class OnTopJob(Job):
         joint, _ = Job.deltas(self, theta)
         parts, _ = self.deltas(theta)
         self.cross = None if joint is None or parts is None else (joint - parts)[0]
+
+    def reference_deltas(self):
+        """The effects it is fitted on top of, alone (the model it is compared with)."""
+        dd = None if self.fixed_mod.damping is None else np.log(np.maximum(self.fixed_mod.damping, 1e-9))[..., None]
+        return None if self.d_fixed is None else self.d_fixed[None], dd
 
     def deltas(self, theta: np.ndarray, windows: np.ndarray | None = None):
         sel = slice(None) if windows is None else windows
@@ -162,6 +171,7 @@ def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch:
         held_out_after=held_after)
     if delta is not None:
         res.extra["delta"] = delta  # (W, K) change of ln f at the MAP: ties (select.decide)
+        res.extra["fitted_windows"] = train
         mod = c.modify(np.atleast_2d(fr.theta_map))
         if mod.groups:  # the form flag's evidence (form_check): smooth functions of the effect's factor
             x = np.asarray(next(iter(mod.groups.values()))[0], float)
@@ -175,7 +185,26 @@ def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch:
     t0 = c.time(fr.theta_map)
     if t0 is not None:
         res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, t0))
+    judged = judged_windows(c.context.times_s, train, c.time_span(fr.theta_map, fr.intervals))
+    if judged.sum() < (~train).sum():
+        res.extra["held_out_check"] = held_out_check(job, fr.theta_map, r_all, z_all, train, judged)
     return res
+
+
+def held_out_check(job: Job, theta: np.ndarray, r_all: np.ndarray, z_all: np.ndarray | None, train: np.ndarray,
+                   judged: np.ndarray) -> dict:
+    """The held-out scores with the candidate (``after``) and with the model it is compared with
+    (``before``: the nominal model, or the effects it is fitted on top of) on the ``judged`` held-out
+    windows alone (:func:`.scoring.judged_windows`), how many of the held-out windows those are, and
+    the first and last window left out."""
+    out: dict = {}
+    for who, (d, dd) in (("after", job.deltas(theta)), ("before", job.reference_deltas())):
+        _, s = scores(r_all, None if d is None else d[0], train, judged)
+        if z_all is not None:
+            _, s.damping_rmse_pct = damping_scores(z_all, None if dd is None else dd[0], train, judged)
+        out[who] = s
+    left = np.flatnonzero(~train & ~judged)
+    return {**out, "windows": int(judged.sum()), "of": int((~train).sum()), "left_out": (int(left[0]), int(left[-1]))}
 
 
 def _form_on_damping(res: CandidateResult, job: Job, theta: np.ndarray, z_all: np.ndarray, train: np.ndarray) -> None:

@@ -84,19 +84,15 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
         res, job, fr = results[0]
         key = job.cand.key_parameter()
         null = next(sp.null for sp in job.specs if sp.name == key)
-        from .select import held_out_metric, null_excluded
+        from .select import held_out_pair, null_excluded
 
-        metric = held_out_metric(res)
-        held = getattr(res.held_out_after, metric) if res.held_out_after else None
-        held = math.inf if held is None else held
-        ref = getattr(held_after, metric)
-        ref = math.inf if ref is None else ref
+        metric, held, ref, where = held_out_pair(res, held_after)
         ok = res.log_evidence_gain > threshold and held < ref and null_excluded(res, key, null)
         res.reasons = [f"{'passed' if res.log_evidence_gain > threshold else 'failed'}: evidence gain "
                        f"{res.log_evidence_gain:.1f} nats on top of {', '.join(res.extra['on_top_of'])} vs "
                        f"threshold {threshold:.1f}",
                        f"{'passed' if held < ref else 'failed'}: held-out {metric} {held:.3f} vs {ref:.3f} "
-                       "without it"]
+                       "without it" + where]
         if not ok:
             tried.append(res)
             break
@@ -182,7 +178,7 @@ def time_unhinted(cand: Candidate) -> Candidate:
     with them fitted and every window in the likelihood, the time's profile peaks by hundreds of nats
     at the change. Candidates whose change window is not a parameter (it only places their on/off
     pattern) are returned as they are."""
-    if "change_index" not in cand.context.hints or not any(s.grid and s.unit == "s" for s in cand.params()):
+    if "change_index" not in cand.context.hints or not any(s.moment for s in cand.params()):
         return cand
     hints = {k: v for k, v in cand.context.hints.items() if k != "change_index"}
     return type(cand)(cand.group, dataclasses.replace(cand.context, hints=hints))
@@ -193,7 +189,7 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
                     epoch: float, config: ExplainConfig) -> None:
     """The reported parameters (MAP and 95 % intervals) of the accepted effects, refitted on every
     window, training and held-out: the held-out windows have done their part (the acceptance) and
-    hold information the parameters need (a change inside a held-out day is placed only by its
+    hold information the parameters need (a change inside a held-out block is placed only by its
     windows). With several effects, one pass of backfitting: each refitted on top of the others at
     their latest values, so that the first, fitted alone, gives back what it took of the second's
     misfit (a step fitted before a knee takes some of the cold spell). A change time is searched over

@@ -6,7 +6,9 @@ A candidate is accepted when all three hold:
    largest gain over all candidates on clean replicates (no effect, the simulator's default model-form
    error), calibrated once offline by ``bench/calibrate_explain.py`` and shipped as
    ``threshold.json`` next to this module (``provisional`` there until the calibration has run);
-2. the frequency misfit on the **held-out windows** (never used in the fit) is smaller with it;
+2. the frequency misfit on the **held-out windows** (never used in the fit) is smaller with it; for an
+   effect that starts at a moment (a change time) the training windows place only within a held-out
+   block, on the other held-out windows, with it and without it alike (:func:`held_out_pair`);
 3. the 95 % interval of its **key parameter** excludes the value at which it is the nominal model.
 
 Accepted candidates within ``tie_nats`` of the most supported one, or whose best fits are within
@@ -56,6 +58,25 @@ def held_out_metric(c: CandidateResult) -> str:
     return "damping_rmse_pct" if c.extra.get("acts_on") == "damping" else "frequency_rmse_pct"
 
 
+def held_out_pair(c: CandidateResult, reference: FitScores) -> tuple[str, float, float, str]:
+    """The held-out check's metric, the candidate's score and the score without it (``reference``:
+    the nominal model's, or the effects' it is fitted on top of), and where. A candidate that starts
+    at a moment the training windows cannot place among some held-out windows (``extra
+    ["held_out_check"]``, :func:`.jobs.held_out_check`) is judged, and its reference with it, on the
+    other held-out windows alone."""
+    metric = held_out_metric(c)
+    chk = c.extra.get("held_out_check")
+    after, before = (chk["after"], chk["before"]) if chk else (c.held_out_after, reference)
+    held = getattr(after, metric) if after is not None else None
+    ref = getattr(before, metric)
+    where = ""
+    if chk:
+        a, b = chk["left_out"]
+        where = (f" on {chk['windows']} of {chk['of']} held-out windows (windows {a}-{b}, among which the training "
+                 "windows cannot place its start, left out)")
+    return metric, math.inf if held is None else held, math.inf if ref is None else ref, where
+
+
 def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | None]], threshold: float,
            held_out_before: FitScores, catch_all: float | None, tie_nats: float,
            tie_fraction: float = 0.0, tie_corr: float = 0.95) -> list[CandidateResult]:
@@ -66,17 +87,13 @@ def decide(results: list[CandidateResult], keys: dict[str, tuple[str, float | No
     """
     for c in results:
         key, null = keys[c.label]
-        metric = held_out_metric(c)
-        held = getattr(c.held_out_after, metric) if c.held_out_after is not None else None
-        held = math.inf if held is None else held
-        before = getattr(held_out_before, metric)
-        before = math.inf if before is None else before
+        metric, held, before, where = held_out_pair(c, held_out_before)
         checks = [
             (c.log_evidence_gain > threshold,
              f"evidence gain {c.log_evidence_gain:.1f} nats vs threshold {threshold:.1f}"),
             (held < before,
              f"held-out {metric.replace('_rmse_pct', ' RMSE').replace('_pct', '')} {held:.3f} % vs {before:.3f} % "
-             "without it"),
+             "without it" + where),
             (null_excluded(c, key, null),
              f"95 % interval of {key} {_iv(c.intervals.get(key))} "
              + ("excludes" if null_excluded(c, key, null) else "includes") + f" the null value {null}"),
@@ -122,13 +139,18 @@ def _iv(iv: tuple[float, float] | None) -> str:
 
 def _alike(a: CandidateResult, b: CandidateResult, min_corr: float, fraction: float) -> bool:
     """The two fits say the same thing happened at the same times: in every mode that moves, their
-    changes of ln f over the windows (``extra["delta"]``) correlate at ``min_corr`` or more, so they
+    changes of ln f over the training windows (``extra["delta"]``) correlate at ``min_corr`` or more, so they
     differ only in how much each mode moves (the pattern that the analysis model's model-form error
     distorts: locate allows it 15 %); and their evidences differ by at most ``fraction`` of the best's
     gain (on many windows a pattern distortion of that kind still adds up to nats)."""
     da, db = a.extra.get("delta"), b.extra.get("delta")
     if fraction <= 0 or da is None or db is None or np.shape(da) != np.shape(db):
         return False
+    fitted = a.extra.get("fitted_windows")
+    if fitted is not None and np.shape(fitted) == np.shape(da)[:1]:
+        # compared where they were fitted: on held-out windows two fits may place a change the training
+        # windows cannot place (within a held-out block) at different points, which says nothing
+        da, db = np.asarray(da)[fitted], np.asarray(db)[fitted]
     if a.log_evidence_gain - b.log_evidence_gain > fraction * abs(a.log_evidence_gain):
         return False
     da = np.asarray(da, float) - np.nanmean(da, axis=0)

@@ -68,6 +68,17 @@ def change_time(context: Context) -> float:
     return float(context.times_s[int(context.hints["change_index"])])
 
 
+def hinted_time_span(context: Context) -> tuple[float, float]:
+    """Seconds since the first window within which locate placed the hinted change: the times of the
+    ends of ``change_span`` (a change inside held-out windows: those windows), else the change window's
+    (:meth:`.base.Candidate.time_span` of a candidate that starts at the hinted window itself)."""
+    i = int(context.hints["change_index"])
+    a, b = context.hints.get("change_span", (i, i))
+    t = np.asarray(context.times_s, float)
+    ends = [t[min(max(int(k), 0), t.size - 1)] for k in (a, b, i)]
+    return float(min(ends)), float(max(ends))
+
+
 def hinted_window_look_elsewhere(context: Context) -> float:
     """The look-elsewhere correction of a candidate that starts at locate's hinted change window
     itself (``change_index``; a change inside held-out windows: ``change_span``) instead of searching

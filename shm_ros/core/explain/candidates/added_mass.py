@@ -15,6 +15,7 @@ from ._common import (
     after_change,
     change_time,
     daily_windows,
+    hinted_time_span,
     hinted_window_look_elsewhere,
     hour_utc,
     hours_text,
@@ -62,6 +63,9 @@ class AddedMass(Candidate):
         if h.get("when") == "after" and "change_index" in h:
             return change_time(self.context)
         return None
+
+    def time_span(self, theta: np.ndarray, intervals: dict[str, tuple[float, float]]) -> tuple[float, float] | None:
+        return None if self.time(theta) is None else hinted_time_span(self.context)
 
     def look_elsewhere(self) -> float:
         """From the hinted window on: ln(full range / hinted range) (:func:`._common.hinted_window_look_elsewhere`)."""

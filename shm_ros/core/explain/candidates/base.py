@@ -32,6 +32,9 @@ class ParamSpec:
     # a parameter the likelihood is not smooth in (a knee, a change time): the fit scans it on a grid
     # and the evidence integrates it with a piecewise-constant proposal instead of a Gaussian one
     grid: bool = False
+    # a moment in the campaign (seconds since the first window, e.g. a change time): the held-out check
+    # leaves out the held-out windows the training windows cannot place it among (Candidate.time_span)
+    moment: bool = False
 
 
 @dataclass
@@ -88,6 +91,18 @@ class Candidate(ABC):
     def time(self, theta: np.ndarray) -> float | None:
         """Seconds since the first window at which the effect starts, if it starts at a moment."""
         return None
+
+    def time_span(self, theta: np.ndarray, intervals: dict[str, tuple[float, float]]) -> tuple[float, float] | None:
+        """Seconds since the first window within which the effect starts, as the data place it: its
+        ``time`` at ``theta`` widened by the 95 % intervals of its ``moment`` parameters; None when it
+        does not start at a moment. The held-out check leaves out the held-out windows between the
+        training windows that bracket this span (:func:`shm_ros.core.explain.scoring.judged_windows`):
+        the training windows cannot fix their prediction."""
+        t = self.time(theta)
+        if t is None:
+            return None
+        ends = [t, *(x for p in self.params() if p.moment and p.name in intervals for x in intervals[p.name])]
+        return float(min(ends)), float(max(ends))
 
     def look_elsewhere(self) -> float:
         """Nats taken off the evidence gain for a prior narrowed around a hint from locate (which read

@@ -38,7 +38,7 @@ class Step(Candidate):
 
     def params(self) -> list[ParamSpec]:
         lo, hi = self._range(True)
-        return [ParamSpec("size", -0.6, 0.4, null=0.0), ParamSpec("t0_s", lo, hi, unit="s", grid=True)]
+        return [ParamSpec("size", -0.6, 0.4, null=0.0), ParamSpec("t0_s", lo, hi, unit="s", grid=True, moment=True)]
 
     def look_elsewhere(self) -> float:
         (lo, hi), (a, b) = self._range(True), self._range(False)

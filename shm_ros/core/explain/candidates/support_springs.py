@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._common import after_change, change_time, hinted_window_look_elsewhere, temperatures
+from ._common import after_change, change_time, hinted_time_span, hinted_window_look_elsewhere, temperatures
 from .base import CANDIDATES, Candidate, Modification, ParamSpec
 
 
@@ -74,6 +74,9 @@ class SupportSprings(Candidate):
         if self._change() == "step":
             return change_time(self.context)
         return None
+
+    def time_span(self, theta: np.ndarray, intervals: dict[str, tuple[float, float]]) -> tuple[float, float] | None:
+        return None if self.time(theta) is None else hinted_time_span(self.context)
 
     def look_elsewhere(self) -> float:
         """From the hinted window on: ln(full range / hinted range) (:func:`._common.hinted_window_look_elsewhere`)."""
