@@ -66,6 +66,33 @@ def test_window_id_is_read_from_the_cdr_without_decoding():
             assert window_id_of(_cdr(wid, frame)) == wid
 
 
+def test_results_without_a_window_id_are_recorded_once_per_content(tmp_path):
+    """A posterior or verdict published again unchanged (a restarted update or explain node, a late
+    joiner's redelivery, a second replay) has the key of the one already in the bag; another has not."""
+    from rclpy.serialization import serialize_message
+    from shm_interfaces.msg import ParameterEstimate, PosteriorSummary, Verdict
+
+    from shm_ros.io.bag_splits import SplitBagWriter
+    from shm_ros.ros.recorder_node import record_key, recorded_keys
+
+    def posterior(mean: float) -> bytes:
+        return serialize_message(PosteriorSummary(n_windows=4, parameters=[ParameterEstimate(name="k", mean=mean)]))
+
+    verdict = serialize_message(Verdict(summary="mode 2 unmodelled"))
+    kinds = {"/shm/posterior": "shm_interfaces/msg/PosteriorSummary", "/shm/verdict": "shm_interfaces/msg/Verdict"}
+    w = SplitBagWriter(tmp_path / "out").open()
+    w.write_cdr("/shm/posterior", kinds["/shm/posterior"], 1, posterior(1.0))
+    w.write_cdr("/shm/verdict", kinds["/shm/verdict"], 2, verdict)
+    w.write_cdr(TOPIC, MSGTYPE, 3, _cdr("w1"))
+    w.close()
+    keys = recorded_keys(tmp_path / "out")
+    assert len(keys) == 3 and (TOPIC, "w1") in keys
+    assert ("/shm/posterior", record_key(kinds["/shm/posterior"], posterior(1.0))) in keys
+    assert ("/shm/verdict", record_key(kinds["/shm/verdict"], verdict)) in keys
+    assert ("/shm/posterior", record_key(kinds["/shm/posterior"], posterior(1.01))) not in keys
+    assert record_key("diagnostic_msgs/msg/DiagnosticArray", b"\0\1\0\0") is None  # every one recorded
+
+
 def test_a_writer_killed_mid_write_loses_only_that_message_and_the_bag_reads_as_one(tmp_path):
     from shm_ros.io.bag_splits import SplitBagWriter, read_info
     from shm_ros.io.sources import open_source

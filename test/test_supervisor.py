@@ -1,5 +1,7 @@
 """`shm-ros run` starts a three-node graph from a config, restarts a node that was killed, and
-Ctrl-C stops everything (exit code 1: a node died while the graph ran)."""
+Ctrl-C stops everything. The exit code follows what was lost: identify, killed and running again,
+takes up what it held from its inputs' history (lost nothing); ingest, killed, loses the samples of
+the window it was filling (exit code 1, named)."""
 
 from __future__ import annotations
 
@@ -127,6 +129,15 @@ def test_supervisor_restarts_a_killed_node_and_stops_cleanly(tmp_path):
         assert len(_children(sup.pid)) == 3
         logged = out.count("[identify]:")
         assert _wait_for(lambda: out.count("[identify]:") > logged, timeout=90), out.text()
+        # then ingest, whose restart cannot take up what it held; both back before the stop
+        victim = next(p for p, c in _children(sup.pid).items() if "ingest_node" in c)
+        os.kill(victim, signal.SIGKILL)
+        restarted = _wait_for(lambda: next((p for p, c in _children(sup.pid).items()
+                                             if "ingest_node" in c and p != victim), None))
+        assert restarted, "the killed ingest was not restarted"
+        seen.update(_identity([restarted]))
+        logged = out.count("[ingest]:")
+        assert _wait_for(lambda: out.count("[ingest]:") > logged, timeout=90), out.text()
         sup.send_signal(signal.SIGINT)
         sup.wait(timeout=40)
     finally:
@@ -134,14 +145,16 @@ def test_supervisor_restarts_a_killed_node_and_stops_cleanly(tmp_path):
             sup.kill()
             sup.wait()
     text = out.text(join_timeout=10)
-    # a node died while the graph ran (what it held may be lost): the exit code says so
+    # ingest died (what it held is lost): the exit code says so; identify came back and lost nothing
     assert sup.returncode == 1, text
-    assert "may be lost: identify exited with -9" in text
-    assert "restarting" in text
-    assert "all nodes stopped" in text
-    # every node process seen while the graph ran (the killed one, its replacement, the others)
+    assert "may be lost: ingest exited with -9" in text and "identify exited with -9;" not in text.split(
+        "may be lost")[-1], text
+    assert "recovered from their inputs: identify\n" in text, text
+    assert text.count("restarting") == 2
+    assert "all nodes stopped (exit code 1)" in text
+    # every node process seen while the graph ran (the killed ones, their replacements, the others)
     # is gone now that the supervisor has exited: no orphans
-    assert len(seen) == 4
+    assert len(seen) == 5
     assert _still_running(seen) == [], text
     assert (tmp_path / "out" / "metadata.yaml").exists()  # the recorder closed its bag cleanly
 

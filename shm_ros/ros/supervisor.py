@@ -79,10 +79,15 @@ class Supervisor:
     times); SIGINT or SIGTERM stops all cleanly.
 
     A node that exits with code 2 has a bad configuration (or a full disk): it is not restarted, the
-    graph is stopped and the node's reason is logged (exit code 2). A node that died (and was restarted or not) may
-    have lost what it held, so the exit code is then 1; 0 means every node ran until the stop and
-    closed its files. The children die with the supervisor (``SHM_SUPERVISOR_PID``: each asks the
-    kernel for a parent-death signal), so killing it with SIGKILL leaves no node running."""
+    graph is stopped and the node's reason is logged (exit code 2). The exit code is 1 when something
+    may have been lost: a node died whose restart cannot take up what it held (the registry's
+    ``recovers``: ingest's samples of the window it was filling), or one that was not running again
+    (set up and spinning) at the stop, or was not restarted; or a node did not stop cleanly. A node
+    that died and came back, of a kind that takes up what it held from its inputs' history
+    (identify, track, update, predict, explain, recorder: transient-local topics, the track store),
+    lost nothing: the exit code stays 0 and the log names it. The children die with the supervisor
+    (``SHM_SUPERVISOR_PID``: each asks the kernel for a parent-death signal), so killing it with
+    SIGKILL leaves no node running."""
 
     def __init__(self, config: GraphConfig, log=print, autostart: bool = True) -> None:
         self.config = config
@@ -93,7 +98,9 @@ class Supervisor:
         self._due: dict[str, float] = {}  # node -> when it is respawned
         self._started: dict[str, float] = {}  # node -> when its current process started
         self._stopping = False
-        self.failures: list[str] = []  # nodes that died while the graph ran: what may have been lost
+        self.failures: list[str] = []  # nodes that died while the graph ran: "<node> exited with <code>"
+        self.died: dict[str, int] = {}  # node -> how often it died while the graph ran
+        self.lost: list[str] = []  # of those, the ones that may have lost what they held (set by stop_all)
         self.fatal = ""  # why the graph stopped by itself (a bad configuration, a node given up)
         self.fatal_code = 0
         self._tmp = tempfile.TemporaryDirectory(prefix="shm-ros-graph-")
@@ -106,6 +113,19 @@ class Supervisor:
 
     def _reason_file(self, name: str) -> Path:
         return Path(self._tmp.name) / f"{name}.reason"
+
+    def _up_file(self, name: str) -> Path:
+        """Written by the node once it is set up and spinning (:func:`~shm_ros.ros.node_main.report_up`)."""
+        return Path(self._tmp.name) / f"{name}.reason.up"
+
+    def _may_have_lost(self, name: str) -> bool:
+        """Whether the node ``name``, which died, may have lost what it held: its kind cannot take it
+        up again, or its current process is not running and spinning (not restarted, or not yet)."""
+        from shm_ros.ros.registry import node_kind as registry_entry
+
+        proc = self.procs.get(name)
+        back = proc is not None and proc.poll() is None and self._up_file(name).exists()
+        return not (back and registry_entry(self.plan[name].kind).recovers)
 
     def command(self, node: NodeSpec | NodeLaunch) -> list[str]:
         launch = self.plan[node.name]
@@ -120,6 +140,7 @@ class Supervisor:
 
     def start(self, node: NodeSpec | NodeLaunch) -> None:
         self._reason_file(node.name).unlink(missing_ok=True)
+        self._up_file(node.name).unlink(missing_ok=True)
         self.procs[node.name] = subprocess.Popen(self.command(node), env=self._env(node.name))
         self._started[node.name] = time.monotonic()
         self.log(f"[supervisor] started {node.name} (pid {self.procs[node.name].pid})")
@@ -166,6 +187,7 @@ class Supervisor:
                 self.fatal_code = 2
                 return f"{name} cannot go on: {reason or 'exit code 2 (a bad configuration)'}"
             self.failures.append(f"{name} exited with {code}")
+            self.died[name] = self.died.get(name, 0) + 1
             if now - self._started.get(name, now) >= STABLE_AFTER_S:
                 self.restarts[name] = 0
             if node.respawn and self.restarts[name] < self.config.max_restarts:
@@ -182,15 +204,23 @@ class Supervisor:
 
     def stop_all(self, timeout: float = 20.0) -> int:
         """SIGINT every child (a second one, as from a terminal's Ctrl-C, does no harm: a node
-        ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly (a node
-        that died earlier is in ``failures``; :meth:`run` counts it)."""
+        ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly and no
+        node that died earlier may have lost what it held (those are in ``lost``, every death in
+        ``failures``)."""
         self._stopping = True
+        for name, proc in self.procs.items():  # died just before the stop, not yet seen by poll()
+            if name not in self._due and proc.poll() is not None and self.config.mode != "single":
+                self.failures.append(f"{name} exited with {proc.returncode}")
+                self.died[name] = self.died.get(name, 0) + 1
+        self.lost = [name for name in self.died if self._may_have_lost(name)]
         for proc in self.procs.values():
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
         worst = 0
         end = time.monotonic() + timeout
         for name, proc in self.procs.items():
+            if name in self.died and proc.returncode is not None:  # died before the stop: in ``lost``
+                continue
             try:
                 code = proc.wait(timeout=max(end - time.monotonic(), 0.1))
             except subprocess.TimeoutExpired:
@@ -206,7 +236,7 @@ class Supervisor:
                 self.log(f"[supervisor] {name} stopped with exit code {code}")
                 worst = max(worst, 1)
         self._tmp.cleanup()
-        return max(worst, self.fatal_code)
+        return max(worst, self.fatal_code, 1 if self.lost else 0)
 
     def run(self) -> int:
         """Start, watch, and stop on SIGINT/SIGTERM (or when the graph cannot go on); returns the
@@ -224,9 +254,12 @@ class Supervisor:
                         break
                     time.sleep(0.2)
             finally:
-                code = max(self.stop_all(), 1 if self.failures else 0)
-        if self.failures:
-            self.log(f"[supervisor] what a node held when it died may be lost: {'; '.join(self.failures)}")
+                code = self.stop_all()
+        lost = [f for f in self.failures if f.split()[0] in self.lost]
+        if lost:
+            self.log(f"[supervisor] what a node held when it died may be lost: {'; '.join(lost)}")
+        if recovered := [name for name in self.died if name not in self.lost]:
+            self.log("[supervisor] restarted after a crash, recovered from their inputs: " + ", ".join(recovered))
         self.log(f"[supervisor] all nodes stopped (exit code {code})")
         return code
 
