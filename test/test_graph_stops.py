@@ -211,6 +211,8 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
     assert sorted(p.name for p in marks.iterdir()) == ["bag.write", "identify.published", "store.commit"]
     # the exit code follows what was lost: 1 exactly when a killed node was not running again at the
     # stop (the recorder in its back-off, a restart still starting), 0 when the three came back
+    # (each node named once, whichever way it died: a restart still starting that the SIGTERM to the
+    # group ended is not a second death)
     lost, recovered = _named(text, "may be lost: "), _named(text, "recovered from their inputs: ")
     assert sorted(lost + recovered) == ["identify", "recorder", "track"], text
     assert code == (1 if lost else 0) and "all nodes stopped" in text, text

@@ -39,7 +39,7 @@ STREAMS = {topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES}
 #: message types whose fields begin with ``std_msgs/Header header`` and ``string window_id``
 WINDOW_KEYED = {"shm_interfaces/msg/Window", "shm_interfaces/msg/ModalEstimate", "shm_interfaces/msg/TrackedModes",
                 "shm_interfaces/msg/ResponsePrediction"}
-#: results without a window id: recorded once per content (their header stamps are not set)
+#: results without a window id: recorded once per content (:func:`canonical_cdr`)
 CONTENT_KEYED = {"shm_interfaces/msg/PosteriorSummary", "shm_interfaces/msg/Verdict"}
 
 
@@ -60,8 +60,31 @@ def record_key(msgtype: str, data: bytes) -> str | None:
     if msgtype in WINDOW_KEYED:
         return window_id_of(data)
     if msgtype in CONTENT_KEYED:
-        return "sha256:" + hashlib.sha256(data).hexdigest()
+        return "sha256:" + hashlib.sha256(canonical_cdr(msgtype, data)).hexdigest()
     return None
+
+
+def canonical_cdr(msgtype: str, data: bytes) -> bytes:
+    """The content of a CDR message of a :data:`CONTENT_KEYED` type as bytes that depend on its
+    fields only: decoded and encoded again (little endian, alignment padding zero) with the header
+    stamp cleared. The serialized message a publisher sends is not such bytes: Fast CDR leaves the
+    alignment padding as the buffer held it (heap garbage), and may send bytes beyond the last
+    field, so one result published twice, or by a restarted node, may differ there; and a stamp
+    set at publishing says when, not what. Bytes that do not decode are their own content."""
+    from dataclasses import replace
+
+    from shm_ros.io.typestore import typestore
+
+    ts = typestore()
+    msgdef = ts.get_msgdef(msgtype)
+    decode = msgdef.deserialize_cdr_le if data[1:2] == b"\x01" else msgdef.deserialize_cdr_be
+    try:  # what follows the last field is not read (the typestore's own check refuses it)
+        msg: Any = decode(memoryview(data)[4:], 0, msgdef.cls, ts)[0]
+    except (struct.error, IndexError, ValueError):  # malformed: keyed by its bytes
+        return bytes(data)
+    header = msg.header
+    msg = replace(msg, header=replace(header, stamp=replace(header.stamp, sec=0, nanosec=0)))
+    return bytes(ts.serialize_cdr(msg, msgtype))
 
 
 class Storage(enum.StrEnum):

@@ -98,9 +98,8 @@ class Supervisor:
         self._due: dict[str, float] = {}  # node -> when it is respawned
         self._started: dict[str, float] = {}  # node -> when its current process started
         self._stopping = False
-        self.failures: list[str] = []  # nodes that died while the graph ran: "<node> exited with <code>"
-        self.died: dict[str, int] = {}  # node -> how often it died while the graph ran
-        self.lost: list[str] = []  # of those, the ones that may have lost what they held (set by stop_all)
+        self.died: dict[str, list[int]] = {}  # node -> the exit codes of its deaths while the graph ran
+        self.lost: dict[str, str] = {}  # node -> why what it held may be lost (set by stop_all)
         self.fatal = ""  # why the graph stopped by itself (a bad configuration, a node given up)
         self.fatal_code = 0
         self._tmp = tempfile.TemporaryDirectory(prefix="shm-ros-graph-")
@@ -118,14 +117,25 @@ class Supervisor:
         """Written by the node once it is set up and spinning (:func:`~shm_ros.ros.node_main.report_up`)."""
         return Path(self._tmp.name) / f"{name}.reason.up"
 
-    def _may_have_lost(self, name: str) -> bool:
-        """Whether the node ``name``, which died, may have lost what it held: its kind cannot take it
-        up again, or its current process is not running and spinning (not restarted, or not yet)."""
+    def _why_lost(self, name: str) -> str:
+        """Why the node ``name``, which died, may have lost what it held ("" when it did not): its
+        kind cannot take it up again, or its current process is not running and spinning (not
+        restarted, or not yet)."""
         from shm_ros.ros.registry import node_kind as registry_entry
 
+        died = f"{name} exited with {' and '.join(str(c) for c in self.died[name])}"
+        if not registry_entry(self.plan[name].kind).recovers:
+            return f"{died} (a restart cannot take up what it held)"
         proc = self.procs.get(name)
-        back = proc is not None and proc.poll() is None and self._up_file(name).exists()
-        return not (back and registry_entry(self.plan[name].kind).recovers)
+        if name in self._due:
+            return f"{died} (waiting for its restart at the stop)"
+        if proc is None:
+            return f"{died} (not restarted)"
+        if not self._up_file(name).exists():
+            return f"{died} (its restart not yet up at the stop)"
+        if proc.returncode is not None:
+            return f"{died} (not running at the stop)"
+        return ""
 
     def command(self, node: NodeSpec | NodeLaunch) -> list[str]:
         launch = self.plan[node.name]
@@ -186,8 +196,7 @@ class Supervisor:
                 self.procs.pop(name)
                 self.fatal_code = 2
                 return f"{name} cannot go on: {reason or 'exit code 2 (a bad configuration)'}"
-            self.failures.append(f"{name} exited with {code}")
-            self.died[name] = self.died.get(name, 0) + 1
+            self.died.setdefault(name, []).append(code)
             if now - self._started.get(name, now) >= STABLE_AFTER_S:
                 self.restarts[name] = 0
             if node.respawn and self.restarts[name] < self.config.max_restarts:
@@ -205,22 +214,26 @@ class Supervisor:
     def stop_all(self, timeout: float = 20.0) -> int:
         """SIGINT every child (a second one, as from a terminal's Ctrl-C, does no harm: a node
         ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly and no
-        node that died earlier may have lost what it held (those are in ``lost``, every death in
-        ``failures``)."""
+        node that died may have lost what it held; ``lost`` names each node that makes it 1, once,
+        with why (``died`` has every death)."""
         self._stopping = True
+        at_stop = (-signal.SIGINT, -signal.SIGTERM)
         for name, proc in self.procs.items():  # died just before the stop, not yet seen by poll()
-            if name not in self._due and proc.poll() is not None and self.config.mode != "single":
-                self.failures.append(f"{name} exited with {proc.returncode}")
-                self.died[name] = self.died.get(name, 0) + 1
-        self.lost = [name for name in self.died if self._may_have_lost(name)]
-        for proc in self.procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        worst = 0
-        end = time.monotonic() + timeout
-        for name, proc in self.procs.items():
-            if name in self.died and proc.returncode is not None:  # died before the stop: in ``lost``
+            if name in self._due or proc.poll() is None:
                 continue
+            if proc.returncode in at_stop and not self._up_file(name).exists():
+                # ended by the stop's own signal (a Ctrl-C or SIGTERM to the process group) while it
+                # still started, before its handlers: it held nothing yet (a restart of a node that
+                # died is in ``died`` already, and counted below as not back at the stop)
+                self.log(f"[supervisor] {name} was still starting at the stop (exit code {proc.returncode})")
+            elif self.config.mode != "single":
+                self.died.setdefault(name, []).append(proc.returncode)
+        self.lost = {name: why for name in self.died if (why := self._why_lost(name))}
+        waited = {name: proc for name, proc in self.procs.items() if proc.returncode is None}
+        for proc in waited.values():
+            proc.send_signal(signal.SIGINT)
+        end = time.monotonic() + timeout
+        for name, proc in waited.items():
             try:
                 code = proc.wait(timeout=max(end - time.monotonic(), 0.1))
             except subprocess.TimeoutExpired:
@@ -230,13 +243,12 @@ class Supervisor:
                 except subprocess.TimeoutExpired:
                     proc.kill()
                     code = proc.wait()
-                self.log(f"[supervisor] {name} did not stop on SIGINT")
-                worst = 1
+                self.lost.setdefault(name, f"{name} did not stop on SIGINT (exit code {code})")
+                continue
             if code not in (0, -signal.SIGINT, 130):
-                self.log(f"[supervisor] {name} stopped with exit code {code}")
-                worst = max(worst, 1)
+                self.lost.setdefault(name, f"{name} stopped with exit code {code}")
         self._tmp.cleanup()
-        return max(worst, self.fatal_code, 1 if self.lost else 0)
+        return max(self.fatal_code, 1 if self.lost else 0)
 
     def run(self) -> int:
         """Start, watch, and stop on SIGINT/SIGTERM (or when the graph cannot go on); returns the
@@ -255,9 +267,8 @@ class Supervisor:
                     time.sleep(0.2)
             finally:
                 code = self.stop_all()
-        lost = [f for f in self.failures if f.split()[0] in self.lost]
-        if lost:
-            self.log(f"[supervisor] what a node held when it died may be lost: {'; '.join(lost)}")
+        if self.lost:
+            self.log(f"[supervisor] what a node held when it died may be lost: {'; '.join(self.lost.values())}")
         if recovered := [name for name in self.died if name not in self.lost]:
             self.log("[supervisor] restarted after a crash, recovered from their inputs: " + ", ".join(recovered))
         self.log(f"[supervisor] all nodes stopped (exit code {code})")
