@@ -302,15 +302,18 @@ def test_the_exit_code_names_each_node_that_lost_something_once_whatever_the_sto
 
 def test_a_node_back_and_spinning_and_one_ended_while_starting_lose_nothing(monkeypatch, tmp_path):
     """Exit code 0 when the only death was a recovering node that is back and spinning, even though
-    the stop's signal ended another node still starting (it held nothing); then a node that does
-    not stop on SIGINT makes it 1, named."""
-    sup, log = _stand_in_supervisor(monkeypatch, tmp_path, {"update": ["up", "up"], "predict": ["starting"]}, {})
+    the stop's signal ended another node still starting (it held nothing) and a third one stopped
+    cleanly on it before the supervisor's stop began; then a node that does not stop on SIGINT
+    makes it 1, named."""
+    sup, log = _stand_in_supervisor(monkeypatch, tmp_path, {"update": ["up", "up"], "predict": ["starting"],
+                                                            "track": ["up"]}, {})
     try:
         sup.start_all()
-        assert _up(sup, "update")
+        assert _up(sup, "update", "track")
         _kill(sup.procs["update"])
         assert sup.poll() == "" and sup.poll() == "" and _up(sup, "update")
         _kill(sup.procs["predict"], signal.SIGTERM)
+        _kill(sup.procs["track"], signal.SIGTERM)  # quicker than the supervisor: closed, exit code 0
         assert sup.stop_all() == 0 and sup.lost == {} and sup.died == {"update": [-9]}
     finally:
         for proc in sup.procs.values():

@@ -98,6 +98,7 @@ class Supervisor:
         self._due: dict[str, float] = {}  # node -> when it is respawned
         self._started: dict[str, float] = {}  # node -> when its current process started
         self._stopping = False
+        self._signals: Any = None  # the StopSignals of :meth:`run`: a stop asked for, not yet begun
         self.died: dict[str, list[int]] = {}  # node -> the exit codes of its deaths while the graph ran
         self.lost: dict[str, str] = {}  # node -> why what it held may be lost (set by stop_all)
         self.fatal = ""  # why the graph stopped by itself (a bad configuration, a node given up)
@@ -179,8 +180,8 @@ class Supervisor:
         must stop (a node with a bad configuration, or one not restarted), else ""."""
         now = time.monotonic()
         for name, node in self.plan.items():
-            if self._stopping:
-                return ""
+            if self._stopping or (self._signals is not None and self._signals.stopping):
+                return ""  # a node that ended meanwhile may have ended on the same signal: stop_all sees it
             if name in self._due:
                 if now >= self._due[name]:
                     del self._due[name]
@@ -217,16 +218,17 @@ class Supervisor:
         node that died may have lost what it held; ``lost`` names each node that makes it 1, once,
         with why (``died`` has every death)."""
         self._stopping = True
-        at_stop = (-signal.SIGINT, -signal.SIGTERM)
-        for name, proc in self.procs.items():  # died just before the stop, not yet seen by poll()
+        for name, proc in self.procs.items():  # ended before this stop saw it
             if name in self._due or proc.poll() is None:
                 continue
-            if proc.returncode in at_stop and not self._up_file(name).exists():
-                # ended by the stop's own signal (a Ctrl-C or SIGTERM to the process group) while it
-                # still started, before its handlers: it held nothing yet (a restart of a node that
-                # died is in ``died`` already, and counted below as not back at the stop)
-                self.log(f"[supervisor] {name} was still starting at the stop (exit code {proc.returncode})")
-            elif self.config.mode != "single":
+            if proc.returncode in (0, 130, -signal.SIGINT, -signal.SIGTERM):
+                # ended by the stop's own signal (a Ctrl-C or SIGTERM to the process group reaches
+                # every node as it reaches the supervisor): stopped cleanly, or, still starting
+                # (before its handlers), it held nothing yet (a restart of a node that died is in
+                # ``died`` already, and counted below as not back at the stop)
+                if not self._up_file(name).exists():
+                    self.log(f"[supervisor] {name} was still starting at the stop (exit code {proc.returncode})")
+            elif self.config.mode != "single":  # died just before the stop
                 self.died.setdefault(name, []).append(proc.returncode)
         self.lost = {name: why for name in self.died if (why := self._why_lost(name))}
         waited = {name: proc for name, proc in self.procs.items() if proc.returncode is None}
@@ -257,6 +259,7 @@ class Supervisor:
 
         die_with_parent()  # a supervisor run by a supervisor (single-process mode)
         with StopSignals() as stop:
+            self._signals = stop
             try:
                 self.start_all()
                 while not stop.stopping:
