@@ -82,8 +82,8 @@ def canonical_cdr(msgtype: str, data: bytes) -> bytes:
         msg: Any = decode(memoryview(data)[4:], 0, msgdef.cls, ts)[0]
     except (struct.error, IndexError, ValueError):  # malformed: keyed by its bytes
         return bytes(data)
-    header = msg.header
-    msg = replace(msg, header=replace(header, stamp=replace(header.stamp, sec=0, nanosec=0)))
+    if (header := getattr(msg, "header", None)) is not None:
+        msg = replace(msg, header=replace(header, stamp=replace(header.stamp, sec=0, nanosec=0)))
     return bytes(ts.serialize_cdr(msg, msgtype))
 
 
