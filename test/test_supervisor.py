@@ -324,3 +324,16 @@ def test_a_node_back_and_spinning_and_one_ended_while_starting_lose_nothing(monk
     assert _up(sup, "update")
     assert sup.stop_all(timeout=1) == 1
     assert sup.lost == {"update": "update did not stop on SIGINT (exit code -15)"}, sup.lost
+
+
+def test_a_single_process_graph_that_died_before_the_stop_makes_the_exit_code_1(monkeypatch, tmp_path):
+    from shm_ros.ros.supervisor import GraphConfig, NodeSpec, Supervisor
+
+    script = tmp_path / "crash.py"
+    script.write_text("import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n")
+    monkeypatch.setattr(Supervisor, "single_command", lambda self: [sys.executable, str(script)])
+    log: list[str] = []
+    sup = Supervisor(GraphConfig([NodeSpec("update", "update")], mode="single"), log=log.append)
+    sup.start_all()
+    assert _wait_for(lambda: sup.procs["graph"].poll() is not None)
+    assert sup.stop_all() == 1 and sup.lost == {"graph": "graph stopped with exit code -9"}, sup.lost

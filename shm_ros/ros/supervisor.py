@@ -218,6 +218,7 @@ class Supervisor:
         node that died may have lost what it held; ``lost`` names each node that makes it 1, once,
         with why (``died`` has every death)."""
         self._stopping = True
+        crashed: dict[str, str] = {}  # the one process of a single-process graph, ended before the stop
         for name, proc in self.procs.items():  # ended before this stop saw it
             if name in self._due or proc.poll() is None:
                 continue
@@ -230,7 +231,9 @@ class Supervisor:
                     self.log(f"[supervisor] {name} was still starting at the stop (exit code {proc.returncode})")
             elif self.config.mode != "single":  # died just before the stop
                 self.died.setdefault(name, []).append(proc.returncode)
-        self.lost = {name: why for name in self.died if (why := self._why_lost(name))}
+            else:
+                crashed[name] = f"{name} stopped with exit code {proc.returncode}"
+        self.lost = {name: why for name in self.died if (why := self._why_lost(name))} | crashed
         waited = {name: proc for name, proc in self.procs.items() if proc.returncode is None}
         for proc in waited.values():
             proc.send_signal(signal.SIGINT)
