@@ -66,6 +66,84 @@ def test_window_id_is_read_from_the_cdr_without_decoding():
             assert window_id_of(_cdr(wid, frame)) == wid
 
 
+def _padding(data: bytes, msg_class, msg) -> list[int]:
+    """The offsets of ``data`` (``msg`` serialized) whose value does not matter: rclpy decodes ``msg``
+    whatever they hold (CDR's alignment padding)."""
+    from rclpy.serialization import deserialize_message
+
+    free = []
+    for i in range(4, len(data)):
+        flipped = bytearray(data)
+        flipped[i] ^= 0xAB
+        try:
+            if deserialize_message(bytes(flipped), msg_class) == msg:
+                free.append(i)
+        except RuntimeError:  # a length or count changed beyond the buffer
+            pass
+    return free
+
+
+def test_results_without_a_window_id_are_recorded_once_per_content(tmp_path):
+    """A posterior or verdict published again unchanged (a restarted update or explain node, a late
+    joiner's redelivery, a second replay) has the key of the one already in the bag, whatever its
+    bytes hold where the content is not: the alignment padding (Fast CDR leaves it as the buffer's
+    memory held it, so two serializations of one message differ there when the heap held other
+    data), the byte order, the header stamp. A result that differs in one field, by one ulp, has
+    another key."""
+    from rclpy.serialization import serialize_message
+    from shm_interfaces.msg import ParameterEstimate, PosteriorSummary, Verdict
+
+    from shm_ros.io.bag_splits import SplitBagWriter
+    from shm_ros.io.typestore import typestore
+    from shm_ros.ros.recorder_node import record_key, recorded_keys
+
+    kinds = {"/shm/posterior": "shm_interfaces/msg/PosteriorSummary", "/shm/verdict": "shm_interfaces/msg/Verdict"}
+
+    def posterior(mean: float = 1.0, name: str = "k") -> PosteriorSummary:
+        return PosteriorSummary(n_windows=4, parameters=[ParameterEstimate(name=name, mean=mean)])
+
+    def garbage_in_padding(msg) -> bytes:
+        data = serialize_message(msg)
+        free = _padding(data, type(msg), msg)
+        assert len(free) >= 3, free  # the test must reach some padding
+        dirty = bytearray(data)
+        for i in free:
+            dirty[i] = 0xAB
+        assert bytes(dirty) != data
+        return bytes(dirty)
+
+    def big_endian(data: bytes, msgtype: str) -> bytes:
+        ts = typestore()
+        msgdef = ts.get_msgdef(msgtype)
+        msg, _ = msgdef.deserialize_cdr_le(data[4:], 0, msgdef.cls, ts)  # (a published one may run on)
+        out = bytes(ts.serialize_cdr(msg, msgtype, little_endian=False))
+        assert out[1] == 0 and out != data
+        return out
+
+    verdict = Verdict(summary="mode 2 unmodelled")
+    published = {"/shm/posterior": serialize_message(posterior()), "/shm/verdict": serialize_message(verdict)}
+    w = SplitBagWriter(tmp_path / "out").open()
+    for t, (topic, data) in enumerate(published.items()):
+        w.write_cdr(topic, kinds[topic], t + 1, data)
+    w.write_cdr(TOPIC, MSGTYPE, 3, _cdr("w1"))
+    w.close()
+    keys = recorded_keys(tmp_path / "out")
+    assert len(keys) == 3 and (TOPIC, "w1") in keys
+    stamped = posterior()
+    stamped.header.stamp.sec, stamped.header.stamp.nanosec = 1_714_521_600, 5
+    for topic, msg, extra in (("/shm/posterior", posterior(), stamped), ("/shm/verdict", verdict, None)):
+        again = [published[topic], garbage_in_padding(msg), big_endian(published[topic], kinds[topic])]
+        if extra is not None:
+            again.append(serialize_message(extra))
+        for data in again:  # the same result published again: skipped
+            assert (topic, record_key(kinds[topic], data)) in keys, (topic, data.hex())
+    for other in (posterior(mean=float(np.nextafter(1.0, 2.0))), posterior(name="m")):
+        assert ("/shm/posterior", record_key(kinds["/shm/posterior"], serialize_message(other))) not in keys
+    other_verdict = serialize_message(Verdict(summary="mode 2 unmodelled", model_fits=True))
+    assert ("/shm/verdict", record_key(kinds["/shm/verdict"], other_verdict)) not in keys
+    assert record_key("diagnostic_msgs/msg/DiagnosticArray", b"\0\1\0\0") is None  # every one recorded
+
+
 def test_a_writer_killed_mid_write_loses_only_that_message_and_the_bag_reads_as_one(tmp_path):
     from shm_ros.io.bag_splits import SplitBagWriter, read_info
     from shm_ros.io.sources import open_source

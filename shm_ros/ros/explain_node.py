@@ -1,12 +1,13 @@
 """explain: tracked modes in, verdicts on missing physics out (docs/explain.md, docs/interfaces.md §5).
 
 Accumulates the track node's ``shm/tracked_modes`` (one row per window; a row sent again counts
-once). Once ``min_windows`` rows have arrived, and again after every ``min_new_windows`` new rows or
-when a replay ends (``shm/replay/done``), it explains all rows so far in a worker process
-(:mod:`shm_ros.ros.explain_worker`, the executor never waits) and publishes a ``Verdict`` on
-``shm/verdict`` (latched) when it is the first or when the set of accepted physics or whether the
-model fits changed, i.e. when the support for a missing effect crossed its threshold. ``output_dir``
-gets verdict.json, the figures' numbers and report.html after every run.
+once). Once ``min_windows`` rows have arrived, and again each time the count reaches the next step
+of ``min_new_windows`` after them (:mod:`shm_ros.ros.run_schedule`: a restarted node that takes up
+the rows in one burst runs at the same counts) or when a replay ends (``shm/replay/done``), it
+explains all rows so far in a worker process (:mod:`shm_ros.ros.explain_worker`, the executor
+never waits) and publishes a ``Verdict`` on ``shm/verdict`` (latched) when it is the first or when
+the set of accepted physics or whether the model fits changed, i.e. when the support for a missing
+effect crossed its threshold. ``output_dir`` gets verdict.json, the figures' numbers and report.html after every run.
 
 **Event series** (docs/explain.md, Time domain): with a structure that declares a measured input, the
 node also keeps the event windows of ``shm/windows`` (those ingest flags as events, docs/interfaces.md
@@ -36,6 +37,7 @@ from shm_ros.ros.managed import ManagedNode
 from shm_ros.ros.node_main import spin
 from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
+from shm_ros.ros.run_schedule import run_due
 from shm_ros.ros.timers import steady_timer
 from shm_ros.ros.worker_pool import WorkerPool
 
@@ -44,7 +46,8 @@ from shm_ros.ros.worker_pool import WorkerPool
 class ExplainNodeConfig:
     structure: str | None = option(None, "structure file (YAML, docs/interfaces.md §2); required")
     min_windows: int = option(24, "tracked windows received before the first run")
-    min_new_windows: int = option(144, "new tracked windows before the next run (144: a day of 10-minute windows)")
+    min_new_windows: int = option(144, "tracked windows between runs: the next run comes when the count "
+                                  "reaches min_windows + k x this (144: a day of 10-minute windows)")
     output_dir: str | None = option(None, "directory of verdict.json and report.html, rewritten after "
                                     "every run (unset: not written); the event series' in its 'events' folder")
     events: str = option("auto", "explain the event windows in the time domain: auto (when the structure "
@@ -182,7 +185,7 @@ class ExplainNode(ManagedNode):
         n = len(self.rows)
         if n < self.settings.min_windows or n == self.used:
             return False
-        return self.flush or self.used == 0 or n - self.used >= self.settings.min_new_windows
+        return self.flush or run_due(n, self.used, self.settings.min_windows, self.settings.min_new_windows)
 
     def _poll(self) -> None:
         if self.future is not None and self.future.done():

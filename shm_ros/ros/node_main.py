@@ -7,6 +7,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import rclpy
@@ -30,7 +31,8 @@ def overrides(parameters: dict[str, Any] | None, prefix: str = "") -> list[Param
 
 #: set by a supervisor in its children's environment: the node dies with that process
 SUPERVISOR_PID_ENV = "SHM_SUPERVISOR_PID"
-#: where a node writes why it could not start (a bad configuration), for its supervisor to report
+#: where a node writes why it could not start (a bad configuration), for its supervisor to report;
+#: the same name with ``.up`` once it runs (set up, spinning: a restarted node takes up its inputs)
 REASON_FILE_ENV = "SHM_EXIT_REASON_FILE"
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
@@ -97,6 +99,13 @@ def report_stop_reason(text: str) -> None:
             fh.write(text)
 
 
+def report_up() -> None:
+    """Under a supervisor, say that the node is set up and spinning (its ``.up`` file)."""
+    path = os.environ.get(REASON_FILE_ENV)
+    if path:
+        Path(path + ".up").touch()
+
+
 def spin(factory: Callable[[], Any], args: list[str] | None = None,
          executor_factory: Callable[[], Any] | None = None) -> int:
     """Run one node until shutdown. Callbacks run in a single-threaded executor (the
@@ -124,6 +133,7 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None,
                 return 2
             executor = (executor_factory or SingleThreadedExecutor)()
             executor.add_node(node)
+            report_up()
             # Wake up regularly: a signal is only handled once control is back in Python.
             while rclpy.ok() and not stop.stopping:
                 executor.spin_once(timeout_sec=0.2)

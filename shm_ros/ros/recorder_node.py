@@ -5,14 +5,18 @@ Restarts lose and duplicate nothing: each start writes a new split of the same b
 (:class:`~shm_ros.io.bag_splits.SplitBagWriter`: a split cut short by a crash is taken up first,
 every message is on disk once written), and a message that carries a window id (windows, modal
 estimates, tracked modes, predictions) is recorded once per topic and window: one published
-again after a restart upstream, or re-published for a second replay, is counted and skipped. A full
-disk stops the recording with an error naming the bag; what was recorded is kept.
+again after a restart upstream, or re-published for a second replay, is counted and skipped. The
+results without a window id (posteriors, verdicts: latched) are recorded once per topic and content:
+the same result published again (by a restarted update or explain node that redid its run, to a
+restarted recorder as a late joiner, by a second replay) is skipped; a different one is recorded. A
+full disk stops the recording with an error naming the bag; what was recorded is kept.
 """
 
 from __future__ import annotations
 
 import enum
 import errno
+import hashlib
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +39,8 @@ STREAMS = {topics.WINDOWS, topics.MODAL_ESTIMATES, topics.TRACKED_MODES}
 #: message types whose fields begin with ``std_msgs/Header header`` and ``string window_id``
 WINDOW_KEYED = {"shm_interfaces/msg/Window", "shm_interfaces/msg/ModalEstimate", "shm_interfaces/msg/TrackedModes",
                 "shm_interfaces/msg/ResponsePrediction"}
+#: results without a window id: recorded once per content (:func:`canonical_cdr`)
+CONTENT_KEYED = {"shm_interfaces/msg/PosteriorSummary", "shm_interfaces/msg/Verdict"}
 
 
 def window_id_of(data: bytes) -> str:
@@ -46,6 +52,39 @@ def window_id_of(data: bytes) -> str:
     off = 4 + ((off + 4 + n - 4 + 3) & ~3)  # strings are 4-aligned (from after the encapsulation)
     (n,) = struct.unpack_from(f"{end}I", data, off)
     return data[off + 4:off + 3 + n].decode("utf-8", "replace")
+
+
+def record_key(msgtype: str, data: bytes) -> str | None:
+    """What a message is recorded once by (with its topic): the window id of a :data:`WINDOW_KEYED`
+    message, the digest of a :data:`CONTENT_KEYED` one; None: every message is recorded."""
+    if msgtype in WINDOW_KEYED:
+        return window_id_of(data)
+    if msgtype in CONTENT_KEYED:
+        return "sha256:" + hashlib.sha256(canonical_cdr(msgtype, data)).hexdigest()
+    return None
+
+
+def canonical_cdr(msgtype: str, data: bytes) -> bytes:
+    """The content of a CDR message of a :data:`CONTENT_KEYED` type as bytes that depend on its
+    fields only: decoded and encoded again (little endian, alignment padding zero) with the header
+    stamp cleared. The serialized message a publisher sends is not such bytes: Fast CDR leaves the
+    alignment padding as the buffer held it (heap garbage), and may send bytes beyond the last
+    field, so one result published twice, or by a restarted node, may differ there; and a stamp
+    set at publishing says when, not what. Bytes that do not decode are their own content."""
+    from dataclasses import replace
+
+    from shm_ros.io.typestore import typestore
+
+    ts = typestore()
+    msgdef = ts.get_msgdef(msgtype)
+    decode = msgdef.deserialize_cdr_le if data[1:2] == b"\x01" else msgdef.deserialize_cdr_be
+    try:  # what follows the last field is not read (the typestore's own check refuses it)
+        msg: Any = decode(memoryview(data)[4:], 0, msgdef.cls, ts)[0]
+    except (struct.error, IndexError, ValueError):  # malformed: keyed by its bytes
+        return bytes(data)
+    if (header := getattr(msg, "header", None)) is not None:
+        msg = replace(msg, header=replace(header, stamp=replace(header.stamp, sec=0, nanosec=0)))
+    return bytes(ts.serialize_cdr(msg, msgtype))
 
 
 class Storage(enum.StrEnum):
@@ -72,8 +111,8 @@ class RecorderNode(ManagedNode):
         self.writer: SplitBagWriter | None = SplitBagWriter(out, storage=settings.storage).open()
         for note in self.writer.recovered:
             self.get_logger().warning(f"{out}: {note}")
-        # (topic, window id) of what the bag holds already, earlier splits included
-        self.recorded = recorded_windows(out)
+        # (topic, window id or digest) of what the bag holds already, earlier splits included
+        self.recorded = recorded_keys(out)
         self.count = 0
         self.duplicates = 0
         self.stopped = ""  # why recording stopped (a full disk)
@@ -95,13 +134,13 @@ class RecorderNode(ManagedNode):
         self.get_logger().info(f"recording to {out}")
 
     def _writer_for(self, topic: str, msgtype: str):
-        keyed = msgtype in WINDOW_KEYED
+        keyed = msgtype in WINDOW_KEYED or msgtype in CONTENT_KEYED
 
         def write(data: bytes) -> None:
             if self.writer is None:
                 return
             if keyed:
-                key = (topic, window_id_of(data))
+                key = (topic, record_key(msgtype, data))
                 if key in self.recorded:
                     self.duplicates += 1
                     return
@@ -144,8 +183,9 @@ class RecorderNode(ManagedNode):
         self.get_logger().info(f"recorded {self.count} messages ({self.duplicates} duplicates skipped)")
 
 
-def recorded_windows(path: Path) -> set[tuple[str, str]]:
-    """(topic, window id) of every window-keyed message in the bag at ``path`` (none if no bag)."""
+def recorded_keys(path: Path) -> set[tuple[str, str | None]]:
+    """(topic, :func:`record_key`) of every window- or content-keyed message in the bag at ``path``
+    (none if no bag)."""
     from shm_ros.io.bag_splits import read_info
     from shm_ros.io.bags import read_messages
 
@@ -153,8 +193,8 @@ def recorded_windows(path: Path) -> set[tuple[str, str]]:
     if not info or not info.get("relative_file_paths"):
         return set()
     keyed = [t["topic_metadata"]["name"] for t in info.get("topics_with_message_count") or []
-             if t["topic_metadata"]["type"] in WINDOW_KEYED]
-    return {(m.topic, window_id_of(m.data)) for m in read_messages(path, keyed)} if keyed else set()
+             if t["topic_metadata"]["type"] in WINDOW_KEYED | CONTENT_KEYED]
+    return {(m.topic, record_key(m.msgtype, m.data)) for m in read_messages(path, keyed)} if keyed else set()
 
 
 def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> RecorderNode:

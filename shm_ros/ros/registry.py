@@ -31,6 +31,10 @@ class NodeKind:
     respawn: bool = True
     #: part of the shipped graph (config/pipeline.yaml); False: started where a graph file names it
     default: bool = True
+    #: a restarted node takes up what the dead one held from its inputs' history (transient-local
+    #: topics, its store) within their depth; False: what it held is lost when it dies (ingest: the
+    #: samples of the windows it was filling; roving: the robot's plan)
+    recovers: bool = True
 
     @property
     def module(self) -> str:
@@ -48,7 +52,7 @@ class NodeKind:
 
 NODES: tuple[NodeKind, ...] = (
     NodeKind("ingest", "recording topics in, validated and aligned windows out",
-             ("shm_ros.ros.ingest_node:IngestNodeConfig", "shm_ros.core.ingest:IngestConfig")),
+             ("shm_ros.ros.ingest_node:IngestNodeConfig", "shm_ros.core.ingest:IngestConfig"), recovers=False),
     NodeKind("identify", "windows in, modal estimates out",
              ("shm_ros.ros.identify_node:IdentifyNodeConfig", "shm_ros.core.identify:IdentifyConfig")),
     NodeKind("track", "modal estimates in, tracked modes and novelty out",
@@ -62,7 +66,7 @@ NODES: tuple[NodeKind, ...] = (
     NodeKind("recorder", "pipeline topics into a bag", ("shm_ros.ros.recorder_node:RecorderNodeConfig",)),
     NodeKind("roving", "roving sensors and tf in, advice to the robot (RecordPoint action) and global modes out "
              "(for a structure with roving sensors; not in the shipped graph)",
-             ("shm_ros.ros.roving_node:RovingNodeConfig",), default=False),
+             ("shm_ros.ros.roving_node:RovingNodeConfig",), default=False, recovers=False),
 )
 KINDS: tuple[str, ...] = tuple(n.kind for n in NODES)
 DEFAULT_KINDS: tuple[str, ...] = tuple(n.kind for n in NODES if n.default)

@@ -79,10 +79,15 @@ class Supervisor:
     times); SIGINT or SIGTERM stops all cleanly.
 
     A node that exits with code 2 has a bad configuration (or a full disk): it is not restarted, the
-    graph is stopped and the node's reason is logged (exit code 2). A node that died (and was restarted or not) may
-    have lost what it held, so the exit code is then 1; 0 means every node ran until the stop and
-    closed its files. The children die with the supervisor (``SHM_SUPERVISOR_PID``: each asks the
-    kernel for a parent-death signal), so killing it with SIGKILL leaves no node running."""
+    graph is stopped and the node's reason is logged (exit code 2). The exit code is 1 when something
+    may have been lost: a node died whose restart cannot take up what it held (the registry's
+    ``recovers``: ingest's samples of the window it was filling), or one that was not running again
+    (set up and spinning) at the stop, or was not restarted; or a node did not stop cleanly. A node
+    that died and came back, of a kind that takes up what it held from its inputs' history
+    (identify, track, update, predict, explain, recorder: transient-local topics, the track store),
+    lost nothing: the exit code stays 0 and the log names it. The children die with the supervisor
+    (``SHM_SUPERVISOR_PID``: each asks the kernel for a parent-death signal), so killing it with
+    SIGKILL leaves no node running."""
 
     def __init__(self, config: GraphConfig, log=print, autostart: bool = True) -> None:
         self.config = config
@@ -93,7 +98,9 @@ class Supervisor:
         self._due: dict[str, float] = {}  # node -> when it is respawned
         self._started: dict[str, float] = {}  # node -> when its current process started
         self._stopping = False
-        self.failures: list[str] = []  # nodes that died while the graph ran: what may have been lost
+        self._signals: Any = None  # the StopSignals of :meth:`run`: a stop asked for, not yet begun
+        self.died: dict[str, list[int]] = {}  # node -> the exit codes of its deaths while the graph ran
+        self.lost: dict[str, str] = {}  # node -> why what it held may be lost (set by stop_all)
         self.fatal = ""  # why the graph stopped by itself (a bad configuration, a node given up)
         self.fatal_code = 0
         self._tmp = tempfile.TemporaryDirectory(prefix="shm-ros-graph-")
@@ -106,6 +113,30 @@ class Supervisor:
 
     def _reason_file(self, name: str) -> Path:
         return Path(self._tmp.name) / f"{name}.reason"
+
+    def _up_file(self, name: str) -> Path:
+        """Written by the node once it is set up and spinning (:func:`~shm_ros.ros.node_main.report_up`)."""
+        return Path(self._tmp.name) / f"{name}.reason.up"
+
+    def _why_lost(self, name: str) -> str:
+        """Why the node ``name``, which died, may have lost what it held ("" when it did not): its
+        kind cannot take it up again, or its current process is not running and spinning (not
+        restarted, or not yet)."""
+        from shm_ros.ros.registry import node_kind as registry_entry
+
+        died = f"{name} exited with {' and '.join(str(c) for c in self.died[name])}"
+        if not registry_entry(self.plan[name].kind).recovers:
+            return f"{died} (a restart cannot take up what it held)"
+        proc = self.procs.get(name)
+        if name in self._due:
+            return f"{died} (waiting for its restart at the stop)"
+        if proc is None:
+            return f"{died} (not restarted)"
+        if not self._up_file(name).exists():
+            return f"{died} (its restart not yet up at the stop)"
+        if proc.returncode is not None:
+            return f"{died} (not running at the stop)"
+        return ""
 
     def command(self, node: NodeSpec | NodeLaunch) -> list[str]:
         launch = self.plan[node.name]
@@ -120,6 +151,7 @@ class Supervisor:
 
     def start(self, node: NodeSpec | NodeLaunch) -> None:
         self._reason_file(node.name).unlink(missing_ok=True)
+        self._up_file(node.name).unlink(missing_ok=True)
         self.procs[node.name] = subprocess.Popen(self.command(node), env=self._env(node.name))
         self._started[node.name] = time.monotonic()
         self.log(f"[supervisor] started {node.name} (pid {self.procs[node.name].pid})")
@@ -148,8 +180,8 @@ class Supervisor:
         must stop (a node with a bad configuration, or one not restarted), else ""."""
         now = time.monotonic()
         for name, node in self.plan.items():
-            if self._stopping:
-                return ""
+            if self._stopping or (self._signals is not None and self._signals.stopping):
+                return ""  # a node that ended meanwhile may have ended on the same signal: stop_all sees it
             if name in self._due:
                 if now >= self._due[name]:
                     del self._due[name]
@@ -165,7 +197,7 @@ class Supervisor:
                 self.procs.pop(name)
                 self.fatal_code = 2
                 return f"{name} cannot go on: {reason or 'exit code 2 (a bad configuration)'}"
-            self.failures.append(f"{name} exited with {code}")
+            self.died.setdefault(name, []).append(code)
             if now - self._started.get(name, now) >= STABLE_AFTER_S:
                 self.restarts[name] = 0
             if node.respawn and self.restarts[name] < self.config.max_restarts:
@@ -182,15 +214,31 @@ class Supervisor:
 
     def stop_all(self, timeout: float = 20.0) -> int:
         """SIGINT every child (a second one, as from a terminal's Ctrl-C, does no harm: a node
-        ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly (a node
-        that died earlier is in ``failures``; :meth:`run` counts it)."""
+        ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly and no
+        node that died may have lost what it held; ``lost`` names each node that makes it 1, once,
+        with why (``died`` has every death)."""
         self._stopping = True
-        for proc in self.procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        worst = 0
+        crashed: dict[str, str] = {}  # the one process of a single-process graph, ended before the stop
+        for name, proc in self.procs.items():  # ended before this stop saw it
+            if name in self._due or proc.poll() is None:
+                continue
+            if proc.returncode in (0, 130, -signal.SIGINT, -signal.SIGTERM):
+                # ended by the stop's own signal (a Ctrl-C or SIGTERM to the process group reaches
+                # every node as it reaches the supervisor): stopped cleanly, or, still starting
+                # (before its handlers), it held nothing yet (a restart of a node that died is in
+                # ``died`` already, and counted below as not back at the stop)
+                if not self._up_file(name).exists():
+                    self.log(f"[supervisor] {name} was still starting at the stop (exit code {proc.returncode})")
+            elif self.config.mode != "single":  # died just before the stop
+                self.died.setdefault(name, []).append(proc.returncode)
+            else:
+                crashed[name] = f"{name} stopped with exit code {proc.returncode}"
+        self.lost = {name: why for name in self.died if (why := self._why_lost(name))} | crashed
+        waited = {name: proc for name, proc in self.procs.items() if proc.returncode is None}
+        for proc in waited.values():
+            proc.send_signal(signal.SIGINT)
         end = time.monotonic() + timeout
-        for name, proc in self.procs.items():
+        for name, proc in waited.items():
             try:
                 code = proc.wait(timeout=max(end - time.monotonic(), 0.1))
             except subprocess.TimeoutExpired:
@@ -200,13 +248,12 @@ class Supervisor:
                 except subprocess.TimeoutExpired:
                     proc.kill()
                     code = proc.wait()
-                self.log(f"[supervisor] {name} did not stop on SIGINT")
-                worst = 1
+                self.lost.setdefault(name, f"{name} did not stop on SIGINT (exit code {code})")
+                continue
             if code not in (0, -signal.SIGINT, 130):
-                self.log(f"[supervisor] {name} stopped with exit code {code}")
-                worst = max(worst, 1)
+                self.lost.setdefault(name, f"{name} stopped with exit code {code}")
         self._tmp.cleanup()
-        return max(worst, self.fatal_code)
+        return max(self.fatal_code, 1 if self.lost else 0)
 
     def run(self) -> int:
         """Start, watch, and stop on SIGINT/SIGTERM (or when the graph cannot go on); returns the
@@ -215,6 +262,7 @@ class Supervisor:
 
         die_with_parent()  # a supervisor run by a supervisor (single-process mode)
         with StopSignals() as stop:
+            self._signals = stop
             try:
                 self.start_all()
                 while not stop.stopping:
@@ -224,9 +272,11 @@ class Supervisor:
                         break
                     time.sleep(0.2)
             finally:
-                code = max(self.stop_all(), 1 if self.failures else 0)
-        if self.failures:
-            self.log(f"[supervisor] what a node held when it died may be lost: {'; '.join(self.failures)}")
+                code = self.stop_all()
+        if self.lost:
+            self.log(f"[supervisor] what a node held when it died may be lost: {'; '.join(self.lost.values())}")
+        if recovered := [name for name in self.died if name not in self.lost]:
+            self.log("[supervisor] restarted after a crash, recovered from their inputs: " + ", ".join(recovered))
         self.log(f"[supervisor] all nodes stopped (exit code {code})")
         return code
 

@@ -1,10 +1,10 @@
 """update: tracked modes in, posterior summary out (re-run as new windows arrive).
 
 Accumulates the track node's ``shm/tracked_modes`` (one row per window, mode identities kept
-across windows); on the first ``min_windows`` windows, and then whenever ``min_new_windows`` new
-ones have arrived, it builds one column per tracked mode and calls
-:func:`shm_ros.core.bayes.update.update` (which pairs the tracked modes with the model's modes
-once, behind the gate), warm-started from the last posterior; publishes ``shm/posterior``
+across windows); on the first ``min_windows`` windows, and then whenever the count reaches the
+next step of ``min_new_windows`` after them (:mod:`shm_ros.ros.run_schedule`), it builds one column
+per tracked mode and calls :func:`shm_ros.core.bayes.update.update` (which pairs the tracked
+modes with the model's modes once, behind the gate), warm-started from the last posterior; publishes ``shm/posterior``
 (latched) and writes ``posterior.json`` to ``output_dir`` when set. With ``input: estimates`` it
 runs without a track node: it takes ``shm/modal_estimates`` and pairs every window's modes with
 the prior-mean model instead (a spurious mode near a model frequency can then pass for a mode
@@ -41,6 +41,7 @@ from shm_ros.ros.managed import ManagedNode
 from shm_ros.ros.node_main import spin
 from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
+from shm_ros.ros.run_schedule import next_run_at, run_due
 from shm_ros.ros.timers import steady_timer
 from shm_ros.ros.worker_pool import WorkerPool
 
@@ -61,7 +62,8 @@ class UpdateNodeConfig:
                         "shm/tracked_modes) or estimates (shm/modal_estimates, without a track node)",
                         choices=UpdateInput)
     min_windows: int = option(10, "windows received before the first run")
-    min_new_windows: int = option(10, "new windows received before the next run")
+    min_new_windows: int = option(10, "windows between runs: the next run comes when the count of "
+                                  "windows received reaches min_windows + k x this, on every window by then")
     output_dir: str | None = option(None, "directory of posterior.json, rewritten after every run "
                                     "(unset: not written)")
 
@@ -125,8 +127,7 @@ class UpdateNode(ManagedNode):
 
     def _maybe_start(self) -> None:
         n = len(self.windows)
-        if n >= self.settings.min_windows and n - self.used >= (
-                self.settings.min_new_windows if self.used else 0):
+        if run_due(n, self.used, self.settings.min_windows, self.settings.min_new_windows):
             self.used = self.run_windows = n
             self.run_started = time.time()
             args = (list(self.windows.values()), self.input.value, self.config, self.posterior)
@@ -178,8 +179,8 @@ class UpdateNode(ManagedNode):
             self.diag.report("ok", text, "progress", received=received, sampling="true",
                              run_windows=self.run_windows, started_at=started)
         else:
-            need = self.settings.min_new_windows if self.used else self.settings.min_windows
-            text = f"waiting: {received - self.used} of {need} windows for the next run"
+            need = next_run_at(self.used, self.settings.min_windows, self.settings.min_new_windows)
+            text = f"waiting: {received} of {need} windows for the next run"
             self.diag.report("ok", text, "progress", received=received, sampling="false",
                              run_windows=self.used)
         self.diag.publish()
