@@ -33,7 +33,7 @@ import enum
 import time
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -77,6 +77,7 @@ class UpdateNodeConfig:
         None, "window files (.npz, as `shm-ros ingest --windows` writes) of recorded events: after each modal "
         "posterior they calibrate in the time domain, the modal posterior as the prior, written to "
         "<output_dir>/time (needs output_dir; unset: no time-domain step)")
+    calibration: EventCalibrationConfig = field(default_factory=EventCalibrationConfig)  # calibration.* parameters
 
 
 class UpdateNode(ManagedNode):
@@ -99,7 +100,7 @@ class UpdateNode(ManagedNode):
         build_model(self.spec)
         self.output_dir = Path(self.settings.output_dir) if self.settings.output_dir else None
         self.events = list(self.settings.calibration_windows or [])
-        self.events_config = load_config(self, EventCalibrationConfig, "calibration.")
+        self.events_config = self.settings.calibration
         if self.events:
             _check_events(self.get_name(), self.events, self.output_dir)
         self.events_future: Future | None = None  # the time-domain step of the last modal posterior
