@@ -105,6 +105,7 @@ class UpdateNode(ManagedNode):
             _check_events(self.get_name(), self.events, self.output_dir)
         self.events_future: Future | None = None  # the time-domain step of the last modal posterior
         self.events_started = 0.0
+        self.events_prior: Posterior | None = None  # the modal posterior of the last time-domain step
         try:
             self.input = UpdateInput(self.settings.input)
         except ValueError:
@@ -189,12 +190,17 @@ class UpdateNode(ManagedNode):
         level = "ok" if posterior.diagnostics.get("converged", False) else "warn"
         self.diag.report(level, f"{n} windows in {took:.1f} s: {summary}", "posterior")
         self.get_logger().info(f"posterior from {n} windows: {summary}")
-        if self.events and self.events_future is None:
-            modal = {k: v.to_dict() for k, v in posterior.parameters.items()}
-            self.events_started = time.time()
-            self.events_future = self.workers.submit(update_worker.run_events, self.events, modal,
-                                                     self.events_config)
-            self.diag.report("ok", f"time-domain step on {len(self.events)} events started", "posterior_time")
+        self._start_events()
+
+    def _start_events(self) -> None:
+        """The time-domain step on the events, the latest modal posterior as the prior (one at a time:
+        a modal posterior that arrives during a step starts the next one when it is done)."""
+        if not self.events or self.posterior is None or self.events_future is not None:
+            return
+        modal = {k: v.to_dict() for k, v in self.posterior.parameters.items()}
+        self.events_prior, self.events_started = self.posterior, time.time()
+        self.events_future = self.workers.submit(update_worker.run_events, self.events, modal, self.events_config)
+        self.diag.report("ok", f"time-domain step on {len(self.events)} events started", "posterior_time")
 
     def _collect_events(self) -> None:
         """Write the finished time-domain posterior (``<output_dir>/time``)."""
@@ -219,6 +225,8 @@ class UpdateNode(ManagedNode):
         level = "ok" if posterior.diagnostics.get("converged", False) else "warn"
         self.diag.report(level, f"{len(self.events)} events in {took:.1f} s: {summary}", "posterior_time")
         self.get_logger().info(f"time-domain posterior from {len(self.events)} events: {summary}")
+        if self.posterior is not self.events_prior:  # a newer modal posterior came meanwhile
+            self._start_events()
 
     def _progress(self) -> None:
         received = len(self.windows)
