@@ -11,6 +11,7 @@ import json
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from ros_helpers.graph import node_process, stop
 
@@ -20,6 +21,7 @@ from shm_ros.io.structure import load_structure
 from shm_ros.io.window_files import save_window
 from shm_ros.ros.predict_node import _likelihood
 
+ROOT = Path(__file__).resolve().parents[1]
 WINDOW_S, N_WINDOWS = 20.0, 4
 
 PROBE = r"""
@@ -104,3 +106,24 @@ def test_update_node_calibrates_on_events_with_the_modal_prior(tmp_path):
         assert abs(prior["mean"] - s["mean"]) < 1e-12 and abs(prior["std"] - s["std"]) < 1e-12, (prior, s)
     # what the predict node reads to choose (with calibration windows: the time-domain one only)
     assert _likelihood(out / "posterior.json") != "time" and _likelihood(out / "time" / "posterior.json") == "time"
+
+
+def test_bad_calibration_windows_stop_the_node_naming_the_parameter(tmp_path):
+    """A missing or unreadable window file, or no output_dir to write to: the node stops at start
+    with one line naming the parameter (not at its first time-domain step, minutes later)."""
+    structure = str(ROOT / "examples" / "building.yaml")
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a window file")
+    cases = [({"output_dir": str(tmp_path / "u"), "calibration_windows": [str(tmp_path / "none.npz")]},
+              "parameter 'calibration_windows'"),
+             ({"output_dir": str(tmp_path / "u"), "calibration_windows": [str(bad)]},
+              "parameter 'calibration_windows'"),
+             ({"calibration_windows": [str(bad)]}, "'calibration_windows' needs 'output_dir'")]
+    for params, said in cases:
+        node = node_process("update", {"structure": structure, **params})
+        try:
+            log, _ = node.communicate(timeout=120.0)  # it stops by itself
+        finally:
+            stop(node)
+        assert node.returncode == 2, log[-3000:]
+        assert said in log and "Traceback" not in log, log[-3000:]
