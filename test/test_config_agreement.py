@@ -20,6 +20,7 @@ from shm_ros.core.bayes.update import UpdateConfig
 from shm_ros.core.config import OptionSpec, nested_configs, option_specs
 from shm_ros.core.identify import IdentifyConfig
 from shm_ros.core.ingest import IngestConfig
+from shm_ros.core.predict.event_calibration import EventCalibrationConfig
 from shm_ros.core.tracking import TrackingConfig
 from shm_ros.ros.identify_node import IdentifyNodeConfig
 from shm_ros.ros.ingest_node import IngestNodeConfig
@@ -52,7 +53,10 @@ STAGES: dict[str, tuple[type, type, dict[str, Any], set[str], set[str], set[str]
               {"modes", "out", "no_plot", "training_fraction", "t_from", "t_to"},
               set()),
     "update": (UpdateConfig, UpdateNodeConfig, {"structure": str(ROOT / "examples" / "building.yaml")},
-               {"input", "min_windows", "min_new_windows", "output_dir"},
+               # the node chains the time-domain step on recorded events after each modal posterior;
+               # (a graph's job: the command runs one updating)
+               {"input", "min_windows", "min_new_windows", "output_dir", "calibration_windows",
+                *(f"calibration.{s.name}" for s in option_specs(EventCalibrationConfig))},
                {"modes", "bag", "out", "study", "refer_to", "window", "no_plots"},
                {"structure"}),
 }

@@ -21,6 +21,8 @@ ALLOWED = {
     ("shm_ros/ros/ingest_node.py", "IngestNode._feed_imu"): "node callback guard: one bad Imu batch",
     ("shm_ros/ros/explain_node.py", "ExplainNode._finish"): "node callback guard: a failed run or lost worker",
     ("shm_ros/ros/update_node.py", "UpdateNode._poll"): "node callback guard: a failed update",
+    ("shm_ros/ros/update_node.py", "UpdateNode._collect_events"): "node callback guard: a failed "
+                                                                  "time-domain step",
     ("shm_ros/ros/track_node.py", "TrackNode._on_estimate"): "node callback guard: one bad estimate",
     ("shm_ros/ros/predict_node.py", "PredictNode._poll"): "node callback guard: a failed prediction",
     ("shm_ros/ros/roving_node.py", "RovingNode._execute"): "action guard: a failed estimate ends the goal",

@@ -83,7 +83,7 @@ def _building_scores(part_dir, pred: dict, calibrating: set[str]) -> dict[str, n
     by_id = {w.window_id: w for w in windows}
     events = [event_from_window(by_id[e["window_id"]], model) for e in later]
     cfg = PredictConfig(n_draws=0, seed=0)
-    theta_map = draws_from_posterior(load_posterior(part_dir / "calibration" / "posterior"), model, 0,
+    theta_map = draws_from_posterior(load_posterior(part_dir / "update" / "time"), model, 0,
                                      np.random.default_rng(0), cfg.relative_error).theta_map
     od = _oracle(model, events, theta_map, cfg)
     out: dict[str, list] = {"nrms": [], "oracle": [], "coverage": []}
@@ -122,8 +122,9 @@ def test_example_runs_every_node_and_reports(tmp_path):
     assert len(pred["events"]) == 5 and pred["model"] == "updated" and len(pred["table3"]) == 5
     calibrating = set(json.loads((b / "calibration" / "events.json").read_text()))
     assert len(calibrating) == 2 and "building: posteriors from update: 1 (last from 6 windows)" in run.stdout
-    td = json.loads((b / "calibration" / "posterior" / "posterior.json").read_text())
-    assert td["provenance"]["configuration"]["calibration"]["likelihood"] == "time", td["provenance"]
+    td = json.loads((b / "update" / "time" / "posterior.json").read_text())  # the update node's time-domain one
+    assert td["diagnostics"]["likelihood"] == "time", td["diagnostics"]
+    assert td["provenance"]["configuration"]["prior"] == str(b / "update" / "posterior.json"), td["provenance"]
     sc = _building_scores(b, pred, calibrating)
     nrms, oracle, coverage = (float(np.median(sc[k])) for k in ("nrms", "oracle", "coverage"))
     per_event = {k: np.round(np.median(sc[k], axis=1), 1).tolist() for k in ("nrms", "oracle")}

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import pytest
 
 from shm_ros.commands.example import calibration_files
-from shm_ros.commands.example_calibration import modal_priors
+from shm_ros.core.bayes.modal_prior import modal_priors
 from shm_ros.core.simulate.scenario import named_scenario
 from shm_ros.core.structure import structure_from_dict
 from shm_ros.errors import InputError

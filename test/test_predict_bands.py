@@ -20,18 +20,19 @@ chosen; the full size (``SHM_FULL=1``: 10 campaigns, 2-4 calibration and 2-5 pre
 3-10 stories; ``SHM_PREDICT_LOG=1`` appends its figures, commit, tree and seeds to the log at the end
 of docs/predict.md).
 
-CI runs one campaign (3 + 3 events, 3-6 stories, seed from the same hash) and bounds only gross
-failures: one campaign's figures scatter widely (full run at core tree 59c12ec, 10 campaigns, per
-campaign: median coverage 0.38-1.00, two below 0.7; peaks inside 0.33-1.00; unmeasured inside
-0.75-1.00; below nominal 1 of 4 to all; sharpness 0.56-10.3, lognormal log mean 0.68, log sd
-0.94, 99 % quantile 17.5; NRMS minus oracle -25.7 to +58.8 points, normal mean 6.7, sd 22.6,
-99 % quantile 59). Thresholds: coverage >= 0.30 and peaks inside >= 0.25 (below every campaign
-seen), unmeasured inside >= 0.60, the updated model below the nominal on at least one of the 3
-events (pooled rate 0.83: P(none) = 0.005), sharpness <= 17.5, median NRMS <= max(15 %, oracle +
-60 points). The criteria themselves are the full run's. The amplitude-aware model error (core trees
-f2077467 and 0fefed5a, 20 campaigns) stays inside every threshold per campaign: coverage 0.73-0.98,
-peaks inside at least 0.60, unmeasured inside at least 0.73, below nominal at least 1 of 2,
-sharpness 0.71-3.46, NRMS minus oracle -20.8 to +28.0 points.
+CI runs two campaigns (3 + 3 events each, 3-6 stories, seeds from the same hash), pooled as the
+full run pools its ten, with thresholds a method behaving as it does today passes with >= 99 %
+probability: `python -m bench.calibrate_predict_bands --campaigns 60 --extra 13851861` scores 60
+development campaigns of this profile (and a CI campaign that once fell below the older one-campaign
+threshold) and pools every one of their 1,830 pairs (docs/results/predict_bands_reduced.json). Over
+those pairs the 0.5 % quantiles are: median coverage 0.713, peaks inside 0.500, unmeasured inside
+0.625, events below nominal 3 of 6; the 99.5 % quantiles: sharpness 2.73 (max 2.94), median NRMS
+25.2 points above max(15 %, oracle) (max 32.7). Thresholds, each beyond its quantile and chosen so
+that all six together fail 0.6 % of the pairs (the JSON's ``pairs_failing_any_threshold``; the
+extra campaign, weighted as one in 61, makes that pessimistic): coverage >= 0.65, peaks >= 0.45,
+unmeasured >= 0.50, below nominal >= 3 of 6, sharpness <= 3.5, NRMS <= max(15 %, oracle) + 30
+points. (One campaign alone scatters too widely for a useful 99 % bound: unmeasured inside went
+down to 0.33 on campaign 13851861.) The criteria themselves are the full run's.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def profiles(seeds: list[int]) -> list[Profile]:
 
 
 def test_bands_hold_outside_the_model_class():
-    n = 10 if FULL else 1
+    n = 10 if FULL else 2
     seeds = [DEV_BASE + k for k in range(int(os.environ.get("SHM_PREDICT_DEV_N", n)))] if DEV else acceptance_seeds(n)
     src = truth_source("opensees")
     res = [score_campaign(src(s, p), s) for s, p in zip(seeds, profiles(seeds), strict=True)]
@@ -101,13 +102,13 @@ def test_bands_hold_outside_the_model_class():
         assert nrms <= max(15.0, oracle + 3.0)
         assert better >= 0.9
         assert hidden >= 0.85
-    else:  # one campaign of 3 + 3 events: thresholds of the module doc
-        assert coverage >= 0.30
-        assert peaks >= 0.25
-        assert nrms <= max(15.0, oracle + 60.0)
-        assert cat["better"].sum() >= 1
-        assert hidden >= 0.60
-    assert sharp <= (3.0 if FULL else 17.5)
+    else:  # two campaigns of 3 + 3 events: the 99 % thresholds of the module doc
+        assert coverage >= 0.65
+        assert peaks >= 0.45
+        assert nrms <= max(15.0, oracle) + 30.0
+        assert cat["better"].sum() >= 3
+        assert hidden >= 0.50
+    assert sharp <= (3.0 if FULL else 3.5)
 
 
 def _append_log(seeds: list[int], events: int, coverage: float, peaks: float, sharp: float, nrms: float,

@@ -10,9 +10,9 @@ profile over it (a smoke-test size).
 * building: an eight-story building with a measured ground input, ambient windows then earthquakes,
   replayed through ingest -> identify -> track -> update -> predict (+ recorder); the predict node
   waits for the posterior and predicts the floors' responses to the measured input. With
-  ``calibrate_on_earlier_events`` (the packaged file: 2) the earlier earthquakes calibrate in the
-  time domain beside the graph, the update node's modal posterior as the prior
-  (:func:`calibration_files`), and the later ones are predicted.
+  ``calibrate_on_earlier_events`` (the packaged file: 2) the update node calibrates on the earlier
+  earthquakes in the time domain, its modal posterior as the prior (:func:`calibration_files`), and
+  the later ones are predicted.
 
 Each graph is separate processes over DDS; the stages overlap as data flows. While the building's
 graph runs, the bridge paper's Table 1 sweep (``shm-ros update --study``) runs on the girder's
@@ -151,15 +151,16 @@ def run_part(name: str, files: Any, sc: Any, settings: dict[str, dict[str, Any]]
                                 timeout_s=1800.0, log=lambda s: _log(f"{name}: {s}"))
 
 
-def calibration_files(part: dict[str, Any], out: Path) -> list[str]:
+def calibration_files(part: dict[str, Any], out: Path, sampler: dict[str, Any] | None = None) -> list[str]:
     """With ``predict: {calibrate_on_earlier_events: N}`` the part is calibrated as a monitoring
     system would be before its later earthquakes: the update node runs once, on the windows before
     the first later earthquake (the ambient windows' modes, and the first N earthquakes'), and the
     windows of the first N earthquakes, read from the recording, are written as window files
-    (``out/calibration``): the time-domain step calibrates on them
-    (:mod:`~shm_ros.commands.example_calibration`, its posterior in ``out/calibration/posterior``)
-    and the predict node, given that posterior and these windows as ``calibration_windows``, learns
-    the model error out of sample (leave one event out) and predicts the later earthquakes.
+    (``out/calibration``): the update node, given them as ``calibration_windows`` (and ``sampler``
+    plus the scenario's seed as its ``calibration.*`` parameters), calibrates on them in the time
+    domain once its modal posterior exists (that posterior the prior; the result in
+    ``out/update/time``), and the predict node, given that posterior and these windows, learns the
+    model error out of sample (leave one event out) and predicts the later earthquakes.
     Returns the calibration events' window ids (also in ``out/calibration/events.json``)."""
     from shm_ros.errors import InputError
     from shm_ros.io.recording import windows_from_bag
@@ -183,7 +184,10 @@ def calibration_files(part: dict[str, Any], out: Path) -> list[str]:
         paths.append(str(out / "calibration" / window_filename(i, windows[i])))
         save_window(paths[-1], windows[i])
     pred["calibration_windows"] = paths
-    pred["posterior"] = str(out / "calibration" / "posterior")
+    upd = part["settings"]["update"]
+    upd["calibration_windows"] = paths
+    upd["calibration"] = {"seed": sc.seed, **(sampler or {})}
+    pred["posterior"] = str(Path(upd["output_dir"]) / "time")
     ids = [windows[i].window_id for i in quakes[:n]]
     (out / "calibration" / "events.json").write_text(json.dumps(ids))
     return ids
@@ -191,7 +195,6 @@ def calibration_files(part: dict[str, Any], out: Path) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from shm_ros.commands.checks import input_file, output_dir
-    from shm_ros.commands.example_calibration import finish_calibration, start_calibration
     from shm_ros.commands.example_outputs import study_job, write_report, write_stage_files
     from shm_ros.errors import InputError, ShmError
 
@@ -225,10 +228,12 @@ def run(args: argparse.Namespace) -> int:
         study = pool.submit(study_job, g["stage"].tracking.observations, str(g["files"].structure),
                             dict(doc["girder"].get("study") or {}), str(out / "girder" / "study"))
     b = parts["building"]
-    b["calibration"] = calibration_files(b, out / "building")
-    job = start_calibration(b, doc["building"], _log)  # the time-domain step, beside the graph
+    b["calibration"] = calibration_files(b, out / "building", doc["building"].get("calibration"))
+    if b["calibration"]:
+        n = len(b["calibration"])
+        _log(f"building: the update node calibrates on {n} earlier earthquakes in the time domain (prior: its "
+             f"modal posterior); the later {len(b['scenario'].earthquakes) - n} are predicted")
     b["graph"] = run_part("building", b["files"], b["scenario"], b["settings"], out / "building")
-    finish_calibration(job)
     b["stage"] = write_stage_files(out / "building", b["graph"], b["settings"], doc)
     study_rows = None
     if study is not None:

@@ -193,7 +193,7 @@ def write_report(out: Path, parts: dict[str, dict[str, Any]], study: dict[str, A
     }
     if prediction is not None and b.get("calibration"):
         facts["building: calibration earthquakes (time domain; prior: the ambient windows' modal posterior)"] = (
-            ", ".join(b["calibration"]) + _posterior_line(out / "building" / "calibration" / "posterior"))
+            ", ".join(b["calibration"]) + _posterior_line(out / "building" / "update" / "time"))
         facts.update(later_events(prediction.payload, b["calibration"]))
     if study is not None:
         facts["Table 1 sweep"] = f"{len(study['rows'])} configurations in {study['wall_s']:.0f} s"

@@ -54,7 +54,10 @@ class PredictNodeConfig:
     calibration_windows: list[str] | None = option(None, "window files (.npz, as `shm-ros ingest --windows` writes) "
                                                    "of the events the posterior was calibrated on in the time "
                                                    "domain, two or more: the model error is learnt from them out "
-                                                   "of sample (leave one event out); unset: the calibration's "
+                                                   "of sample (leave one event out); the posterior must then be "
+                                                   "a time-domain one (diagnostics.likelihood 'time', e.g. the "
+                                                   "update node's <output_dir>/time): a modal one is waited past "
+                                                   "or, without a wait, not used; unset: the calibration's "
                                                    "in-sample error")
     output_dir: str | None = option(None, "directory of prediction.json and prediction_series.json (as `shm-ros "
                                     "predict` writes them), rewritten after every prediction (unset: not written)")
@@ -205,11 +208,23 @@ class PredictNode(ManagedNode):
         """The posterior to predict with, or False while the queued windows still wait for it."""
         path = self.settings.posterior
         wait = float(self.settings.wait_for_posterior_s)
-        if not path or wait <= 0 or self.waiting_since == -1.0:
+        if not path or self.waiting_since == -1.0:
             return path
         p = _posterior_file(path)
         # the update node writes posterior.json, then samples.npz by rename: both present = complete
-        if p.is_file() and p.with_name("samples.npz").is_file():
+        complete = p.is_file() and p.with_name("samples.npz").is_file()
+        # with calibration windows the posterior must be their time-domain one: a modal posterior
+        # (the time-domain step's prior) plus the model error learnt at the time-domain fits would
+        # count the same misfit twice (docs/predict.md)
+        if complete and self.settings.calibration_windows and _likelihood(p) != "time":
+            if wait <= 0:
+                why = f"{p} is not a time-domain posterior (diagnostics.likelihood 'time')"
+                self.diag.report("error", f"{why}: predicting with the nominal model", "prediction")
+                return None
+            complete = False
+        if wait <= 0:
+            return path
+        if complete:
             self.waiting_since = -1.0  # from now on the file is only re-read when it changes
             return path
         now = time.monotonic()
@@ -237,6 +252,17 @@ def _check_calibration(name: str, paths: tuple[str, ...]) -> None:
             load_window(p)
         except ShmError as exc:
             raise ParameterError(f"{name}: parameter 'calibration_windows': {exc}") from None
+
+
+def _likelihood(posterior_json: Path) -> str:
+    """The likelihood a posterior file was sampled with (``diagnostics.likelihood``; "" if unreadable)."""
+    from shm_ros.io import jsonio
+
+    try:
+        doc = jsonio.loads(posterior_json.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return ""
+    return str((doc.get("diagnostics") or {}).get("likelihood", "")) if isinstance(doc, dict) else ""
 
 
 def _posterior_file(path: str) -> Path:

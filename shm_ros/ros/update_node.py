@@ -10,6 +10,14 @@ runs without a track node: it takes ``shm/modal_estimates`` and pairs every wind
 the prior-mean model instead (a spurious mode near a model frequency can then pass for a mode
 the window missed).
 
+With ``calibration_windows`` (window files of recorded events, e.g. earthquakes with a measured
+input) the node, after each modal posterior, calibrates on those events in the time domain with the
+modal posterior as the prior (:mod:`shm_ros.core.predict.event_calibration`; sampler: the
+``calibration.*`` parameters) and writes that posterior to ``<output_dir>/time`` (its
+``diagnostics.likelihood`` is ``time``): the one a predict node given the same events predicts with.
+It is not published on ``shm/posterior``, which stays the modal one; the ``posterior_time``
+diagnostic reports it.
+
 A run (seconds to minutes) goes to a worker process (:mod:`shm_ros.ros.update_worker`): the node
 keeps receiving meanwhile. Windows that arrive during a run are kept; when it is done, the next
 run starts at once if enough new windows came, with every window received by then (so at most one
@@ -25,7 +33,7 @@ import enum
 import time
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -34,6 +42,7 @@ from rclpy.publisher import Publisher
 
 from shm_ros.core.bayes.update import Posterior, UpdateConfig
 from shm_ros.core.config import option
+from shm_ros.core.predict.event_calibration import EventCalibrationConfig
 from shm_ros.io.faults import fault_point
 from shm_ros.ros import topics, update_worker
 from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg, tracked_row_from_msg
@@ -66,6 +75,11 @@ class UpdateNodeConfig:
                                   "windows received reaches min_windows + k x this, on every window by then")
     output_dir: str | None = option(None, "directory of posterior.json, rewritten after every run "
                                     "(unset: not written)")
+    calibration_windows: list[str] | None = option(
+        None, "window files (.npz, as `shm-ros ingest --windows` writes) of recorded events: after each modal "
+        "posterior they calibrate in the time domain, the modal posterior as the prior, written to "
+        "<output_dir>/time (needs output_dir; unset: no time-domain step)")
+    calibration: EventCalibrationConfig = field(default_factory=EventCalibrationConfig)  # calibration.* parameters
 
 
 class UpdateNode(ManagedNode):
@@ -87,6 +101,13 @@ class UpdateNode(ManagedNode):
         self.spec = load_structure(self.structure)
         build_model(self.spec)
         self.output_dir = Path(self.settings.output_dir) if self.settings.output_dir else None
+        self.events = list(self.settings.calibration_windows or [])
+        self.events_config = self.settings.calibration
+        if self.events:
+            _check_events(self.get_name(), self.events, self.output_dir)
+        self.events_future: Future | None = None  # the time-domain step of the last modal posterior
+        self.events_started = 0.0
+        self.events_prior: Posterior | None = None  # the modal posterior of the last time-domain step
         try:
             self.input = UpdateInput(self.settings.input)
         except ValueError:
@@ -135,6 +156,8 @@ class UpdateNode(ManagedNode):
 
     def _poll(self) -> None:
         """Timer (executor thread): collect a finished run, publish it, start the next one."""
+        if self.events_future is not None and self.events_future.done():
+            self._collect_events()
         if self.future is None:
             return
         if not self.future.done():
@@ -168,6 +191,44 @@ class UpdateNode(ManagedNode):
         level = "ok" if posterior.diagnostics.get("converged", False) else "warn"
         self.diag.report(level, f"{n} windows in {took:.1f} s: {summary}", "posterior")
         self.get_logger().info(f"posterior from {n} windows: {summary}")
+        self._start_events()
+
+    def _start_events(self) -> None:
+        """The time-domain step on the events, the latest modal posterior as the prior (one at a time:
+        a modal posterior that arrives during a step starts the next one when it is done)."""
+        if not self.events or self.posterior is None or self.events_future is not None:
+            return
+        modal = {k: v.to_dict() for k, v in self.posterior.parameters.items()}
+        self.events_prior, self.events_started = self.posterior, time.time()
+        self.events_future = self.workers.submit(update_worker.run_events, self.events, modal, self.events_config)
+        self.diag.report("ok", f"time-domain step on {len(self.events)} events started", "posterior_time")
+
+    def _collect_events(self) -> None:
+        """Write the finished time-domain posterior (``<output_dir>/time``)."""
+        future, self.events_future = self.events_future, None
+        if future is None or self.output_dir is None:  # setup refuses events without output_dir
+            return
+        took = time.time() - self.events_started
+        try:
+            posterior = future.result()
+        except BrokenProcessPool as exc:
+            self.diag.report("error", f"time-domain step failed: worker process lost ({exc})", "posterior_time")
+            self.workers.restart()
+            return
+        except Exception as exc:  # a failed step must not take the node down
+            self.diag.report("error", f"time-domain step failed: {exc}", "posterior_time")
+            return
+        from shm_ros.io.posterior_files import write_posterior
+
+        config = asdict(self.events_config) | {"likelihood": "time", "calibration_windows": self.events,
+                                                "prior": str(self.output_dir / "posterior.json")}
+        write_posterior(self.output_dir / "time", posterior, config, self.events_config.seed)
+        summary = ", ".join(f"{k} {v.mean:.4f}±{v.std:.4f}" for k, v in posterior.parameters.items())
+        level = "ok" if posterior.diagnostics.get("converged", False) else "warn"
+        self.diag.report(level, f"{len(self.events)} events in {took:.1f} s: {summary}", "posterior_time")
+        self.get_logger().info(f"time-domain posterior from {len(self.events)} events: {summary}")
+        if self.posterior is not self.events_prior:  # a newer modal posterior came meanwhile
+            self._start_events()
 
     def _progress(self) -> None:
         received = len(self.windows)
@@ -185,6 +246,21 @@ class UpdateNode(ManagedNode):
                              run_windows=self.used)
         self.diag.publish()
         self._progress_at = time.time()
+
+
+def _check_events(name: str, paths: list[str], output_dir: Path | None) -> None:
+    """Calibration windows: readable window files, and a folder to write the posterior to."""
+    from shm_ros.errors import ShmError
+    from shm_ros.io.window_files import load_window
+
+    if output_dir is None:
+        raise ParameterError(f"{name}: parameter 'calibration_windows' needs 'output_dir' (the time-domain "
+                             "posterior is written to <output_dir>/time)")
+    for p in paths:
+        try:
+            load_window(p)
+        except ShmError as exc:
+            raise ParameterError(f"{name}: parameter 'calibration_windows': {exc}") from None
 
 
 def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> UpdateNode:

@@ -62,3 +62,14 @@ def run(windows: list, kind: str, config: UpdateConfig, warm_start: Posterior | 
         theta, gate = pairing_reference(model, config, spec.parameters)
         obs = observations_for_model(model, windows, sensors, theta=theta, gate=gate)
     return update(model, obs, config, spec.parameters, warm_start=warm_start)
+
+
+def run_events(paths: list[str], modal: dict[str, dict[str, Any]], config: Any) -> Posterior:
+    """The time-domain posterior of the event window files ``paths``, the modal posterior's
+    parameter summaries ``modal`` as the prior (:mod:`shm_ros.core.predict.event_calibration`;
+    ``config`` an :class:`~shm_ros.core.predict.event_calibration.EventCalibrationConfig`)."""
+    from shm_ros.core.predict.event_calibration import calibrate_on_events
+    from shm_ros.io.window_files import load_window
+
+    windows = [load_window(p) for p in paths]
+    return calibrate_on_events(_state["model"], _state["spec"], windows, modal, config)
