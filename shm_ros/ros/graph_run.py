@@ -329,6 +329,8 @@ def run_graph(bag: str | Path, nodes: list[NodeSpec], workdir: str | Path, *,
     finally:
         rclpy.try_shutdown()
         code = sup.stop_all()
+        for why in sup.lost.values():  # which node made the run's exit code 1, and why
+            log(f"[supervisor] {why}")
     rec = read_pipeline_bag(out_bag, namespace)
     return GraphRun(result, rec.windows, rec.estimates, rec.diagnostics, out_bag, code, rec.tracked,
                     rec.posteriors, time.monotonic() - t0, rec.diagnostic_rows, rec.predictions, rec.verdicts)
