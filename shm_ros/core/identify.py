@@ -76,6 +76,12 @@ METHODS = tuple(m.value for m in Method)
 # automatic block rows: periods of the lowest mode of interest (IdentifyConfig.block_periods)
 BLOCK_PERIODS = 2.0
 IO_BLOCK_PERIODS = 4.0
+# largest model order when unset. Input-output SSI reports a column's frequency as the mean over
+# its orders, and the orders too low to hold every mode the outputs see pull it aside; on the
+# peers bench's earthquake windows (eight-story building, 4 outputs, 50 Hz) the mean frequency
+# errors of modes 1-4 fall steadily from 60 to 120 orders (docs/benchmarks.md), at about 0.3 s.
+MAX_ORDER = 60
+IO_MAX_ORDER = 120
 
 
 @dataclass
@@ -102,7 +108,7 @@ class IdentifyConfig:
                                          "of the lowest mode of interest (unset: 4 for ssi-io, 2 for "
                                          "the output-only methods)")
     max_block_rows: int = option(100, "largest automatic number of block rows (cost)")
-    max_order: int = option(60, "largest model order")
+    max_order: int | None = option(None, "largest model order (unset: 60; 120 for ssi-io)")
     min_order: int = option(2, "smallest model order")
     order_step: int = option(1, "model order step")
     reference_channels: list[str] | None = option(None, "reference sensor ids of SSI-cov / SSI-data "
@@ -171,10 +177,17 @@ class IdentificationResult:
     filters: FilterReport | None = None  # poles each filter removed
 
 
-def _block_rows(cfg: IdentifyConfig, n_refs: int) -> int:
+def max_order_of(cfg: IdentifyConfig, method: Method | str) -> int:
+    """The configured largest model order, or the method's default when unset."""
+    if cfg.max_order is not None:
+        return int(cfg.max_order)
+    return IO_MAX_ORDER if Method(method) == Method.SSI_IO else MAX_ORDER
+
+
+def _block_rows(cfg: IdentifyConfig, n_refs: int, max_order: int) -> int:
     if cfg.block_rows is not None:
         return int(cfg.block_rows)
-    return max(20, int(np.ceil(cfg.max_order / n_refs)) + 2)
+    return max(20, int(np.ceil(max_order / n_refs)) + 2)
 
 
 def identify_window(window: Window, config: IdentifyConfig | None = None) -> ModalEstimate:
@@ -244,7 +257,7 @@ def _resolution(prep: Prepared, cfg: IdentifyConfig, inputs: list[str], method: 
     outputs = [k for k, c in enumerate(prep.channel_names) if c not in inputs]
     n_refs = len(cfg.reference_channels) if cfg.reference_channels and not inputs \
         else max(1, len(outputs))
-    default_rows = max(20, int(np.ceil(cfg.max_order / n_refs)) + 2)
+    default_rows = max(20, int(np.ceil(max_order_of(cfg, method) / n_refs)) + 2)
     source = BandSource(cfg.band)
     band = None
     if source in (BandSource.AUTO, BandSource.MODEL) and cfg.nominal_frequencies_hz:
@@ -291,8 +304,9 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Seq
         out_names = [names[j] for j in out_idx]
         if not out_names:
             raise ValueError(f"ssi-io: no output channel besides the input(s) {ins}")
-        i = cfg.block_rows or max(20, int(np.ceil(cfg.max_order / len(out_names))) + 2)
-        model = ssi.ssi_io(y, u, fs, i, cfg.max_order, lq=cfg.lq)
+        nmax = max_order_of(cfg, method)
+        i = _block_rows(cfg, len(out_names), nmax)
+        model = ssi.ssi_io(y, u, fs, i, nmax, lq=cfg.lq)
         refs = None
     else:
         y = data
@@ -304,11 +318,12 @@ def identify_array(prep: Prepared, cfg: IdentifyConfig, input_channel: str | Seq
             refs = np.array([names.index(c) for c in cfg.reference_channels])
         else:
             refs = np.arange(len(names))
-        i = _block_rows(cfg, refs.size)
+        nmax = max_order_of(cfg, method)
+        i = _block_rows(cfg, refs.size, nmax)
         if method == Method.SSI_COV:
-            model = ssi.ssi_cov(y, fs, i, cfg.max_order, refs)
+            model = ssi.ssi_cov(y, fs, i, nmax, refs)
         else:
-            model = ssi.ssi_data(y, fs, i, cfg.max_order, refs, lq=cfg.lq, weighting=cfg.weighting)
+            model = ssi.ssi_data(y, fs, i, nmax, refs, lq=cfg.lq, weighting=cfg.weighting)
     orders = np.arange(max(1, cfg.min_order), model.observability.shape[1] + 1, cfg.order_step)
     poles, flags, picked, report = diagram_picks(model, orders, cfg, data.shape[0] / fs)
     std_f = np.full(len(picked), np.nan)
