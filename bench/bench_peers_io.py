@@ -22,6 +22,12 @@ A and C only). Timed: CPU seconds of the calling process with one BLAS thread (b
 
     python -m bench.bench_peers_io              # 10 simulated windows (OKID-ERA on 1) + the bridge
     python -m bench.bench_peers_io --windows 3  # quicker
+    python -m bench.bench_peers_io --okid-windows 0 --no-bridge --identify '{"max_order": 60}'
+        # shm_ros with other identify options (JSON of IdentifyConfig fields)
+    python -m bench.bench_peers_io --first-seed 10 --windows 30 --okid-windows 0 --no-bridge
+
+Accuracy: mean frequency and damping errors and mean MAC of the shapes at the four outputs with the
+simulator's own shapes, per true mode.
 """
 
 from __future__ import annotations
@@ -127,20 +133,25 @@ def mutual_modes(f1, phi1, f2, phi2, mac_min: float = 0.9) -> list[tuple[int, in
     return [(i, int(j), float(mac[i, j])) for i, j in enumerate(to2) if j >= 0 and to1[j] == i]
 
 
-def _errors(f, z, ft, zt) -> tuple[np.ndarray, np.ndarray]:
-    ef, ez = np.full(N_MODES, np.nan), np.full(N_MODES, np.nan)
+def _errors(f, z, ft, zt, phi=None, phit=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frequency and damping errors of the identified mode nearest each true one (within 5 %),
+    and the MAC of its shape with the true shape (rows of ``phi`` and ``phit``; NaN without)."""
+    ef, ez, mac = np.full(N_MODES, np.nan), np.full(N_MODES, np.nan), np.full(N_MODES, np.nan)
     for k in range(N_MODES):
         if len(f) == 0:
             continue
         j = int(np.argmin(np.abs(f - ft[k])))
         if abs(f[j] / ft[k] - 1) <= 0.05:
             ef[k], ez[k] = abs(f[j] / ft[k] - 1), abs(z[j] - zt[k])
-    return ef, ez
+            if phi is not None and phit is not None:
+                mac[k] = mac_matrix(phi[j][None], phit[k][None])[0, 0]
+    return ef, ez, mac
 
 
-def simulated(n_windows: int, order: int, horizon: int, repeat: int, okid_windows: int) -> list[dict]:
+def simulated(n_windows: int, order: int, horizon: int, repeat: int, okid_windows: int,
+              identify: dict | None = None, first_seed: int = 0) -> list[dict]:
     rows: dict[str, dict] = {}
-    for seed in range(n_windows):
+    for seed in range(first_seed, first_seed + n_windows):
         sc = named_scenario("building-earthquake", n_windows=1, window_s=300.0, seed=seed)
         campaign = simulate_campaign(sc)
         sim = campaign.window(0)
@@ -152,42 +163,53 @@ def simulated(n_windows: int, order: int, horizon: int, repeat: int, okid_window
         in_x = np.asarray(sim.truth["mode_families"]) == "x"
         ft = np.asarray(sim.truth["frequencies_hz"])[in_x][:N_MODES]
         zt = np.asarray(sim.truth["damping_ratios"])[in_x][:N_MODES]
+        shapes = sim.truth["mode_shapes"]  # sensor -> value per mode
         assert w.input_channel is not None  # the building declares its ground sensor as input
         k_in = w.channel_names.index(w.input_channel)
         u = w.samples[:, [k_in]] - w.samples[:, [k_in]].mean(axis=0)
         y = np.delete(w.samples, k_in, axis=1)
+        outputs = [c for c in w.channel_names if c != w.input_channel]
+        phit = np.array([[shapes[c][k] for c in outputs] for k in np.flatnonzero(in_x)[:N_MODES]])
         y = y - y.mean(axis=0)
         dt = 1.0 / w.sample_rate_hz
         tools = {
-            "shm_ros ssi-io (identify defaults)": partial(_ours, w, nominal),
+            "shm_ros ssi-io (identify defaults)" if not identify else
+            f"shm_ros ssi-io ({json.dumps(identify)})": partial(_ours, w, nominal, outputs, identify or {}),
             f"mdof SRIM (order {order})": partial(mdof_modes, u, y, dt, "srim", order, horizon),
         }
-        if seed < okid_windows:  # minutes of CPU per 300 s window
+        if seed - first_seed < okid_windows:  # minutes of CPU per 300 s window
             tools[f"mdof OKID-ERA (order {order})"] = partial(mdof_modes, u, y, dt, "okid-era", order, horizon)
         for name, fn in tools.items():
-            (f, z, *_), cpu = _cpu(fn, repeat if seed == 0 and "OKID" not in name else 1)
-            ef, ez = _errors(f, z, ft, zt)
-            r = rows.setdefault(name, {"tool": name, "ef": [], "ez": [], "cpu": []})
+            (f, z, phi), cpu = _cpu(fn, repeat if seed == first_seed and "OKID" not in name else 1)
+            ef, ez, mac = _errors(f, z, ft, zt, phi, phit)
+            r = rows.setdefault(name, {"tool": name, "ef": [], "ez": [], "mac": [], "cpu": []})
             r["ef"].append(ef)
             r["ez"].append(ez)
+            r["mac"].append(mac)
             r["cpu"].append(cpu)
         print(f"window {seed}: done", flush=True)
     out = []
     for r in rows.values():
-        ef, ez = np.array(r["ef"]), np.array(r["ez"])
+        ef, ez, mac = np.array(r["ef"]), np.array(r["ez"]), np.array(r["mac"])
         found = np.isfinite(ef)
         out.append({"tool": r["tool"], "windows": len(r["ef"]), "found": found.sum(0).tolist(),
                     "mean_f_err_pct": [float(100 * np.nanmean(ef[:, k])) if found[:, k].any() else None
                                        for k in range(N_MODES)],
                     "mean_z_err_points": [float(100 * np.nanmean(ez[:, k])) if found[:, k].any() else None
                                           for k in range(N_MODES)],
+                    "mean_mac_truth": [float(np.nanmean(mac[:, k])) if found[:, k].any() else None
+                                       for k in range(N_MODES)],
                     "cpu_s_first_window": float(r["cpu"][0]), "cpu_s_median": float(np.median(r["cpu"]))})
     return out
 
 
-def _ours(window, nominal: list[float] | None):
-    est = identify_window(window, IdentifyConfig(nominal_frequencies_hz=nominal))
-    return np.array([m.frequency_hz for m in est.modes]), np.array([m.damping_ratio for m in est.modes])
+def _ours(window, nominal: list[float] | None, outputs: list[str], options: dict):
+    """Frequencies, damping ratios and shapes (rows, ``outputs`` order) of shm_ros's identify
+    with the structure's band (``options``: IdentifyConfig fields given on the command line)."""
+    est = identify_window(window, IdentifyConfig.from_dict({"nominal_frequencies_hz": nominal, **options}))
+    cols = [est.sensor_ids.index(c) for c in outputs]
+    return (np.array([m.frequency_hz for m in est.modes]), np.array([m.damping_ratio for m in est.modes]),
+            np.array([np.asarray(m.mode_shape, float)[cols] for m in est.modes]).reshape(len(est.modes), -1))
 
 
 def bridge(order: int, horizon: int, repeat: int) -> dict:
@@ -206,10 +228,11 @@ def bridge(order: int, horizon: int, repeat: int) -> dict:
             "cpu_s": {"shm_ros ssi-io": c1, "mdof SRIM": c2, "mdof OKID-ERA": c3}}
 
 
-def _markdown(sim: list[dict], br: dict) -> str:
+def _markdown(sim: list[dict], br: dict | None) -> str:
     lines = ["| tool | windows | found modes 1-4 | mean freq. error % modes 1-4 | mean damping error "
-             "(points) modes 1-4 | CPU s (first window, best of repeats) | CPU s median |",
-             "|---|---|---|---|---|---|---|"]
+             "(points) modes 1-4 | mean MAC to the true shapes modes 1-4 | CPU s (first window, best of "
+             "repeats) | CPU s median |",
+             "|---|---|---|---|---|---|---|---|"]
 
     def fmt(v, f):
         return " / ".join("miss" if x is None else f.format(x) for x in v)
@@ -217,7 +240,10 @@ def _markdown(sim: list[dict], br: dict) -> str:
     for r in sim:
         lines.append(f"| {r['tool']} | {r['windows']} | {' / '.join(map(str, r['found']))} | "
                      f"{fmt(r['mean_f_err_pct'], '{:.3f}')} | {fmt(r['mean_z_err_points'], '{:.2f}')} | "
+                     f"{fmt(r['mean_mac_truth'], '{:.4f}')} | "
                      f"{r['cpu_s_first_window']:.3f} | {r['cpu_s_median']:.3f} |")
+    if br is None:
+        return "\n".join(lines) + "\n"
     lines += ["", f"Bridge record ({br['samples']} samples at {br['fs_hz']:.0f} Hz for mdof): shm_ros "
               f"({br['shm_ros_band']}) picked "
               f"{', '.join(f'{f:.3f}' for f in br['shm_ros_hz'])} Hz; SRIM's poles below 0.45 fs "
@@ -240,14 +266,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="timing repeats on the first window")
     ap.add_argument("--okid-windows", type=int, default=1,
                     help="simulated windows also given to OKID-ERA (slow: minutes of CPU each)")
+    ap.add_argument("--first-seed", type=int, default=0, help="first simulated window's seed")
+    ap.add_argument("--identify", type=json.loads, default=None, metavar="JSON",
+                    help='shm_ros identify options instead of the defaults, e.g. \'{"max_order": 60}\'')
+    ap.add_argument("--no-bridge", action="store_true", help="leave the bridge record out")
     args = ap.parse_args(argv)
     try:
         import mdof  # noqa: F401
     except ImportError:
         print("mdof is not installed (requirements/bench.txt)", file=sys.stderr)
         return 1
-    sim = simulated(args.windows, args.order, args.horizon, args.repeat, args.okid_windows)
-    br = bridge(args.order, args.horizon, args.repeat)
+    sim = simulated(args.windows, args.order, args.horizon, args.repeat, args.okid_windows, args.identify,
+                    args.first_seed)
+    br = None if args.no_bridge else bridge(args.order, args.horizon, args.repeat)
     RESULTS.mkdir(parents=True, exist_ok=True)
     result = {"simulated": sim, "bridge": br, "load_average": os.getloadavg()[0],
               "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}

@@ -53,6 +53,23 @@ def test_stable_candidates_pick_what_every_pole_picks(method, scope, _two_a_scop
     assert max(validated) < 0.5, validated
 
 
+def test_input_output_ssi_picks_what_every_pole_picks(_two_a_scope_check):
+    """An earthquake window of the input-output peers bench (bench/bench_peers_io.py, seed 0) with
+    the defaults (ssi-io, the structure's band, 120 orders): the column check against every pole."""
+    from shm_ros.core.band import band_frequencies
+    from shm_ros.core.simulate.campaign import simulate_campaign
+    from shm_ros.core.simulate.scenario import named_scenario
+    from shm_ros.core.structure import structure_from_dict
+
+    campaign = simulate_campaign(named_scenario("building-earthquake", n_windows=1, window_s=300.0, seed=0))
+    nominal, _ = band_frequencies(structure_from_dict(campaign.nominal_structure), "auto", 6)
+    res = identify_window_detailed(campaign.window(0).to_window(),
+                                   IdentifyConfig(nominal_frequencies_hz=nominal))
+    assert res.estimate.method == "ssi-io" and len(res.diagram.picked) >= 4
+    assert _two_a_scope_check.compared == 1
+    assert res.diagram.flags.two_a_checked is not None  # the column scope ran
+
+
 def test_same_picks_fails_on_a_different_mode():
     w = _window(302, 0.02)
     res = identify_window_detailed(w, IdentifyConfig(uncertainty=False,

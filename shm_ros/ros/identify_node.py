@@ -50,7 +50,8 @@ class IdentifyNode(ManagedNode):
         self.create_subscription(topics.message_class(topics.TYPES[topics.WINDOWS]), topics.WINDOWS,
                                  self._on_window, stream_qos())
         self.count = 0
-        self.get_logger().info(f"identify with {self.config.method}, orders up to {self.config.max_order}"
+        orders = self.config.max_order or "the method's default"
+        self.get_logger().info(f"identify with {self.config.method}, orders up to {orders}"
                                + ("" if self.config.uncertainty else ", no uncertainty"))
 
     def _band_from(self, path: str) -> None:

@@ -21,7 +21,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from shm_ros.core import ssi
-from shm_ros.core.identify import IdentifyConfig
+from shm_ros.core.identify import IdentifyConfig, max_order_of
 from shm_ros.core.roving.merge_post import GlobalMode
 from shm_ros.core.stabilization import classify, pick_modes_reported, real_mode_shape
 from shm_ros.errors import InputError
@@ -81,8 +81,9 @@ def merge_pre(datasets: Sequence[np.ndarray], channels: Sequence[Sequence[str]],
     notes."""
     if config.block_rows is None:
         raise InputError("merge_pre: identify.block_rows must be set (no band is chosen for merged setups)")
-    h, names = merged_hankel(datasets, channels, references, config.block_rows, config.max_order)
-    o, s = ssi.observability_from(h, config.max_order)
+    nmax = max_order_of(config, config.method)
+    h, names = merged_hankel(datasets, channels, references, config.block_rows, nmax)
+    o, s = ssi.observability_from(h, nmax)
     model = ssi.SubspaceModel(o, s, len(names), sample_rate_hz, "ssi-cov", config.block_rows)
     orders = np.arange(max(1, config.min_order), o.shape[1] + 1, config.order_step)
     st = config.stability
@@ -99,5 +100,5 @@ def merge_pre(datasets: Sequence[np.ndarray], channels: Sequence[Sequence[str]],
                               {n: float(v) for n, v in zip(names, phi, strict=True)},
                               {n: float("nan") for n in names}, len(datasets)))
     notes = [f"pre-identification merge of {len(datasets)} setups: {len(names)} channels per block row, "
-             f"{config.block_rows} block rows, orders up to {config.max_order}"]
+             f"{config.block_rows} block rows, orders up to {nmax}"]
     return out, notes
