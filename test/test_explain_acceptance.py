@@ -219,10 +219,15 @@ def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss():
     one. A method naming both in 14 of 15 full-size cases (the rate on fresh seeds, docs/explain.md)
     fails it with (1/15)^2 = 0.4 %: a 99 % check. Every criterion together holds on too few
     full-size cases for a 99 % check on two (1 - (2/15)^2 = 0.98 even at 13 of 15): the cases' other
-    checks are printed, and asserted at full size."""
-    rows = {seed: _two_effects(seed) for seed in seeds("two_effects", TWO_CI)}
+    checks are printed, and asserted at full size. The second case runs only when the first does
+    not name both (the same check; about one run in 15 pays for it)."""
+    rows = {}
+    for seed in seeds("two_effects", TWO_CI):
+        rows[seed] = _two_effects(seed)
+        if rows[seed]["both"]:
+            break
     print(f"two effects, reduced: {rows}")
-    assert sum(c["both"] for c in rows.values()) >= 1, rows
+    assert any(c["both"] for c in rows.values()), rows
 
 
 @pytest.mark.skipif(not FULL, reason="full size only (SHM_FULL=1)")
