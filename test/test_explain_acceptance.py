@@ -218,7 +218,7 @@ def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss():
     """Two reduced cases (the first two seeds of the full-size row): both effects named in at least
     one. A method naming both in 14 of 15 full-size cases (the rate on fresh seeds, docs/explain.md)
     fails it with (1/15)^2 = 0.4 %: a 99 % check (if that rate holds: the development seeds named both
-    on 7 of 9, docs/explain.md). Every criterion together holds on too few
+    on 8 of 10, docs/explain.md). Every criterion together holds on too few
     full-size cases for a 99 % check on two (1 - (2/15)^2 = 0.98 even at 13 of 15): the cases' other
     checks are printed, and asserted at full size. The second case runs only when the first does
     not name both (the same check; about one run in 15 pays for it)."""
