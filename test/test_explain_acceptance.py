@@ -16,13 +16,19 @@ thresholds that a method meeting the full-size rates passes with >= 99 % probabi
   hold with 0.982 only);
 * clean: the threshold is the 99th percentile of the largest gain on clean replicates, so the per-seed
   false-alarm rate is about 1 %: P(at most 1 of 6) = 0.9985 (0/50 false alarms at full size);
-* the two-effect case and the unmodelled-modes case are exact checks (both effects found; the listed
-  modes equal the out-of-plane modes) on fixed seeds: the unmodelled modes were listed exactly on
-  every full-size seed; the two-effect cases meet every criterion on 14 of 15 full-size seeds (seed
-  12 misses the slope below the knee), so seed 0's check guards against a regression of
-  its own case rather than being a 1 % check.
-Every accepted candidate's evidence is checked against the second estimator (nested sampling) within
-max(0.5, 3 combined standard errors).
+* two-effect cases: two, both effects named in at least one (14 of 15 full-size cases on fresh
+  seeds name both: P = 1 - (1/15)^2 = 0.996); every criterion together is asserted at full size only
+  (at 13 of 15 two reduced cases would pass "at least one" with 0.98 only);
+* the unmodelled-modes case is an exact check (the listed modes equal the out-of-plane modes): they
+  were listed exactly on every full-size seed.
+Seeds: every row's from the git tree of ``shm_ros/core`` (:func:`seeds`, which holds the shipped
+threshold files), so the figures come from seeds drawn after the last change of the method and no
+seed is chosen; CI takes the first seeds of the same rows. Each full-size run appends its rows'
+seeds and figures to docs/results/explain_dense_log.md, and a test checks them against the hash.
+Development runs use seeds below ``acceptance_seeds.DEV_SEEDS`` (e.g. 9300-9319 of the two-effect
+cases).
+Every accepted candidate's evidence is checked against the second estimator (quadrature or nested
+sampling) within max(0.5, 3 combined standard errors) (docs/explain.md, "Fit and evidence").
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import pytest
+from acceptance_seeds import DEV_SEEDS, core_tree, explain_seeds
 from explain_cases import draw_case
 from explain_scoring import parameter_checks, score, top_entry, truth_misfit
 
@@ -47,6 +54,16 @@ PER_NAME = 5 if FULL else 1
 WINDOWS = 864 if FULL else 192
 CLEAN_SEEDS = 50 if FULL else 6
 TWO = 15 if FULL else 1
+TWO_CI = 2
+LOG = Path(__file__).resolve().parents[1] / "docs" / "results" / "explain_dense_log.md"
+
+
+def seeds(row: str, n: int, tree: str | None = None) -> list[int]:
+    """``n`` acceptance seeds of one row (``named:<name>``, ``clean``, ``unmodelled``, ``two_effects``) from
+    the git tree of ``shm_ros/core`` (which holds the shipped threshold files): drawn by the hash alone
+    after the last change of the method, >= ``DEV_SEEDS`` (development seeds are below it); CI takes
+    the first ones of the same rows."""
+    return explain_seeds(n, core_tree() if tree is None else tree, f"dense_{row}")
 
 
 def _run(case):
@@ -97,9 +114,9 @@ def test_documented_tallies_are_found():
 
 def test_named_effects_found_and_fitted():
     results = []
-    for i, name in enumerate(NAMES):
-        for j in range(PER_NAME):
-            case = draw_case(7000 + 100 * i + j, name, n_windows=WINDOWS)
+    for name in NAMES:
+        for seed in seeds(f"named:{name}", PER_NAME):
+            case = draw_case(seed, name, n_windows=WINDOWS)
             v, d = _run(case)
             _check_evidence(d)
             results.append(score(d, case, v.figures))
@@ -116,6 +133,11 @@ def test_named_effects_found_and_fitted():
     if FULL:  # the tallies docs/explain.md quotes (test_documented_results.py compares them)
         record_tallies({"top": f"{len(right)}/{len(results)}",
                         "every_check": f"{sum(s.ok for s in results)}/{len(results)}"})
+        for name in NAMES:
+            mine = [s for s in results if s.name == name]
+            append_log(f"named:{name}", seeds(f"named:{name}", PER_NAME),
+                       f"right top name {sum(s.top_ok for s in mine)}/{len(mine)}, every check "
+                       f"{sum(s.ok for s in mine)}/{len(mine)}", sum(s.top_ok for s in mine) >= 0.6 * len(mine))
         assert sum(s.top_ok for s in results) >= 0.9 * len(results), report
         for name in NAMES:
             mine = [s for s in results if s.name == name]
@@ -131,8 +153,8 @@ def test_named_effects_found_and_fitted():
 
 def test_clean_recordings_raise_no_false_alarm():
     alarms, listed_wrong = [], []
-    for seed in range(CLEAN_SEEDS):
-        case = draw_case(8000 + seed, "clean", n_windows=WINDOWS)
+    for seed in seeds("clean", CLEAN_SEEDS):
+        case = draw_case(seed, "clean", n_windows=WINDOWS)
         _, d = _run(case)
         named = [m["name"] for m in d["missing_physics"] if m["name"] != "unmodelled_modes"]
         if named:
@@ -143,22 +165,30 @@ def test_clean_recordings_raise_no_false_alarm():
     print(f"false alarms {len(alarms)}/{CLEAN_SEEDS}: {alarms}; unmodelled listed on a clean table {listed_wrong}")
     if FULL:  # the tallies docs/explain.md quotes (test_documented_results.py compares them)
         record_tallies({"alarms": str(len(alarms)), "alarm_rate": f"{len(alarms)}/{CLEAN_SEEDS}"})
+        append_log("clean", seeds("clean", CLEAN_SEEDS), f"false alarms {len(alarms)}/{CLEAN_SEEDS} {alarms}, "
+                   f"unmodelled listed on {len(listed_wrong)}", len(alarms) <= 0.05 * CLEAN_SEEDS
+                   and len(listed_wrong) <= 0.05 * CLEAN_SEEDS)
     assert len(alarms) <= (0.05 * CLEAN_SEEDS if FULL else 1), alarms
     assert len(listed_wrong) <= (0.05 * CLEAN_SEEDS if FULL else 1), listed_wrong
 
 
 def test_unmodelled_modes_listed_exactly():
-    for seed in range(3 if FULL else 1):
-        case = draw_case(8500 + seed, "unmodelled_modes", n_windows=WINDOWS)
+    drawn = seeds("unmodelled", 3 if FULL else 1)
+    wrong = []
+    for seed in drawn:
+        case = draw_case(seed, "unmodelled_modes", n_windows=WINDOWS)
         _, d = _run(case)
         listed = {int(m["where"].split()[2]) for m in d["missing_physics"] if m["name"] == "unmodelled_modes"}
-        assert listed == set(case.truth.out_of_plane_modes), (listed, case.truth.out_of_plane_modes)
-        assert top_entry(d) is None, d["missing_physics"]
+        if listed != set(case.truth.out_of_plane_modes) or top_entry(d) is not None:
+            wrong.append((seed, sorted(listed), case.truth.out_of_plane_modes, top_entry(d)))
+    if FULL:
+        append_log("unmodelled", drawn, f"listed exactly on {len(drawn) - len(wrong)}/{len(drawn)}", not wrong)
+    assert not wrong, wrong
 
 
 def _two_effects(seed: int) -> dict[str, bool]:
-    """Seed ``9000 + seed`` of the freezing knee and the later loss: each criterion, True or False."""
-    case = draw_case(9000 + seed, "temperature_dependent_stiffness", kind="girder", n_windows=WINDOWS,
+    """Seed ``seed`` of the freezing knee and the later loss: each criterion, True or False."""
+    case = draw_case(seed, "temperature_dependent_stiffness", kind="girder", n_windows=WINDOWS,
                      form="bilinear", second_step=True)
     v, d = _run(case)
     _check_evidence(d)
@@ -185,16 +215,58 @@ def _two_effects(seed: int) -> dict[str, bool]:
 
 @pytest.mark.skipif(FULL, reason="at full size: test_two_effects_over_seeds")
 def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss():
-    checks = _two_effects(0)
-    assert all(checks.values()), checks
+    """Two reduced cases (the first two seeds of the full-size row): both effects named in at least
+    one. A method naming both in 14 of 15 full-size cases (the rate on fresh seeds, docs/explain.md)
+    fails it with (1/15)^2 = 0.4 %: a 99 % check (if that rate holds: the development seeds named both
+    on 8 of 10, docs/explain.md). Every criterion together holds on too few
+    full-size cases for a 99 % check on two (1 - (2/15)^2 = 0.98 even at 13 of 15): the cases' other
+    checks are printed, and asserted at full size. The second case runs only when the first does
+    not name both (the same check; about one run in 15 pays for it)."""
+    rows = {}
+    for seed in seeds("two_effects", TWO_CI):
+        rows[seed] = _two_effects(seed)
+        if rows[seed]["both"]:
+            break
+    print(f"two effects, reduced: {rows}")
+    assert any(c["both"] for c in rows.values()), rows
 
 
 @pytest.mark.skipif(not FULL, reason="full size only (SHM_FULL=1)")
 def test_two_effects_over_seeds():
     """15 seeds; every criterion in at least 13 (the named cases' 90 % per check, 13.5 of 15, less
     the half case a finite count cannot meet)."""
+    drawn = seeds("two_effects", TWO)
     with ProcessPoolExecutor(2) as pool:  # the named cases' test runs beside it: two cores in all
-        rows = dict(zip(range(TWO), pool.map(_two_effects, range(TWO)), strict=True))
+        rows = dict(zip(drawn, pool.map(_two_effects, drawn), strict=True))
     bad = {seed: [k for k, ok in c.items() if not ok] for seed, c in rows.items() if not all(c.values())}
-    print(f"two effects: {TWO - len(bad)}/{TWO} meet every criterion; failures {bad}")
+    both = sum(c["both"] for c in rows.values())
+    figures = f"both effects named {both}/{TWO}, every criterion {TWO - len(bad)}/{TWO}; failures {bad}"
+    print(f"two effects: {figures}")
+    append_log("two_effects", drawn, figures, TWO - len(bad) >= 13)
     assert TWO - len(bad) >= 13, bad
+
+
+def append_log(row: str, drawn: list[int], figures: str, passed: bool) -> None:
+    """One line per full-size run of a row at the end of docs/results/explain_dense_log.md, passed or
+    failed: date, commit, core tree, the row's seeds (first seed + count: they are consecutive) and
+    its figures (test_recorded_dense_seeds_follow_from_the_recorded_tree checks the seeds)."""
+    import subprocess
+    from datetime import UTC, datetime
+
+    def git(*a: str) -> str:
+        return subprocess.run(["git", "-C", str(LOG.parents[2]), *a], capture_output=True, text=True).stdout.strip()
+
+    dirty = " (with uncommitted changes)" if git("status", "--porcelain", "--", "shm_ros", "test") else ""
+    with LOG.open("a") as fh:
+        fh.write(f"- {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, commit {git('rev-parse', '--short', 'HEAD')}{dirty}, "
+                 f"core tree `{core_tree()}`, row `{row}`, seeds `{drawn[0]}+{len(drawn)}`: {figures}: "
+                 + ("**passes**" if passed else "**fails**") + "\n")
+
+
+def test_recorded_dense_seeds_follow_from_the_recorded_tree():
+    """Every full-size run in the log used the seeds its core tree gives (no seed chosen by hand),
+    from the acceptance range (never a development seed)."""
+    found = re.findall(r"core tree `([0-9a-f]{40})`, row `([a-z_:]+)`, seeds `(\d+)\+(\d+)`", LOG.read_text())
+    for tree, row, first, n in found:
+        assert seeds(row, int(n), tree) == list(range(int(first), int(first) + int(n))), (tree, row)
+        assert int(first) >= DEV_SEEDS

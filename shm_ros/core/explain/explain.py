@@ -424,7 +424,8 @@ def _decide(run: Run) -> None:
         for i, c in enumerate(run.accepted):
             run.say(f"evidence check of {c.label}", 0.95)
             job = run.jobs[c.label][0]
-            chk, err, method = evidence_check(job.gain, Box(job.specs), config.n_live, config.seed + i)
+            chk, err, method = evidence_check(job.gain, Box(job.specs), config.n_live, config.seed + i,
+                                              run.jobs[c.label][1].theta_map)
             c.log_evidence_gain_check = chk - job.cand.look_elsewhere()
             c.extra.update({"check_method": method, "check_err": err})
             tol = max(0.5, 3.0 * math.hypot(c.log_evidence_gain_err, err))

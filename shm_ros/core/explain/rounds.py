@@ -98,7 +98,7 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
             break
         res.accepted = True
         if config.nested_check:  # the second estimator, of the gain over nominal, less the same base
-            chk, err, method = evidence_check(job.gain, Box(job.specs), config.n_live, config.seed + 200)
+            chk, err, method = evidence_check(job.gain, Box(job.specs), config.n_live, config.seed + 200, fr.theta_map)
             res.log_evidence_gain_check = float(chk - (res.extra["gain_over_nominal"] - res.log_evidence_gain))
             tol = max(0.5, 3.0 * math.hypot(res.log_evidence_gain_err, err))
             res.extra.update({"check_method": method, "check_err": err,

@@ -8,8 +8,13 @@ the factor ranges the candidates' priors allow):
 
 * one group varies (every candidate of the library): **interpolation in the factor**. Each paired
   mode's log-frequency is a smooth function of the group factor x; it is tabulated once per group by
-  the exact eigen-solution at ``N_NODES`` nodes uniform in ln x over the needed range (extended on
-  demand) and read by a cubic spline in ln x. Modes are followed from the baseline (x = 1) outwards
+  the exact eigen-solution at nodes a fixed ``H_NODE`` apart in ln x over the needed range (extended
+  on demand) and read by a cubic spline in ln x. The spacing does not depend on the range: extending
+  a table keeps its nodes, so a candidate's gain does not depend on which candidates were fitted
+  before it (with a fixed number of nodes over the range, a later candidate whose factors reach
+  further coarsened an earlier one's table: a freezing knee's gain of 1,187.5 nats became 1,185.0
+  when a step's prior had stretched the table from 0.04-3.4 to 0.001-8, and its second evidence
+  estimator, run after, disagreed by that much). Modes are followed from the baseline (x = 1) outwards
   node by node by their MAC with the previous node, so a mode keeps its identity when frequencies cross.
 * several groups vary together: a **reduced Ritz basis** - the baseline's lowest modes plus, for each
   varying group, the static corrections ``K^-1 dK_g phi`` and ``K^-1 dM_g phi`` of the retained
@@ -31,7 +36,7 @@ from scipy.interpolate import CubicSpline
 from .candidates.base import Modification
 from .groups import GroupModel
 
-N_NODES = 64  # nodes of a group's table: cubic spline error ~ (h^4) well below 1e-6 in ln f
+H_NODE = 0.01  # spacing of a group's table in ln x: cubic spline error ~ h^4, well below 1e-6 in ln f
 X_FLOOR, X_CEIL = 1e-3, 1e3  # factors beyond these are not physical for any group
 
 
@@ -92,6 +97,7 @@ class Surrogate:
         self.phi_base = phi[0]  # (dof, n_modes)
         self.log_f_base = 0.5 * np.log(np.clip(self.w2_base[self.model_index], 1e-300, None)) - np.log(2 * np.pi)
         self._tables: dict[str, _Table] = {}
+        self._nodes: dict[str, dict[int, tuple[np.ndarray, np.ndarray]]] = {}
         self._ritz: dict[tuple[str, ...], tuple] = {}
 
     # -- sensitivities ---------------------------------------------------------------------------
@@ -150,11 +156,11 @@ class Surrogate:
             lo, hi = min(lo, t.lo), max(hi, t.hi)
         lo = max(min(lo, 1.0) / 1.05, X_FLOOR)
         hi = min(max(hi, 1.0) * 1.05, X_CEIL)
-        h = (np.log(hi) - np.log(lo)) / N_NODES
-        u = h * np.arange(np.floor(np.log(lo) / h), np.ceil(np.log(hi) / h) + 1)
+        h = H_NODE
+        k = np.arange(np.floor(np.log(lo) / h), np.ceil(np.log(hi) / h) + 1).astype(int)
+        u = h * k
         x = np.exp(u)
-        K, M = self.groups.matrices({group: x})
-        w2, phi = _eig(K, M, self.n_modes)
+        w2, phi = self._node_modes(group, k, x)
         i0 = int(np.argmin(np.abs(u)))
         ref = self.phi_base[:, self.model_index]
         logf = np.zeros((len(u), len(self.model_index)))
@@ -168,6 +174,17 @@ class Surrogate:
         t = _Table(float(x[0]), float(x[-1]), float(u[0]), float(h), CubicSpline(u, logf, axis=0).c, shapes)
         self._tables[group] = t
         return t
+
+    def _node_modes(self, group: str, k: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The exact eigen-solutions at the nodes ``k`` (x = exp(k H_NODE)), each solved once per group."""
+        known = self._nodes.setdefault(group, {})
+        new = [i for i, kk in enumerate(k) if int(kk) not in known]
+        for a in range(0, len(new), 128):  # in batches: (N, dof, dof) pencils
+            part = new[a:a + 128]
+            K, M = self.groups.matrices({group: x[part]})
+            w2, phi = _eig(K, M, self.n_modes)
+            known.update({int(k[i]): (w2[j], phi[j]) for j, i in enumerate(part)})
+        return (np.stack([known[int(kk)][0] for kk in k]), np.stack([known[int(kk)][1] for kk in k]))
 
     # -- several groups: reduced Ritz basis -------------------------------------------------------
     def _ritz_basis(self, names: tuple[str, ...]) -> tuple:

@@ -1,0 +1,32 @@
+"""The second evidence estimator (quadrature, up to three parameters) finds a peak narrower than its
+first grid's cells when told where the fit's peak is (docs/explain.md, "Fit and evidence")."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from shm_ros.core.explain.candidates.base import ParamSpec
+from shm_ros.core.explain.fit import Box, quadrature_check
+
+PEAK = np.array([0.4137, 0.5219, 0.3071])  # off the first grid's points (31 a side)
+BUMP = np.array([0.8, 0.2, 0.7])
+
+
+def _gain(theta: np.ndarray) -> np.ndarray:
+    """A sharp peak (1,000 nats, sd 0.001 per axis) and a broad lesser bump (900 nats, sd 0.1)."""
+    peak = 1000.0 - 0.5 * np.sum(((theta - PEAK) / 0.001) ** 2, axis=1)
+    bump = 900.0 - 0.5 * np.sum(((theta - BUMP) / 0.1) ** 2, axis=1)
+    return np.logaddexp(peak, bump)
+
+
+def test_a_sharp_peak_between_the_grid_points_is_integrated():
+    box = Box([ParamSpec(n, 0.0, 1.0) for n in ("a", "b", "c")])
+    # ln of each Gaussian's integral: height + 3/2 ln(2 pi) + 3 ln sd
+    exact = float(np.logaddexp(1000.0 + 1.5 * math.log(2 * math.pi) + 3 * math.log(0.001),
+                               900.0 + 1.5 * math.log(2 * math.pi) + 3 * math.log(0.1)))
+    blind, _ = quadrature_check(_gain, box)
+    told, err = quadrature_check(_gain, box, PEAK[None])
+    assert blind < exact - 50  # the grid alone sees the bump only
+    assert abs(told - exact) < max(0.05, 3 * err), (told, exact, err)
