@@ -6,7 +6,8 @@ from __future__ import annotations
 import os
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -68,6 +69,9 @@ class StopSignals:
         # A process started in the background by a non-interactive shell inherits SIGINT as
         # ignored; a node must still stop on it (and on SIGTERM), so install the handlers explicitly.
         self._previous = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        # A supervisor starts its nodes with SIGINT blocked (:func:`held_while_starting`): a Ctrl-C
+        # that came while this process imported is delivered now, to the handler.
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -87,6 +91,20 @@ class StopSignals:
     @property
     def stopping(self) -> bool:
         return bool(self.signum)
+
+
+@contextmanager
+def held_while_starting() -> Iterator[None]:
+    """Processes started in this block begin with SIGINT blocked (the mask is inherited): a Ctrl-C
+    to the process group while a node still imports waits until :class:`StopSignals` is in place,
+    and the node then stops cleanly instead of dying of a KeyboardInterrupt inside an import. (A
+    SIGTERM there ends it at once, quietly: the default action; a SIGINT to this process meanwhile
+    is delivered at the end of the block.)"""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def report_stop_reason(text: str) -> None:
@@ -125,6 +143,8 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None,
         rclpy.init(args=sys.argv if args is None else args,
                    signal_handler_options=SignalHandlerOptions.NO)
         try:
+            if stop.stopping:  # stopped while it started: it holds nothing yet
+                return 0
             node = factory()
             if getattr(node, "autostart", False) and not getattr(node, "configured", True):
                 # a managed node that could not configure itself: say why and stop (a supervisor
