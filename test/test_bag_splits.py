@@ -235,3 +235,25 @@ def test_a_full_disk_stops_the_store_with_a_clear_error_and_keeps_what_was_store
             store.record(est(3), tracker.add(est(3)), tracker)
     with TrackStore(path) as store:
         assert store.count("estimates") == 3 and not store.has("w3")
+
+
+def test_the_windows_of_a_split_being_written_are_counted(tmp_path):
+    """What the graph tests wait on (``ros_helpers.graph.windows_written``): the windows a running
+    recorder has written, its open split (in ``out/out_<k>/``, flushed message by message) included,
+    so the wait ends with the last window instead of running to its timeout."""
+    from ros_helpers.graph import windows_written
+
+    from shm_ros.io.bag_splits import SplitBagWriter
+
+    window = "shm_interfaces/msg/Window"
+    w = SplitBagWriter(tmp_path / "out").open()
+    w.write_cdr("/shm/windows", window, 1, _cdr("w1"))
+    w.write_cdr(TOPIC, MSGTYPE, 2, _cdr("w1"))
+    assert windows_written(tmp_path / "out") == 1  # the open split: one window, one estimate
+    w.write_cdr("/shm/windows", window, 3, _cdr("w2"))
+    assert windows_written(tmp_path / "out") == 2
+    w.close()
+    w = SplitBagWriter(tmp_path / "out").open()  # a closed split and an open one
+    w.write_cdr("/shm/windows", window, 4, _cdr("w3"))
+    assert windows_written(tmp_path / "out") == 3
+    w.close()
