@@ -75,12 +75,14 @@ class StopSignals:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        # A node process keeps them to its end (``restore=False``): a signal that comes while the
-        # interpreter winds down must not raise KeyboardInterrupt inside a callback of rclpy's C++
-        # executor threads (that aborts the process: "terminate called ... error_already_set").
-        if self.restore:
-            for s, handler in self._previous.items():
-                signal.signal(s, handler)
+        # A node process ignores them from here to its end (``restore=False``): it has stopped and
+        # closed its files, so a later signal (the supervisor's SIGINT after the group's SIGTERM)
+        # has nothing left to stop. It must neither raise KeyboardInterrupt inside a callback of
+        # rclpy's C++ executor threads (that aborts the process: "terminate called ...
+        # error_already_set") nor kill the process as the interpreter winds down (it puts the
+        # default action back for a handler of its own, not for an ignored signal): exit code 0.
+        for s, handler in self._previous.items():
+            signal.signal(s, handler if self.restore else signal.SIG_IGN)
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         if self.signum:
@@ -105,6 +107,16 @@ def held_while_starting() -> Iterator[None]:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def delivered(publisher: Any, timeout_s: float = 10.0) -> Callable[[], object]:
+    """``before`` of a test hook's :func:`~shm_ros.io.faults.fault_point` after a publication:
+    until every subscriber of the reliable ``publisher`` acknowledged what it sent (at most
+    ``timeout_s``), so that a node killed there has published its result and its restart
+    publishes it again."""
+    from rclpy.duration import Duration
+
+    return lambda: publisher.wait_for_all_acked(Duration(seconds=timeout_s))
 
 
 def report_stop_reason(text: str) -> None:
