@@ -11,7 +11,9 @@ estimates; the store must hold every window; no traceback; nothing left running;
 code says whether something was lost (a killed node not running again at the stop) and the replay
 that was stopped says so.
 
-One run in CI; ``SHM_FULL=1`` runs 20 with kill points drawn from a fixed seed.
+One run in CI, stopped once the three killed nodes are running again: exit code 0, every window
+published before the stop recorded, estimated and stored once. ``SHM_FULL=1`` runs 20 with kill
+points drawn from a fixed seed, every other one stopped as soon as the three faults fired.
 
 Also: the recorder killed as it closes its bag at a Ctrl-C (``recorder:close``) keeps every window
 for the next start; killing the supervisor with SIGKILL leaves no node running (and the recorder,
