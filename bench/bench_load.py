@@ -22,6 +22,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -89,6 +90,7 @@ def on_window(w):
     state["windows"] += 1
     for name in w.channel_names:
         out[name] = out.get(name, 0) + int(w.n_samples)
+    print("samples", sum(out.values()), flush=True)  # so far: the bench waits for all it sent
 def on_diag(m):
     for st in m.status:
         if st.name == "ingest: status":
@@ -131,6 +133,17 @@ def run(seconds: float = 600.0) -> dict:
     # the reader (ingest holds windows for a slow reader)
     reader = subprocess.Popen([sys.executable, "-c", READER], stdout=subprocess.PIPE, text=True)
     assert reader.stdout is not None and reader.stdout.readline().strip() == "ready"
+    counted_so_far = [0]
+    reader_lines: list[str] = []
+
+    def follow(stream) -> None:
+        for line in stream:
+            if line.startswith("samples "):
+                counted_so_far[0] = int(line.split()[1])
+            else:
+                reader_lines.append(line)
+    follower = threading.Thread(target=follow, args=(reader.stdout,), daemon=True)
+    follower.start()
     retries = [0]
 
     def publish(pub, msg) -> None:
@@ -197,15 +210,18 @@ def run(seconds: float = 600.0) -> dict:
         cpu = _cpu_s(ingest.pid) - c_start
         done_pub.publish(String(data="load bench"))
         expected = {**{n: sent for n in names}, **{f"i{c}": sent for c in range(N_IMU)}}
+        # ingest cuts what it holds; the last window travels: until the reader has every sample
+        # sent (at most 60 s; short of that samples were lost, and once ingest is idle none come)
         end = time.monotonic() + 60
-        while time.monotonic() < end:  # ingest cuts what it holds; the last window travels
+        while time.monotonic() < end and counted_so_far[0] < sent * (N_BLOCK + N_IMU):
             rclpy.spin_once(node, timeout_sec=0.2)
             if time.monotonic() > end - 50 and ingest_idle(ingest.pid):
                 break
         code, log = stop_process(ingest)
-        time.sleep(2.0)
         stop_pub.publish(String(data="stop"))
-        counted = json.loads(reader.communicate(timeout=60)[0].strip().splitlines()[-1])
+        reader.wait(timeout=60)
+        follower.join(timeout=10)
+        counted = json.loads(reader_lines[-1])
     finally:
         node.destroy_node()
         rclpy.try_shutdown()

@@ -95,7 +95,7 @@ def test_results_without_a_window_id_are_recorded_once_per_content(tmp_path):
 
     from shm_ros.io.bag_splits import SplitBagWriter
     from shm_ros.io.typestore import typestore
-    from shm_ros.ros.recorder_node import record_key, recorded_keys
+    from shm_ros.ros.recorder_node import decode_cdr_lenient, record_key, recorded_keys
 
     kinds = {"/shm/posterior": "shm_interfaces/msg/PosteriorSummary", "/shm/verdict": "shm_interfaces/msg/Verdict"}
 
@@ -114,8 +114,7 @@ def test_results_without_a_window_id_are_recorded_once_per_content(tmp_path):
 
     def big_endian(data: bytes, msgtype: str) -> bytes:
         ts = typestore()
-        msgdef = ts.get_msgdef(msgtype)
-        msg, _ = msgdef.deserialize_cdr_le(data[4:], 0, msgdef.cls, ts)  # (a published one may run on)
+        msg = decode_cdr_lenient(ts, msgtype, data)  # (a published one may run on past its last field)
         out = bytes(ts.serialize_cdr(msg, msgtype, little_endian=False))
         assert out[1] == 0 and out != data
         return out
@@ -142,6 +141,29 @@ def test_results_without_a_window_id_are_recorded_once_per_content(tmp_path):
     other_verdict = serialize_message(Verdict(summary="mode 2 unmodelled", model_fits=True))
     assert ("/shm/verdict", record_key(kinds["/shm/verdict"], other_verdict)) not in keys
     assert record_key("diagnostic_msgs/msg/DiagnosticArray", b"\0\1\0\0") is None  # every one recorded
+
+
+def test_a_message_sent_with_bytes_after_its_last_field_decodes_through_the_public_api():
+    """rclpy (Fast CDR) sends a Verdict with 5 bytes after its last field, more than the typestore's
+    ``deserialize_cdr`` accepts: the recorder's lenient decode gives the message the bytes carry; a
+    message cut short, or with a wrong encapsulation, does not decode."""
+    from rclpy.serialization import serialize_message
+    from rosbags.serde import SerdeError
+    from shm_interfaces.msg import Verdict
+
+    from shm_ros.io.typestore import typestore
+    from shm_ros.ros.recorder_node import decode_cdr_lenient
+
+    ts, msgtype = typestore(), "shm_interfaces/msg/Verdict"
+    data = serialize_message(Verdict(summary="mode 2 unmodelled"))
+    with pytest.raises(SerdeError, match="size mismatch"):
+        ts.deserialize_cdr(data, msgtype)
+    msg = decode_cdr_lenient(ts, msgtype, data)
+    assert msg is not None and msg.summary == "mode 2 unmodelled"
+    assert msg.status == "" and msg.model_fits is False and len(msg.lag1_after) == 0
+    assert len(ts.serialize_cdr(msg, msgtype)) < len(data)
+    assert decode_cdr_lenient(ts, msgtype, data[:40]) is None
+    assert decode_cdr_lenient(ts, msgtype, b"\x07\x07" + data[2:]) is None
 
 
 def test_a_writer_killed_mid_write_loses_only_that_message_and_the_bag_reads_as_one(tmp_path):
@@ -213,3 +235,25 @@ def test_a_full_disk_stops_the_store_with_a_clear_error_and_keeps_what_was_store
             store.record(est(3), tracker.add(est(3)), tracker)
     with TrackStore(path) as store:
         assert store.count("estimates") == 3 and not store.has("w3")
+
+
+def test_the_windows_of_a_split_being_written_are_counted(tmp_path):
+    """What the graph tests wait on (``ros_helpers.graph.windows_written``): the windows a running
+    recorder has written, its open split (in ``out/out_<k>/``, flushed message by message) included,
+    so the wait ends with the last window instead of running to its timeout."""
+    from ros_helpers.graph import windows_written
+
+    from shm_ros.io.bag_splits import SplitBagWriter
+
+    window = "shm_interfaces/msg/Window"
+    w = SplitBagWriter(tmp_path / "out").open()
+    w.write_cdr("/shm/windows", window, 1, _cdr("w1"))
+    w.write_cdr(TOPIC, MSGTYPE, 2, _cdr("w1"))
+    assert windows_written(tmp_path / "out") == 1  # the open split: one window, one estimate
+    w.write_cdr("/shm/windows", window, 3, _cdr("w2"))
+    assert windows_written(tmp_path / "out") == 2
+    w.close()
+    w = SplitBagWriter(tmp_path / "out").open()  # a closed split and an open one
+    w.write_cdr("/shm/windows", window, 4, _cdr("w3"))
+    assert windows_written(tmp_path / "out") == 3
+    w.close()

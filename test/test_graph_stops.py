@@ -11,7 +11,9 @@ estimates; the store must hold every window; no traceback; nothing left running;
 code says whether something was lost (a killed node not running again at the stop) and the replay
 that was stopped says so.
 
-One run in CI; ``SHM_FULL=1`` runs 20 with kill points drawn from a fixed seed.
+One run in CI, stopped once the three killed nodes are running again: exit code 0, every window
+published before the stop recorded, estimated and stored once. ``SHM_FULL=1`` runs 20 with kill
+points drawn from a fixed seed, every other one stopped as soon as the three faults fired.
 
 Also: the recorder killed as it closes its bag at a Ctrl-C (``recorder:close``) keeps every window
 for the next start; killing the supervisor with SIGKILL leaves no node running (and the recorder,
@@ -185,18 +187,61 @@ def _clean(text: str) -> bool:
     return "Traceback" not in text and "KeyboardInterrupt" not in text and "terminate called" not in text
 
 
-def _fault_sets() -> list[str]:
-    """The faults of each run: one fixed set in CI; with SHM_FULL=1, 20 sets whose kill points are
-    drawn from a fixed seed (the recorder's message, identify's and the store's window)."""
+def _fault_sets() -> list[tuple[str, bool]]:
+    """The faults of each run and whether the stop waits until the killed nodes are back: in CI one
+    fixed set, stopped once the three are running again (the exit code 0 path); with SHM_FULL=1, 20
+    sets whose kill points are drawn from a fixed seed (the recorder's message, identify's and the
+    store's window), every other one stopped as soon as the three faults fired (a killed node
+    usually still down: exit code 1 naming it)."""
     if not full_size():
-        return ["bag:write:15,identify:published:1,store:commit:1"]
+        return [pytest.param("bag:write:15,identify:published:1,store:commit:1", True, id="run00")]
     rng = np.random.default_rng(35)
-    return [f"bag:write:{rng.integers(5, 40)},identify:published:{rng.integers(1, 3)},"
-            f"store:commit:{rng.integers(1, 3)}" for _ in range(20)]
+    return [pytest.param(f"bag:write:{rng.integers(5, 40)},identify:published:{rng.integers(1, 3)},"
+                         f"store:commit:{rng.integers(1, 3)}", k % 2 == 0, id=f"run{k:02d}") for k in range(20)]
 
 
-@pytest.mark.parametrize("fault", _fault_sets())
-def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplicate_nothing(tmp_path, fault):
+
+def _up_again(text: str, node: str) -> bool:
+    """``node`` was restarted and its latest process is set up and spinning: the up file it writes
+    then (the supervisor removes it before each start) exists. The file is named in the process's
+    environment (``SHM_EXIT_REASON_FILE``)."""
+    from shm_ros.ros.node_main import REASON_FILE_ENV
+
+    pids = re.findall(rf"started {node} \(pid (\d+)\)", text)
+    if len(pids) < 2:
+        return False
+    try:
+        env = Path(f"/proc/{pids[-1]}/environ").read_bytes().split(b"\0")
+    except OSError:
+        return False
+    reason = next((e.split(b"=", 1)[1].decode() for e in env if e.startswith(REASON_FILE_ENV.encode() + b"=")), "")
+    return bool(reason) and Path(reason + ".up").exists()
+
+
+class _Recovered:
+    """``stop_when`` of a session: the three faults fired, each killed node is running again (set up
+    and spinning), and the graph is quiet: every window ingest published is in the track store and
+    neither count changed for ``quiet_s`` (the restarted recorder has taken up what was published
+    while it was down)."""
+
+    def __init__(self, marks: Path, store: Path, quiet_s: float = 3.0) -> None:
+        self.marks, self.store, self.quiet_s = marks, store, quiet_s
+        self.state, self.since = (-1, -1), time.monotonic()
+
+    def __call__(self, lines) -> bool:
+        if len(list(self.marks.iterdir())) < 3:
+            return False
+        text = lines.text()
+        if not all(_up_again(text, node) for node in ("identify", "track", "recorder")):
+            return False
+        state = (lines.count("[ingest]: window"), _estimates_in_store(self.store))
+        if state != self.state:
+            self.state, self.since = state, time.monotonic()
+        return 1 <= state[0] == state[1] and time.monotonic() - self.since >= self.quiet_s
+
+
+@pytest.mark.parametrize(("fault", "recovered"), _fault_sets())
+def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplicate_nothing(tmp_path, fault, recovered):
     from shm_ros.core.tracking import Tracker, TrackingConfig
     from shm_ros.io.sources import open_source
     from shm_ros.ros.graph_run import read_pipeline_bag
@@ -208,8 +253,11 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
     store = tmp_path / "track.sqlite"
     # 1: faults while a replay runs; SIGTERM to the graph (every process) once all three fired
     faults = {**os.environ, "SHM_FAULT_MARK": str(marks), "SHM_FAULT": fault}
+    # stopped once the three faults fired, or once the killed nodes are back (a slower replay, so
+    # that it still runs then: the stop cuts it short, it adds no time)
+    stop_when = _Recovered(marks, store) if recovered else lambda out: len(list(marks.iterdir())) == 3
     code, text, replay_code, replay_out, seen, replaying = _session(
-        tmp_path, bag, faults, lambda out: len(list(marks.iterdir())) == 3, signal.SIGTERM, "--rate", "1")
+        tmp_path, bag, faults, stop_when, signal.SIGTERM, "--rate", "0.5" if recovered else "1")
     print(text[-3000:], replay_out[-1000:])
     assert replaying and replay_code != 0, "the graph stopped during the replay: the replay must say so"
     assert sorted(p.name for p in marks.iterdir()) == ["bag.write", "identify.published", "store.commit"]
@@ -217,11 +265,13 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
     # stop (the recorder in its back-off, a restart still starting), 0 when the three came back
     # (each node named once, whichever way it died: a restart still starting that the SIGTERM to the
     # group ended is not a second death)
-    lost, recovered = _named(text, "may be lost: "), _named(text, "recovered from their inputs: ")
-    assert sorted(lost + recovered) == ["identify", "recorder", "track"], text
+    lost, back = _named(text, "may be lost: "), _named(text, "recovered from their inputs: ")
+    assert sorted(lost + back) == ["identify", "recorder", "track"], text
     assert code == (1 if lost else 0) and "all nodes stopped" in text, text
     if text.count("[recorder]: recording to") < 2:
         assert "recorder" in lost, text
+    if recovered:  # each back and spinning at the stop: nothing lost, the exit code 0
+        assert code == 0 and lost == [] and sorted(back) == ["identify", "recorder", "track"], text
     assert _clean(text), text
     # the four, and the recorder again when its restart came before the stop (its back-off is 2 s);
     # a restart just before the stop may live shorter than the watcher's poll: the announced pids count
@@ -234,6 +284,13 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
         for ids in ([w.window_id for w in first.windows], [e.window_id for e in first.estimates],
                     [r["window_id"] for r in first.tracked]):
             assert max(collections.Counter(ids).values(), default=0) <= 1, ids
+        if recovered:  # every window published before the stop: recorded, estimated and stored (ingest
+            # publishes what it still holds as it closes: those may come after the others stopped)
+            before = sorted(w.window_id for w in first.windows)[:stop_when.state[0]]  # ids sort in time
+            assert len(before) == stop_when.state[0] >= 1, (stop_when.state, text)
+            assert set(before) <= {e.window_id for e in first.estimates}, first.estimates
+            assert {r["window_id"] for r in first.tracked} <= {w.window_id for w in first.windows}
+            assert _estimates_in_store(store) >= len(before)
     else:  # stopped while the recorder waited for its restart: its split cut short waits for the next
         assert list((tmp_path / "out").glob("out_*/out_*.mcap")), "the split cut short must be kept"
     # 2: rerun (no faults): the same bag again resumes; then Ctrl-C to the whole process group

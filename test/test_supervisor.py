@@ -232,9 +232,10 @@ if sys.argv[1] == "up":  # a node set up and spinning: stops cleanly on SIGINT o
     signal.signal(signal.SIGTERM, lambda *a: sys.exit(0))
 if sys.argv[1] == "stuck":  # up, but does not stop on SIGINT
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-if sys.argv[1] != "starting":
+if sys.argv[1] != "starting":  # a node's handlers in place: the SIGINT its supervisor held is let in
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     Path(os.environ[sys.argv[2]] + ".up").touch()
-time.sleep(120)  # "starting": still importing, no handler yet (SIGTERM ends it)
+time.sleep(120)  # "starting": still importing, no handler yet (SIGINT held, SIGTERM ends it)
 """
 
 
@@ -337,3 +338,39 @@ def test_a_single_process_graph_that_died_before_the_stop_makes_the_exit_code_1(
     sup.start_all()
     assert _wait_for(lambda: sup.procs["graph"].poll() is not None)
     assert sup.stop_all() == 1 and sup.lost == {"graph": "graph stopped with exit code -9"}, sup.lost
+
+
+def test_a_node_still_starting_stops_cleanly_on_a_ctrl_c_or_the_supervisors_stop(tmp_path, capfd):
+    """A Ctrl-C to the process group reaches a node still importing (before its handlers): the
+    supervisor started it with SIGINT held, so the node stops once it can (exit code 0, no
+    KeyboardInterrupt traceback from inside an import, nothing set up); another node still starting
+    when the supervisor's own stop comes is ended by SIGTERM at once. Neither is a death or lost:
+    exit code 0, each logged as ended while starting. (Without the held SIGINT the first dies with
+    -2 and a traceback.)"""
+    from shm_ros.ros.supervisor import GraphConfig, NodeSpec, Supervisor
+
+    log: list[str] = []
+    sup = Supervisor(GraphConfig([NodeSpec("recorder", "recorder", {"output": str(tmp_path / "out")}),
+                                  NodeSpec("identify", "identify", {})]), log=log.append)
+    try:
+        sup.start_all()
+        time.sleep(0.5)  # both import (rclpy, numpy, the node's modules: seconds)
+        rec = sup.procs["recorder"]
+        assert rec.poll() is None and not sup._up_file("recorder").exists()
+        rec.send_signal(signal.SIGINT)  # the terminal's Ctrl-C, as it reaches every process of the group
+        code = rec.wait(timeout=120)
+        assert not sup._up_file("identify").exists()
+        stopped = sup.stop_all()
+    finally:
+        for proc in sup.procs.values():
+            if proc.poll() is None:
+                proc.kill()
+    out = capfd.readouterr()
+    text = out.out + out.err
+    assert code == 0, text
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
+    assert not (tmp_path / "out").exists(), "stopped before it set up: no bag opened"
+    assert stopped == 0 and sup.lost == {} and sup.died == {}, (sup.lost, log)
+    assert "[supervisor] recorder was still starting at the stop (exit code 0)" in log, log
+    assert any(ln.startswith("[supervisor] identify was still starting at the stop (exit code ")
+               for ln in log), log

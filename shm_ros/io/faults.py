@@ -11,7 +11,7 @@ Points: ``bag:write`` (a bag writer flushing a message: a large record is partly
 process dies; the recorder flushes every message), ``identify:published``
 (after publishing the estimate of a window), ``ingest:published`` (after publishing a window),
 ``update:published``, ``predict:published`` and ``explain:published`` (after publishing a
-posterior, a prediction, a verdict),
+posterior, a prediction, a verdict, once its subscribers acknowledged it),
 ``store:commit`` (inside the track store's transaction of a window, before its commit),
 ``<any node>:close`` (on a stop, before the node closes its files), ``recorder:enospc`` and
 ``store:enospc`` (the next write fails as on a full disk). Without ``SHM_FAULT`` every call reads
@@ -23,6 +23,7 @@ from __future__ import annotations
 import errno
 import os
 import signal
+from collections.abc import Callable
 from pathlib import Path
 
 _passes: dict[tuple[str, str], int] = {}
@@ -54,10 +55,14 @@ def _fires(node: str, point: str) -> bool:
     return True
 
 
-def fault_point(node: str, point: str) -> None:
-    """Die here (SIGKILL, nothing flushed or closed) when ``SHM_FAULT`` says so."""
+def fault_point(node: str, point: str, before: Callable[[], object] | None = None) -> None:
+    """Die here (SIGKILL, nothing flushed or closed) when ``SHM_FAULT`` says so; ``before`` first
+    (a publisher waiting until its subscribers have the message: killed after its delivery)."""
     if _fires(node, point):
+        if before is not None:
+            before()
         os.kill(os.getpid(), signal.SIGKILL)
+
 
 
 def disk_full_point(node: str, path: str | Path) -> None:

@@ -34,7 +34,7 @@ from shm_ros.io.faults import fault_point
 from shm_ros.ros import explain_worker, topics
 from shm_ros.ros.convert import tracked_row_from_msg, window_from_msg
 from shm_ros.ros.managed import ManagedNode
-from shm_ros.ros.node_main import spin
+from shm_ros.ros.node_main import delivered, spin
 from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.run_schedule import run_due
@@ -237,7 +237,7 @@ class ExplainNode(ManagedNode):
         if state != self.last.get(name):
             self.last[name] = state
             self.pub.publish(verdict_to_msg(verdict))
-            fault_point(self.get_name(), "published")  # a test hook: killed after a verdict
+            fault_point(self.get_name(), "published", delivered(self.pub))  # a test hook: killed after a verdict
             self.get_logger().info(f"verdict from {count} {unit}: {text}")
         return accepted
 

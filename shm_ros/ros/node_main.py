@@ -6,7 +6,8 @@ from __future__ import annotations
 import os
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -68,15 +69,20 @@ class StopSignals:
         # A process started in the background by a non-interactive shell inherits SIGINT as
         # ignored; a node must still stop on it (and on SIGTERM), so install the handlers explicitly.
         self._previous = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        # A supervisor starts its nodes with SIGINT blocked (:func:`held_while_starting`): a Ctrl-C
+        # that came while this process imported is delivered now, to the handler.
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
         return self
 
     def __exit__(self, *exc: object) -> None:
-        # A node process keeps them to its end (``restore=False``): a signal that comes while the
-        # interpreter winds down must not raise KeyboardInterrupt inside a callback of rclpy's C++
-        # executor threads (that aborts the process: "terminate called ... error_already_set").
-        if self.restore:
-            for s, handler in self._previous.items():
-                signal.signal(s, handler)
+        # A node process ignores them from here to its end (``restore=False``): it has stopped and
+        # closed its files, so a later signal (the supervisor's SIGINT after the group's SIGTERM)
+        # has nothing left to stop. It must neither raise KeyboardInterrupt inside a callback of
+        # rclpy's C++ executor threads (that aborts the process: "terminate called ...
+        # error_already_set") nor kill the process as the interpreter winds down (it puts the
+        # default action back for a handler of its own, not for an ignored signal): exit code 0.
+        for s, handler in self._previous.items():
+            signal.signal(s, handler if self.restore else signal.SIG_IGN)
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         if self.signum:
@@ -87,6 +93,30 @@ class StopSignals:
     @property
     def stopping(self) -> bool:
         return bool(self.signum)
+
+
+@contextmanager
+def held_while_starting() -> Iterator[None]:
+    """Processes started in this block begin with SIGINT blocked (the mask is inherited): a Ctrl-C
+    to the process group while a node still imports waits until :class:`StopSignals` is in place,
+    and the node then stops cleanly instead of dying of a KeyboardInterrupt inside an import. (A
+    SIGTERM there ends it at once, quietly: the default action; a SIGINT to this process meanwhile
+    is delivered at the end of the block.)"""
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+def delivered(publisher: Any, timeout_s: float = 10.0) -> Callable[[], object]:
+    """``before`` of a test hook's :func:`~shm_ros.io.faults.fault_point` after a publication:
+    until every subscriber of the reliable ``publisher`` acknowledged what it sent (at most
+    ``timeout_s``), so that a node killed there has published its result and its restart
+    publishes it again."""
+    from rclpy.duration import Duration
+
+    return lambda: publisher.wait_for_all_acked(Duration(seconds=timeout_s))
 
 
 def report_stop_reason(text: str) -> None:
@@ -125,6 +155,8 @@ def spin(factory: Callable[[], Any], args: list[str] | None = None,
         rclpy.init(args=sys.argv if args is None else args,
                    signal_handler_options=SignalHandlerOptions.NO)
         try:
+            if stop.stopping:  # stopped while it started: it holds nothing yet
+                return 0
             node = factory()
             if getattr(node, "autostart", False) and not getattr(node, "configured", True):
                 # a managed node that could not configure itself: say why and stop (a supervisor

@@ -32,7 +32,7 @@ from shm_ros.io.faults import fault_point
 from shm_ros.ros import predict_worker, topics
 from shm_ros.ros.convert import ns_to_time, window_from_msg
 from shm_ros.ros.managed import ManagedNode
-from shm_ros.ros.node_main import spin
+from shm_ros.ros.node_main import delivered, spin
 from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
@@ -166,7 +166,7 @@ class PredictNode(ManagedNode):
                 self.diag.report("error", f"prediction failed: {exc}", "prediction")
             else:
                 self.pub.publish(prediction_to_msg(pred))
-                fault_point(self.get_name(), "published")  # a test hook: killed after a prediction
+                fault_point(self.get_name(), "published", delivered(self.pub))  # a test hook: killed after a prediction
                 self.done += 1
                 if self.settings.output_dir:
                     self.results.append((pred, row, self.future_model))

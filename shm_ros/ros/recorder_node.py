@@ -76,15 +76,40 @@ def canonical_cdr(msgtype: str, data: bytes) -> bytes:
     from shm_ros.io.typestore import typestore
 
     ts = typestore()
-    msgdef = ts.get_msgdef(msgtype)
-    decode = msgdef.deserialize_cdr_le if data[1:2] == b"\x01" else msgdef.deserialize_cdr_be
-    try:  # what follows the last field is not read (the typestore's own check refuses it)
-        msg: Any = decode(memoryview(data)[4:], 0, msgdef.cls, ts)[0]
-    except (struct.error, IndexError, ValueError):  # malformed: keyed by its bytes
+    msg: Any = decode_cdr_lenient(ts, msgtype, data)
+    if msg is None:  # malformed: keyed by its bytes
         return bytes(data)
     if (header := getattr(msg, "header", None)) is not None:
         msg = replace(msg, header=replace(header, stamp=replace(header.stamp, sec=0, nanosec=0)))
     return bytes(ts.serialize_cdr(msg, msgtype))
+
+
+#: at most this many bytes after a message's last field are taken as the sender's end padding
+MAX_TRAILING = 64
+
+
+def decode_cdr_lenient(ts: Any, msgtype: str, data: bytes) -> object | None:
+    """``data`` decoded by the typestore's public ``deserialize_cdr``, bytes a sender put after the
+    last field (Fast CDR ends a message at its buffer's alignment: 5 bytes after a Verdict's last
+    field, where the typestore allows 3) left out; None when it does not decode. The typestore
+    refuses more than 3 bytes after the end ("size mismatch", an error without a cause); the message
+    is then decoded from ``data`` cut one byte shorter until it is accepted: the first length
+    accepted still holds every field (the end of the last field is at most 3 bytes before it), so
+    the message is the one the whole of ``data`` carries."""
+    from rosbags.serde import SerdeError
+
+    if len(data) < 4 or bytes(data[:2]) not in (b"\x00\x00", b"\x00\x01"):
+        return None
+    view = memoryview(data)
+    for end in range(len(data), max(len(data) - MAX_TRAILING, 4) - 1, -1):
+        try:
+            return ts.deserialize_cdr(view[:end], msgtype)
+        except SerdeError as exc:
+            if exc.__cause__ is not None:  # a field does not decode (not bytes after the end)
+                return None
+        except IndexError:  # a length beyond the buffer the typestore does not check
+            return None
+    return None
 
 
 class Storage(enum.StrEnum):

@@ -150,15 +150,21 @@ class Supervisor:
         return {**os.environ, SUPERVISOR_PID_ENV: str(os.getpid()), REASON_FILE_ENV: str(self._reason_file(name))}
 
     def start(self, node: NodeSpec | NodeLaunch) -> None:
+        from shm_ros.ros.node_main import held_while_starting
+
         self._reason_file(node.name).unlink(missing_ok=True)
         self._up_file(node.name).unlink(missing_ok=True)
-        self.procs[node.name] = subprocess.Popen(self.command(node), env=self._env(node.name))
+        with held_while_starting():  # a Ctrl-C while it imports stops it cleanly once it can
+            self.procs[node.name] = subprocess.Popen(self.command(node), env=self._env(node.name))
         self._started[node.name] = time.monotonic()
         self.log(f"[supervisor] started {node.name} (pid {self.procs[node.name].pid})")
 
     def start_all(self) -> None:
+        from shm_ros.ros.node_main import held_while_starting
+
         if self.config.mode == "single":
-            self.procs["graph"] = subprocess.Popen(self.single_command(), env=self._env("graph"))
+            with held_while_starting():
+                self.procs["graph"] = subprocess.Popen(self.single_command(), env=self._env("graph"))
             self.log(f"[supervisor] started the graph in one process (pid {self.procs['graph'].pid})")
             return
         for node in self.plan.values():
@@ -213,20 +219,23 @@ class Supervisor:
         return ""
 
     def stop_all(self, timeout: float = 20.0) -> int:
-        """SIGINT every child (a second one, as from a terminal's Ctrl-C, does no harm: a node
-        ignores it while it closes its files), wait, escalate; 0 when all stopped cleanly and no
-        node that died may have lost what it held; ``lost`` names each node that makes it 1, once,
-        with why (``died`` has every death)."""
+        """SIGINT every child that is up (a second one, as from a terminal's Ctrl-C, does no harm: a
+        node ignores it while it closes its files), SIGTERM one still starting (it holds nothing
+        yet; a SIGINT would wait in it until its handlers are in place, see
+        :func:`~shm_ros.ros.node_main.held_while_starting`, while SIGTERM ends it at once, quietly),
+        wait, escalate; 0 when all stopped cleanly and no node that died may have lost what it
+        held; ``lost`` names each node that makes it 1, once, with why (``died`` has every death).
+        A node dying of SIGINT (-2) did not stop cleanly: a node started here never gets it unhandled."""
         self._stopping = True
         crashed: dict[str, str] = {}  # the one process of a single-process graph, ended before the stop
         for name, proc in self.procs.items():  # ended before this stop saw it
             if name in self._due or proc.poll() is None:
                 continue
-            if proc.returncode in (0, 130, -signal.SIGINT, -signal.SIGTERM):
+            if proc.returncode in (0, 130, -signal.SIGTERM):
                 # ended by the stop's own signal (a Ctrl-C or SIGTERM to the process group reaches
                 # every node as it reaches the supervisor): stopped cleanly, or, still starting
-                # (before its handlers), it held nothing yet (a restart of a node that died is in
-                # ``died`` already, and counted below as not back at the stop)
+                # (a SIGTERM before its handlers), it held nothing yet (a restart of a node that
+                # died is in ``died`` already, and counted below as not back at the stop)
                 if not self._up_file(name).exists():
                     self.log(f"[supervisor] {name} was still starting at the stop (exit code {proc.returncode})")
             elif self.config.mode != "single":  # died just before the stop
@@ -235,8 +244,9 @@ class Supervisor:
                 crashed[name] = f"{name} stopped with exit code {proc.returncode}"
         self.lost = {name: why for name in self.died if (why := self._why_lost(name))} | crashed
         waited = {name: proc for name, proc in self.procs.items() if proc.returncode is None}
-        for proc in waited.values():
-            proc.send_signal(signal.SIGINT)
+        starting = {name for name in waited if not self._up_file(name).exists()}
+        for name, proc in waited.items():
+            proc.send_signal(signal.SIGTERM if name in starting else signal.SIGINT)
         end = time.monotonic() + timeout
         for name, proc in waited.items():
             try:
@@ -250,7 +260,9 @@ class Supervisor:
                     code = proc.wait()
                 self.lost.setdefault(name, f"{name} did not stop on SIGINT (exit code {code})")
                 continue
-            if code not in (0, -signal.SIGINT, 130):
+            if name in starting and code in (0, -signal.SIGTERM):
+                self.log(f"[supervisor] {name} was still starting at the stop (exit code {code})")
+            elif code not in (0, 130):
                 self.lost.setdefault(name, f"{name} stopped with exit code {code}")
         self._tmp.cleanup()
         return max(self.fatal_code, 1 if self.lost else 0)
@@ -291,7 +303,7 @@ def run_single_process(config: GraphConfig, autostart: bool = True) -> int:
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from shm_ros.ros.node_main import StopSignals, close_node, die_with_parent, report_stop_reason
+    from shm_ros.ros.node_main import StopSignals, close_node, die_with_parent, report_stop_reason, report_up
 
     die_with_parent()
     nodes = []
@@ -308,6 +320,7 @@ def run_single_process(config: GraphConfig, autostart: bool = True) -> int:
                     report_stop_reason(node.config_error)
                     return 2
                 executor.add_node(node)
+            report_up()
             while rclpy.ok() and not stop.stopping:
                 executor.spin_once(timeout_sec=0.2)
         except ExternalShutdownException:

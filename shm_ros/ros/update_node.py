@@ -47,7 +47,7 @@ from shm_ros.io.faults import fault_point
 from shm_ros.ros import topics, update_worker
 from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg, tracked_row_from_msg
 from shm_ros.ros.managed import ManagedNode
-from shm_ros.ros.node_main import spin
+from shm_ros.ros.node_main import delivered, spin
 from shm_ros.ros.params import ParameterError, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.run_schedule import next_run_at, run_due
@@ -182,7 +182,8 @@ class UpdateNode(ManagedNode):
     def _publish(self, posterior: Posterior, n: int, took: float) -> None:
         self.posterior = posterior
         self.pub.publish(posterior_to_msg(posterior.summary_record(self.spec.name)))
-        fault_point(self.get_name(), "published")  # a test hook: killed after publishing a posterior
+        # a test hook: killed after publishing a posterior (delivered)
+        fault_point(self.get_name(), "published", delivered(self.pub))
         if self.output_dir is not None:
             from shm_ros.io.posterior_files import write_posterior
 

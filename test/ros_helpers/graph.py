@@ -115,7 +115,8 @@ def windows_written(out: Path) -> int:
     from shm_ros.io.sources import open_source
 
     count = 0
-    for split in sorted(p for p in out.glob("*") if p.suffix in (".mcap", ".db3")):  # the recorder's splits
+    # the recorder's splits: closed ones in ``out``, the one being written in ``out/out_<k>/``
+    for split in sorted(p for p in [*out.glob("*"), *out.glob("*/*")] if p.suffix in (".mcap", ".db3")):
         try:
             for m in open_source(split).messages():
                 count += m.topic == "/shm/windows"
@@ -127,9 +128,9 @@ def windows_written(out: Path) -> int:
 def wait_for_windows(out: Path, n: int, timeout: float = 15.0) -> None:
     """Until ``n`` windows are in the running recorder's bag at ``out`` (or ``timeout`` s): a replay
     ends when ingest has acknowledged the samples, and the last window may still be on its way to
-    the recorder; stopping the nodes before it arrives would lose it. An MCAP split being written
-    reads here only up to its last complete chunk, so the wait often runs to its timeout: a bound
-    well above a message's delivery time on a loaded machine (under a second)."""
+    the recorder; stopping the nodes before it arrives would lose it. The recorder flushes every
+    message to its split as it writes it, so the count is exact and the wait ends with the n-th
+    window; ``timeout`` is a bound well above a message's delivery time on a loaded machine."""
     end = time.monotonic() + timeout
     while windows_written(out) < n and time.monotonic() < end:
         time.sleep(0.5)
