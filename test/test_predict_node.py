@@ -99,3 +99,18 @@ def test_predict_node_in_the_graph_matches_cli(tmp_path):
             want = np.column_stack([getattr(c, attr) for c in p.channels])
             have = np.asarray(m[key]).reshape(want.shape)
             assert np.max(np.abs(have - want)) <= 1e-9 * np.max(np.abs(want)), key
+
+
+def test_bad_calibration_windows_name_the_parameter_and_the_file(tmp_path):
+    """One event, or a file that is no window, stops the node at its start with the parameter's name."""
+    import pytest
+
+    from shm_ros.ros.params import ParameterError
+    from shm_ros.ros.predict_node import _check_calibration
+
+    with pytest.raises(ParameterError, match="'calibration_windows': give two or more"):
+        _check_calibration("predict", (str(tmp_path / "a.npz"),))
+    bad = tmp_path / "not_a_window.npz"
+    bad.write_bytes(b"not a window")
+    with pytest.raises(ParameterError, match=r"predict: parameter 'calibration_windows': .*not_a_window"):
+        _check_calibration("predict", (str(bad), str(bad)))

@@ -34,7 +34,7 @@ from rclpy.parameter import Parameter
 from shm_ros.core.config import OptionSpec, format_value, nested_configs, option_specs
 from shm_ros.errors import InputError
 
-__all__ = ["declare_config", "config_from_node", "load_config", "ROS_TYPES", "ParameterError"]
+__all__ = ["declare_config", "config_from_node", "load_config", "check_window_files", "ROS_TYPES", "ParameterError"]
 
 
 class ParameterError(InputError):
@@ -123,3 +123,16 @@ def _checked(node: Node, name: str, spec: OptionSpec, value: Any) -> Any:
         raise ParameterError(f"{node.get_name()}: parameter '{name}' must be one of "
                          f"{'|'.join(spec.choices)}, got {value!r}")
     return value
+
+
+def check_window_files(node: str, parameter: str, paths: list[str] | tuple[str, ...]) -> None:
+    """Every path a readable analysis window file, else :class:`ParameterError` naming the node, the
+    parameter and the file (a node checks its window-file parameters at its start)."""
+    from shm_ros.errors import ShmError
+    from shm_ros.io.window_files import load_window
+
+    for path in paths:
+        try:
+            load_window(path)
+        except ShmError as exc:
+            raise ParameterError(f"{node}: parameter '{parameter}': {exc}") from None

@@ -33,7 +33,7 @@ from shm_ros.ros import predict_worker, topics
 from shm_ros.ros.convert import ns_to_time, window_from_msg
 from shm_ros.ros.managed import ManagedNode
 from shm_ros.ros.node_main import delivered, spin
-from shm_ros.ros.params import ParameterError, load_config
+from shm_ros.ros.params import ParameterError, check_window_files, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.timers import steady_timer
 from shm_ros.ros.worker_pool import WorkerPool
@@ -241,17 +241,10 @@ class PredictNode(ManagedNode):
 
 def _check_calibration(name: str, paths: tuple[str, ...]) -> None:
     """Calibration windows: two or more readable window files (else the node does not start)."""
-    from shm_ros.errors import ShmError
-    from shm_ros.io.window_files import load_window
-
     if len(paths) == 1:
         raise ParameterError(f"{name}: parameter 'calibration_windows': give two or more events (one is left "
                              "out at a time)")
-    for p in paths:
-        try:
-            load_window(p)
-        except ShmError as exc:
-            raise ParameterError(f"{name}: parameter 'calibration_windows': {exc}") from None
+    check_window_files(name, "calibration_windows", paths)
 
 
 def _likelihood(posterior_json: Path) -> str:

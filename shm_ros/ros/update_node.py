@@ -48,7 +48,7 @@ from shm_ros.ros import topics, update_worker
 from shm_ros.ros.convert import estimate_from_msg, posterior_to_msg, tracked_row_from_msg
 from shm_ros.ros.managed import ManagedNode
 from shm_ros.ros.node_main import delivered, spin
-from shm_ros.ros.params import ParameterError, load_config
+from shm_ros.ros.params import ParameterError, check_window_files, load_config
 from shm_ros.ros.qos import latched_qos, stream_qos
 from shm_ros.ros.run_schedule import next_run_at, run_due
 from shm_ros.ros.timers import steady_timer
@@ -251,17 +251,10 @@ class UpdateNode(ManagedNode):
 
 def _check_events(name: str, paths: list[str], output_dir: Path | None) -> None:
     """Calibration windows: readable window files, and a folder to write the posterior to."""
-    from shm_ros.errors import ShmError
-    from shm_ros.io.window_files import load_window
-
     if output_dir is None:
         raise ParameterError(f"{name}: parameter 'calibration_windows' needs 'output_dir' (the time-domain "
                              "posterior is written to <output_dir>/time)")
-    for p in paths:
-        try:
-            load_window(p)
-        except ShmError as exc:
-            raise ParameterError(f"{name}: parameter 'calibration_windows': {exc}") from None
+    check_window_files(name, "calibration_windows", paths)
 
 
 def make_node(name: str, parameters: dict[str, Any], namespace: str = "") -> UpdateNode:
