@@ -71,6 +71,8 @@ def stop_process(proc: subprocess.Popen, timeout: float = 20.0) -> tuple[int, st
 MAX_RESPAWN_DELAY_S = 60.0
 #: a node that ran this long before it died starts its back-off afresh, s
 STABLE_AFTER_S = 60.0
+#: a node that takes longer than this to stop is named in the log, s
+SLOW_STOP_S = 5.0
 
 
 class Supervisor:
@@ -247,10 +249,13 @@ class Supervisor:
         starting = {name for name in waited if not self._up_file(name).exists()}
         for name, proc in waited.items():
             proc.send_signal(signal.SIGTERM if name in starting else signal.SIGINT)
-        end = time.monotonic() + timeout
+        start = time.monotonic()
+        end = start + timeout
         for name, proc in waited.items():
             try:
                 code = proc.wait(timeout=max(end - time.monotonic(), 0.1))
+                if (took := time.monotonic() - start) > SLOW_STOP_S:  # a slow stop, before it is a lost one
+                    self.log(f"[supervisor] {name} took {took:.0f} s to stop (exit code {code})")
             except subprocess.TimeoutExpired:
                 proc.terminate()
                 try:
