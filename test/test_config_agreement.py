@@ -38,7 +38,7 @@ STAGES: dict[str, tuple[type, type, dict[str, Any], set[str], set[str], set[str]
     "ingest": (IngestConfig, IngestNodeConfig, {"structure": str(ROOT / "examples" / "building.yaml")},
                # live-graph settings: offline reading knows when a window is complete
                {"reliable_input", "idle_flush_s", "discovery_period_s", "discovery_timeout_s", "frame_id",
-                "max_latency_s", "settle_s", "check_interval_s"},
+                "close_wait_s", "max_latency_s", "settle_s", "check_interval_s"},
                {"bag", "out", "no_samples", "quiet"},
                {"structure"}),
     "identify": (IdentifyConfig, IdentifyNodeConfig, {},

@@ -74,7 +74,9 @@ def _config(tmp_path: Path, only: tuple[str, ...] = (), **extra: dict) -> Path:
     """The graph: ingest, identify, track, recorder (``only`` those named), ``extra`` parameters by node."""
     structure = tmp_path / "structure.yaml"
     structure.write_text(STRUCTURE)
-    nodes = {"ingest": {"parameters": {"structure": str(structure), "window_s": WINDOW_S}},
+    # close_wait_s: a killed node's reader stays matched until DDS drops it, and ingest's stop would
+    # wait the default 10 s for it in vain (what ingest publishes as it closes is not counted here)
+    nodes = {"ingest": {"parameters": {"structure": str(structure), "window_s": WINDOW_S, "close_wait_s": 2.0}},
              "identify": {"parameters": {"structure": str(structure)}},
              "track": {"parameters": {"store": str(tmp_path / "track.sqlite"), "reference_windows": 3}},
              "recorder": {"parameters": {"output": str(tmp_path / "out")}}}

@@ -45,7 +45,6 @@ from shm_ros.ros.timers import steady_timer
 IMU_BATCH = 512  # Imu messages decoded together (also every 0.05 s)
 MAX_HELD_WINDOWS = 64  # windows held for a slow reader before they go out regardless
 HOLD_ACKS_AT = 2  # more windows held than this: the replay's acknowledgements wait
-CLOSE_WAIT_S = 10.0  # on shutdown, how long held windows wait for a slow reader
 
 
 @dataclass
@@ -61,6 +60,8 @@ class IngestNodeConfig:
     discovery_timeout_s: float = option(10.0, "a structure sensor that no topic feeds this long after "
                                         "start is reported, s")
     frame_id: str = option("", "frame_id in the header of the published windows")
+    close_wait_s: float = option(10.0, "on shutdown, how long the windows still held wait for a slow reader, s "
+                                 "(a reader whose process died is waited for in vain until DDS drops it)")
 
 
 class IngestNode(ManagedNode):
@@ -74,6 +75,10 @@ class IngestNode(ManagedNode):
         self.core = IngestCore(self._channel_map(settings.structure), config)
         self.frame_id = settings.frame_id
         self.idle_flush_s = settings.idle_flush_s
+        if not settings.close_wait_s >= 0.0:  # NaN too
+            raise ParameterError(f"{self.get_name()}: parameter 'close_wait_s' must be >= 0, "
+                                 f"got {settings.close_wait_s}")
+        self.close_wait_s = settings.close_wait_s
         self.reliable = settings.reliable_input
         # window_readers: subscriptions this node's window publisher has matched (a reader that the
         # graph shows but that is not matched yet would miss the first windows)
@@ -321,7 +326,7 @@ class IngestNode(ManagedNode):
     def close(self) -> None:
         self._feed_imu()
         self.pending.extend(self.core.flush())
-        end = time.monotonic() + CLOSE_WAIT_S
+        end = time.monotonic() + self.close_wait_s
         while self.pending and time.monotonic() < end:  # give a slow reader its last windows
             self._release_windows(wait_s=0.5)
         while self.pending:  # the rest without waiting: the node is going
