@@ -75,6 +75,16 @@ def _detrend(x: np.ndarray, linear: bool) -> np.ndarray:
     return out
 
 
+def _finite_columns(x: np.ndarray) -> np.ndarray:
+    """Per column: every sample finite. A finite column sum says so in one pass over the data
+    (a NaN or inf makes it NaN or inf); only a sum that is not finite needs the sample check."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        finite = np.isfinite(x.sum(axis=0))
+    if not finite.all():
+        finite = np.isfinite(x).all(axis=0)
+    return finite
+
+
 def preprocess(samples: np.ndarray, fs: float, channel_names: list[str],
                config: PreprocessConfig | None = None,
                channel_status: list[str] | None = None) -> Prepared:
@@ -94,11 +104,11 @@ def preprocess(samples: np.ndarray, fs: float, channel_names: list[str],
         idx = [names.index(c) for c in cfg.channels]
     else:
         idx = list(range(len(names)))
-    finite = np.isfinite(x).all(axis=0)
+    finite = _finite_columns(x)
     if cfg.drop_bad_channels:
         kept = []
         with np.errstate(invalid="ignore"):
-            constant = x.max(axis=0) == x.min(axis=0)
+            constant = ~(x != x[:1]).any(axis=0)  # a NaN column is dropped as such before this
         for k in idx:
             status = channel_status[k] if channel_status is not None else "ok"
             if status in _BAD_STATUS:
@@ -112,7 +122,8 @@ def preprocess(samples: np.ndarray, fs: float, channel_names: list[str],
         idx = kept
     if not idx:
         raise ValueError("no usable channel left after channel selection: " + "; ".join(notes))
-    x = x[:, idx]
+    if idx != list(range(x.shape[1])) or cfg.detrend == "none":  # detrending makes a new array
+        x = x[:, idx]
     names = [names[k] for k in idx]
     if not np.all(finite[idx]):
         raise ValueError("selected channels contain NaN/inf samples (enable drop_bad_channels)")

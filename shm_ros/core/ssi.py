@@ -128,9 +128,12 @@ def correlations(y: np.ndarray, refs: np.ndarray, n_lags: int, segment: int | No
     # outputs y_{s .. s+P-1} of every block (a view), references r_{s .. s+B-1} zero-padded
     ys = np.lib.stride_tricks.sliding_window_view(ypad, p, axis=0)[: nb * b : b]  # (nb, n_out, P)
     fy = scipy.fft.rfft(ys, axis=-1)  # (nb, n_out, F)
-    fr = scipy.fft.rfft(ypad[: nb * b, refs].reshape(nb, b, refs.size), n=p, axis=1)  # (nb, F, r)
+    # references: a view when they are all the outputs in order (no copy of the record)
+    yr = ypad[: nb * b] if np.array_equal(refs, np.arange(n_out)) else ypad[: nb * b, refs]
+    fr = scipy.fft.rfft(yr.reshape(nb, b, refs.size), n=p, axis=1)  # (nb, F, r)
+    np.conjugate(fr, out=fr)
     # sum over blocks of conj(F_ref) F_y for every frequency: a batched (n_out x nb) @ (nb x r)
-    cross = np.matmul(fy.transpose(2, 1, 0), np.conj(fr).transpose(1, 0, 2))  # (F, n_out, r)
+    cross = np.matmul(fy.transpose(2, 1, 0), fr.transpose(1, 0, 2))  # (F, n_out, r)
     r = scipy.fft.irfft(cross, n=p, axis=0)[:n_lags]
     r /= (n - np.arange(n_lags))[:, None, None]
     return r
