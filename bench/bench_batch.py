@@ -2,10 +2,13 @@
 
     python -m bench.bench_batch                 # 50 bags x 4 girder windows of 60 s = 200 windows
     python -m bench.bench_batch --bags 10       # a slice
+    python -m bench.bench_batch --rounds 2      # 1, 2, 2, 1 workers in turn; medians per count
 
 The archive (girder scenario, one structure file, 100 Hz ``AccelBlock``) is simulated once (not
 timed); then ``run_batch`` on a local Dask cluster of 1 and of 2 single-threaded worker processes
-(cluster start included, tracking only: no update). Throughput = windows / wall second. Target:
+(cluster start included, tracking only: no update), in turn (1, 2, 2, 1, ... workers, so that a
+load that changes during the runs weighs on both counts alike; the median wall time per count).
+Throughput = windows / wall second. Target:
 2 workers >= 1.7 x 1 worker on >= 200 windows. The outputs of both runs must be equal (apart from
 provenance). Writes ``bench/results/bench_batch.json``; on a machine whose other load leaves less
 than two free cores the ratio says more about that load than about the batch (the load average is
@@ -67,21 +70,31 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bags", type=int, default=50)
     ap.add_argument("--windows-per-bag", type=int, default=4)
+    ap.add_argument("--rounds", type=int, default=1, help="pairs of runs, in the order 1, 2, 2, 1, ... workers")
     args = ap.parse_args(argv)
+    import statistics
+    import subprocess
+
+    order = [w for r in range(args.rounds) for w in ((1, 2) if r % 2 == 0 else (2, 1))]
+    runs: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp) / "archive"
         make_archive(root, args.bags, args.windows_per_bag)
-        walls = {}
-        for workers in (1, 2):
-            walls[workers], summary = timed_run(root, Path(tmp) / f"out{workers}", workers)
+        for k, workers in enumerate(order):
+            load = os.getloadavg()[0]
+            wall, summary = timed_run(root, Path(tmp) / f"out{k}_{workers}", workers)
             n = sum(b["identified"] for b in summary["bags"])
-            print(f"{workers} worker(s): {n} windows in {walls[workers]:.1f} s", flush=True)
-        same = all((Path(tmp) / "out1" / p.relative_to(Path(tmp) / "out2")).is_file()
-                   for p in (Path(tmp) / "out2").rglob("*") if p.is_file())
+            runs.append({"workers": workers, "wall_s": wall, "windows": n, "load_average_1min_at_start": load})
+            print(f"{workers} worker(s): {n} windows in {wall:.1f} s (load {load:.1f})", flush=True)
+        out1, out2 = Path(tmp) / f"out{order.index(1)}_1", Path(tmp) / f"out{order.index(2)}_2"
+        same = all((out1 / p.relative_to(out2)).is_file() for p in out2.rglob("*") if p.is_file())
+    walls = {w: statistics.median(r["wall_s"] for r in runs if r["workers"] == w) for w in (1, 2)}
     ratio = walls[1] / walls[2]
+    commit = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True,
+                            cwd=Path(__file__).resolve().parent).stdout.strip()
     result = {"bags": args.bags, "windows": n, "wall_s": walls, "throughput_ratio": ratio, "target": TARGET,
               "same_files": same, "met": bool(n >= 200 and ratio >= TARGET), "load_average": list(os.getloadavg()),
-              "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
+              "runs": runs, "commit": commit, "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "bench_batch.json").write_text(json.dumps(result, indent=2))
     print(json.dumps(result, indent=2))
