@@ -146,6 +146,8 @@ def _session(tmp_path: Path, bag: Path, env: dict[str, str], stop_when, stop_sig
         replaying = replay.poll() is None
         os.killpg(sup.pid, stop_signal)
         sup.wait(timeout=90)
+        if replay.poll() is None:  # a replay at real time goes on without the graph: its user stops it too
+            replay.send_signal(signal.SIGINT)
         replay_out, _ = replay.communicate(timeout=120)
     finally:
         if sup.poll() is None:
@@ -262,6 +264,7 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
         tmp_path, bag, faults, stop_when, signal.SIGTERM, "--rate", "0.5" if recovered else "1")
     print(text[-3000:], replay_out[-1000:])
     assert replaying and replay_code != 0, "the graph stopped during the replay: the replay must say so"
+    assert re.search(r"stopped by a signal|left the graph|lost [1-9]", replay_out), replay_out
     assert sorted(p.name for p in marks.iterdir()) == ["bag.write", "identify.published", "store.commit"]
     # the exit code follows what was lost: 1 exactly when a killed node was not running again at the
     # stop (the recorder in its back-off, a restart still starting), 0 when the three came back
