@@ -43,7 +43,10 @@ SIZES = {"reduced": EventSize((1, 2), (5, 5), (21.0, 21.0), (50.0,), (60.0, 60.0
 def _schedule(rng: np.random.Generator, m: int, span_days: float) -> np.ndarray:
     gaps = rng.exponential(1.0, m)
     t = np.cumsum(gaps) / gaps.sum() * span_days * 86400.0
-    return np.maximum(t, np.arange(1, m + 1) * 86400.0)  # at least a day apart, from day 1
+    t = np.maximum(t, np.arange(1, m + 1) * 86400.0)  # from day 1
+    for k in range(1, m):  # at least an hour apart: a short exponential gap overlapped two records
+        t[k] = max(t[k], t[k - 1] + 3600.0)
+    return t
 
 
 def _pgas(rng: np.random.Generator, m: int) -> tuple[np.ndarray, float]:
