@@ -1,7 +1,15 @@
 """The girder-roving scenario end to end at reduced size (3 seeds, 10 points, 60 s dwells, 50 Hz):
 tf tracks -> setups -> clock offset -> per-setup identification -> setups merged, against the truth
 without the robot (model-form error on). Full size: ``SHM_FULL=1`` (10 seeds, 12 points, 120 s dwells,
-100 Hz; docs/roving.md has the latest result)."""
+100 Hz; docs/roving.md has the latest result).
+
+At full size the acceptance's own limits apply (frequencies within 0.5 %, MAC >= 0.98). At reduced
+size (60-s setups at 50 Hz) a correct pipeline scatters more, so the limits are set for a >= 99 %
+pass of three seeds (per-seed failure <= 0.33 %): over development seeds 100-199 at reduced size (at
+the commit that introduced them), a Student-t fitted per mode to the frequency errors puts the chance
+of any of modes 1-3 beyond 1.2 % at 0.22 % a seed, and one fitted per mode to log10(1 - MAC) puts a
+MAC below 0.85 at 0.10 % (largest error seen 0.96 %, smallest MAC 0.890; docs/roving.md).
+"""
 
 from __future__ import annotations
 
@@ -15,6 +23,7 @@ import synthetic_oma as so
 FULL = os.environ.get("SHM_FULL") == "1"
 SEEDS = range(10) if FULL else range(3)
 SIZE = dict(dwell_s=120.0, n_points=12, fs=100.0) if FULL else dict(dwell_s=60.0, n_points=10, fs=50.0)
+FREQ_PCT, MAC_MIN = (0.5, 0.98) if FULL else (1.2, 0.85)  # see the module doc
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -37,8 +46,9 @@ def test_girder_roving_acceptance(seed):
     assert near[left].all() and res.cut.missing_samples == 0 and not res.cut.errors()
     # the clock offset, reported within 2 ms
     assert abs(res.clock_offset_s - rec.clock_offset_s) < 0.002, res.clock_offset_s
-    # vertical modes 1-3 within 0.5 % of the truth without the robot
-    assert np.all(np.abs(out.freq_err_pct) < 0.5), out.freq_err_pct
+    # vertical modes 1-3 within 0.5 % of the truth without the robot (reduced size: module doc)
+    assert np.all(np.abs(out.freq_err_pct) < FREQ_PCT), out.freq_err_pct
     # modes 1-3 over every visited point and reference with MAC >= 0.98 (the roving components from
-    # the references' transmissibility on the merged reference shapes: docs/roving.md)
-    assert all(c == 1.0 for c in out.coverage) and all(m >= 0.98 for m in out.macs), (out.coverage, out.macs)
+    # the references' transmissibility on the merged reference shapes: docs/roving.md; reduced size:
+    # module doc)
+    assert all(c == 1.0 for c in out.coverage) and all(m >= MAC_MIN for m in out.macs), (out.coverage, out.macs)

@@ -29,17 +29,18 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["unloaded_frequency", "carrier_mass", "shifted_median"]
 
 
-def _finite(*arrays: Sequence[float]) -> list[np.ndarray]:
+def _finite(*arrays: ArrayLike) -> list[np.ndarray]:
     a = [np.asarray(x, dtype=float) for x in arrays]
     ok = np.logical_and.reduce([np.isfinite(x) for x in a])
     return [x[ok] for x in a]
 
 
-def unloaded_frequency(frequencies_hz: Sequence[float], phi2: Sequence[float], min_setups: int = 4,
+def unloaded_frequency(frequencies_hz: ArrayLike, phi2: ArrayLike, min_setups: int = 4,
                        min_span: float = 0.25, min_t: float = 0.0) -> tuple[float, float] | None:
     """``(f_0, b)`` of the per-mode fit in the module doc (``phi2`` on the merged shape's scale, max
     |component| = 1), or None when the data cannot carry it or the slope is not a fall."""
@@ -56,7 +57,7 @@ def unloaded_frequency(frequencies_hz: Sequence[float], phi2: Sequence[float], m
     return float(f0), float(b)
 
 
-def carrier_mass(frequencies_hz: Sequence[Sequence[float]], u: Sequence[Sequence[float]],
+def carrier_mass(frequencies_hz: Sequence[ArrayLike], u: Sequence[ArrayLike],
                  min_setups: int = 4) -> float | None:
     """The robot's mass (kg) from every mode's setups (module doc): ``frequencies_hz[j]`` and
     ``u[j]`` (squared component at the robot's point over the modal mass, 1/kg) per setup of mode
@@ -79,7 +80,7 @@ def carrier_mass(frequencies_hz: Sequence[Sequence[float]], u: Sequence[Sequence
     return max(float(sol[-1]), 0.0)
 
 
-def shifted_median(frequencies_hz: Sequence[float], u: Sequence[float], mass_kg: float) -> float:
+def shifted_median(frequencies_hz: ArrayLike, u: ArrayLike, mass_kg: float) -> float:
     """The median of the setups' frequencies shifted to no robot, ``f_k (1 + m u_k / 2)``."""
     f, x = _finite(frequencies_hz, u)
     if f.size == 0:
