@@ -3,6 +3,7 @@ full-size command (``SHM_FULL=1``): simulate, cut, merge, compare with the truth
 
 from __future__ import annotations
 
+import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,7 +15,16 @@ from shm_ros.core.roving.transforms import TransformBuffer
 from shm_ros.core.simulate.roving import RovingOptions, RovingRecording, simulate_roving
 from shm_ros.io.structure import load_structure
 
-SPEC = load_structure(Path(__file__).resolve().parents[1] / "examples" / "girder_roving.yaml")
+ROOT = Path(__file__).resolve().parents[1]
+SPEC = load_structure(ROOT / "examples" / "girder_roving.yaml")
+
+
+def acceptance_seeds(n: int = 10) -> list[int]:
+    """Full-size seeds drawn from the git tree of ``shm_ros/core/roving`` (no seed shopping: a change
+    to the pipeline draws new ones), from 1,000 up, disjoint from the development seeds (0-999)."""
+    tree = subprocess.run(["git", "rev-parse", "HEAD:shm_ros/core/roving"], cwd=ROOT, capture_output=True,
+                          text=True, check=True).stdout.strip()
+    return [int(s) for s in np.random.default_rng(int(tree[:12], 16)).choice(np.arange(1000, 1_000_000), n, replace=False)]
 
 
 @dataclass
@@ -58,9 +68,10 @@ def run(seed: int, dwell_s: float, n_points: int, merge: str = "post", fs: float
 if __name__ == "__main__":  # per-seed figures: python test/roving_acceptance.py [full] (docs/roving.md)
     import sys
 
-    full = sys.argv[1:] == ["full"]
+    full = sys.argv[1:2] == ["full"]
     size = dict(dwell_s=120.0, n_points=12, fs=100.0) if full else dict(dwell_s=60.0, n_points=10, fs=50.0)
-    for seed in range(10 if full else 3):
+    seeds = [int(a) for a in sys.argv[2:]] or (acceptance_seeds() if full else list(range(3)))
+    for seed in seeds:
         out = run(seed, **size)
         print(f"| {seed} | {', '.join(f'{e:+.2f}' for e in out.freq_err_pct)} | "
               f"{', '.join(f'{m:.4f}' for m in out.macs)} | {', '.join(f'{c:.2f}' for c in out.coverage)} | "
