@@ -12,7 +12,7 @@ from shm_ros.core.identify import IdentifyConfig, identify_array
 from shm_ros.core.modal import mac
 from shm_ros.core.preprocess import PreprocessConfig, preprocess
 from shm_ros.core.roving.clock import estimate_clock_offset
-from shm_ros.core.roving.merge_post import merge_post, pair_modes
+from shm_ros.core.roving.merge_post import drop_unconfirmed, merge_post, pair_modes
 from shm_ros.core.roving.merge_pre import merge_pre
 from shm_ros.core.roving.offline import merge_arrays
 from shm_ros.core.types import ModalEstimate, Mode
@@ -89,6 +89,36 @@ def _setups(seed: int, duration: float = 1800.0):
         sets.append(data[k * n:(k + 1) * n, cols] * (1.0, 3.0, 0.5, 8.0)[k])
         chans.append(refs + mov)
     return sets, chans, refs, fs, truth, names
+
+
+def test_one_setup_far_off_does_not_move_the_common_reference_shape():
+    # five setups agree on mode 1's reference ratio; a sixth (a pick blended with a neighbour) is far off
+    setups = [_estimate([2, 3], 1.0 + 0.1 * k, [0, 1, 2]) for k in range(5)]
+    bad = _estimate([4, 5], 1.0, [0, 1, 2])
+    bad.modes[0].mode_shape = bad.modes[0].mode_shape * np.array([3.0, 1.0, 1.0, 1.0])
+    g = merge_post(setups + [bad], REFS)[0]
+    assert g.shape["r1"] / g.shape["r2"] == pytest.approx(TRUTH[0, 0] / TRUTH[0, 1], rel=1e-9)
+
+
+def test_modes_the_setups_do_not_confirm_are_left_out():
+    setups = [_estimate([2, 3], 1.0, [0, 1, 2]) for _ in range(8)]
+    # one setup offers a fourth mode of its own; another a second estimate of mode 1 (0.5 % above,
+    # the same reference shape), and a third the same second estimate
+    extra = Mode(3.0, 0.02, TRUTH[2, [0, 1, 2, 3]] * np.array([1.0, -1.0, 1.0, 1.0]))
+    setups[0].modes.append(extra)
+    for k in (1, 2):
+        setups[k].modes.append(Mode(1.005, 0.02, TRUTH[0, [0, 1, 2, 3]]))
+        setups[k].modes.sort(key=lambda m: m.frequency_hz)
+    merged = merge_post(setups, REFS)
+    assert [g.setups_found for g in merged] == [8, 2, 8, 8, 1]
+    kept, notes = drop_unconfirmed(merged, len(setups), REFS)
+    assert [g.frequency_hz for g in kept] == pytest.approx([1.0, 2.0, 2.05])
+    assert notes == ["a mode at 3 Hz found in one setup of 8 only: left out"]
+    assert any("second estimate at 1.005 Hz from 2 setup(s)" in n for n in kept[0].notes)
+    # the members of every kept mode are the setups' modes it was merged from
+    assert kept[0].members == {k: 0 for k in range(8)}
+    # three setups are too few to tell: nothing is left out
+    assert len(drop_unconfirmed(merge_post(setups[:3], REFS), 3, REFS)[0]) == 5
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,8 @@ optimal assignment per setup, :func:`scipy.optimize.linear_sum_assignment`). For
 references' components of setup ``j``, ``a_j``, are scaled onto the common reference shape ``g`` by
 the least-squares factor ``alpha_j = a_j . g / a_j . a_j`` (so references 10 x larger give roving
 components divided by 10), and the roving components of the setup are multiplied by the same
-factor; ``g`` is the mean of the scaled reference shapes, found by a few fixed-point steps. The
+factor; ``g`` is the median of the scaled reference shapes (a setup whose pick blends the mode
+with a neighbour can be far off), found by a few fixed-point steps. The
 factor's standard error from the least-squares residual,
 ``s_alpha^2 = |alpha_j a_j - g|^2 / (r - 1) / a_j . a_j`` with ``r`` references, goes into the roving
 components' ``shape_std`` (one reference leaves it unknown: NaN). A component measured in several
@@ -27,10 +28,14 @@ from shm_ros.core.modal import mac
 from shm_ros.core.types import ModalEstimate
 from shm_ros.errors import InputError
 
-__all__ = ["GlobalMode", "pair_modes", "merge_post"]
+__all__ = ["GlobalMode", "pair_modes", "merge_post", "drop_unconfirmed"]
 
 FREQ_TOL = 0.05  # a pair's frequencies differ by at most this fraction
 MAC_MIN = 0.5  # ... and its reference shapes have at least this MAC
+MIN_SETUPS_TO_CONFIRM = 4  # drop_unconfirmed acts from this many setups on
+GHOST_SHARE = 0.25  # a mode in at most this share of the setups ...
+GHOST_TOL = 0.02  # ... within this of one found in more ...
+GHOST_MAC = 0.9  # ... with this reference MAC is a second estimate of it (module doc)
 
 
 @dataclass
@@ -45,6 +50,7 @@ class GlobalMode:
     setups_found: int
     missing_setups: list[int] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    members: dict[int, int] = field(default_factory=dict)  # setup index -> its mode's index (post merge)
 
     def vector(self, keys: Sequence[str]) -> np.ndarray:
         """The shape over ``keys`` (NaN where this mode has no component)."""
@@ -115,7 +121,7 @@ def _scales(a: np.ndarray, iterations: int = 20) -> tuple[np.ndarray, np.ndarray
     g = a[0] / np.sqrt(norms[0])
     for _ in range(iterations):
         alpha = a @ g / norms
-        new = np.mean(alpha[:, None] * a, axis=0)
+        new = np.median(alpha[:, None] * a, axis=0)
         new /= np.linalg.norm(new)
         if np.allclose(new, g, rtol=0, atol=1e-15):
             break
@@ -173,5 +179,27 @@ def merge_post(setups: Sequence[ModalEstimate], references: Sequence[str], freq_
         notes = [f"not found in setup(s) {missing}: merged from the other {len(members)}; no shape at "
                  "the points only those setups measured"] if missing else []
         out.append(GlobalMode(freq, float(np.mean([m.damping_ratio for m in modes])), fstd, shape, std,
-                              len(members), missing, notes))
+                              len(members), missing, notes, dict(group)))
     return out
+
+
+def drop_unconfirmed(modes: list[GlobalMode], n_setups: int, references: Sequence[str]
+                     ) -> tuple[list[GlobalMode], list[str]]:
+    """The modes the setups confirm, and a note for each one left out (module doc)."""
+    if n_setups < MIN_SETUPS_TO_CONFIRM:
+        return list(modes), []
+    keep, notes = [], []
+    for g in modes:
+        ref = g.vector(references)
+        twins = [h for h in modes if h.setups_found > g.setups_found
+                 and abs(h.frequency_hz / g.frequency_hz - 1) <= GHOST_TOL
+                 and float(mac(ref, h.vector(references))) >= GHOST_MAC]
+        if twins and g.setups_found <= GHOST_SHARE * n_setups:
+            main = max(twins, key=lambda h: h.setups_found)
+            main.notes.append(f"a second estimate at {g.frequency_hz:.4g} Hz from {g.setups_found} setup(s), "
+                              "with the same reference shape, left out")
+        elif g.setups_found == 1:
+            notes.append(f"a mode at {g.frequency_hz:.4g} Hz found in one setup of {n_setups} only: left out")
+        else:
+            keep.append(g)
+    return keep, notes

@@ -33,7 +33,7 @@ from shm_ros.core.identify import IdentifyConfig, identify_prepared
 from shm_ros.core.preprocess import Prepared, PreprocessConfig, decimate, preprocess
 from shm_ros.core.roving.carrier_mass import carrier_mass, shifted_median, unloaded_frequency
 from shm_ros.core.roving.clock import estimate_clock_offset
-from shm_ros.core.roving.merge_post import GlobalMode, merge_post, pair_modes
+from shm_ros.core.roving.merge_post import GlobalMode, drop_unconfirmed, merge_post
 from shm_ros.core.roving.merge_pre import merge_pre
 from shm_ros.core.roving.nominal import NominalAtPoints
 from shm_ros.core.roving.offline import MergeMethod
@@ -140,12 +140,14 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
         if cfg.second_look and second_look(results, modes, refs):
             modes = merge_post([r.estimate for r in results], refs)
             notes.append("a second look at the setups' diagrams found modes the automatic picking had missed")
+        modes, more = drop_unconfirmed(modes, len(results), refs)
+        notes += more
         if cfg.transmissibility:
             apply_transmissibility(modes, [p.data for p in preps], [p.sample_rate_hz for p in preps],
                                    [r.estimate for r in results], refs)
             notes.append("roving components from the references' transmissibility on the merged reference shapes")
         if cfg.unload:
-            notes += _unload(modes, [r.estimate for r in results], refs, cut,
+            notes += _unload(modes, [r.estimate for r in results], cut,
                              NominalAtPoints(spec, cfg.unload_modes) if cfg.unload_modes > 0 else None)
     else:
         band = results[0].band
@@ -157,13 +159,14 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
     return RovingResult(cut, modes, offsets, refs, notes)
 
 
-def _unload(modes: list[GlobalMode], estimates: list[ModalEstimate], refs: list[str], cut: SetupCut,
+def _unload(modes: list[GlobalMode], estimates: list[ModalEstimate], cut: SetupCut,
             nominal: NominalAtPoints | None) -> list[str]:
     """Each merged mode's frequency without the robot (carrier_mass.py): the setups' frequencies
     against the squared merged component at the robot's point (the setup's roving points), one
     robot mass for the modes ``nominal`` assigns, a fit per mode for the others."""
     freqs, phi2 = [], []
-    for g, group in zip(modes, pair_modes(estimates, refs), strict=True):
+    for g in modes:
+        group = g.members
         peak = max((abs(v) for v in g.shape.values() if np.isfinite(v)), default=np.nan)
         freqs.append(np.array([estimates[k].modes[i].frequency_hz for k, i in group.items()]))
         phi2.append(np.array([sum(g.shape.get(p, np.nan) ** 2 for p in cut.setups[k].points.values())
