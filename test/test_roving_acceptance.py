@@ -4,11 +4,12 @@ without the robot (model-form error on). Full size: ``SHM_FULL=1`` (10 seeds dra
 of shm_ros/core/roving, 12 points, 120 s dwells, 100 Hz; docs/roving.md has the latest result).
 
 At full size the acceptance's own limits apply (frequencies within 0.5 %, MAC >= 0.98). At reduced
-size (60-s setups at 50 Hz) a correct pipeline scatters more, so the limits are set for a >= 99 %
-pass of three seeds (per-seed failure <= 0.33 %): over development seeds 100-199 at reduced size (at
-the commit that introduced them), a Student-t fitted per mode to the frequency errors puts the chance
-of any of modes 1-3 beyond 1.2 % at 0.22 % a seed, and one fitted per mode to log10(1 - MAC) puts a
-MAC below 0.85 at 0.10 % (largest error seen 0.96 %, smallest MAC 0.890; docs/roving.md).
+size (60-s setups at 50 Hz) a correct pipeline scatters more, so the limits are set for a >= 99 % pass
+of three seeds (per-seed failure <= 0.33 %): over development seeds 100-199 at reduced size (at
+`f1901c7`), a Student-t fitted per mode to the frequency errors puts the chance of any of modes 1-3
+beyond 1.4 % at 0.22 % a seed, and one fitted per mode to log10(1 - MAC) puts a MAC below 0.85 at
+0.07 %: 0.29 % together, a 99.1 % pass of three seeds (largest error seen 1.13 %, smallest MAC
+0.875; docs/roving.md).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import synthetic_oma as so
 FULL = os.environ.get("SHM_FULL") == "1"
 SEEDS = ra.acceptance_seeds() if FULL else range(3)  # full size: drawn from the pipeline's tree
 SIZE = dict(dwell_s=120.0, n_points=12, fs=100.0) if FULL else dict(dwell_s=60.0, n_points=10, fs=50.0)
-FREQ_PCT, MAC_MIN = (0.5, 0.98) if FULL else (1.2, 0.85)  # see the module doc
+FREQ_PCT, MAC_MIN = (0.5, 0.98) if FULL else (1.4, 0.85)  # see the module doc
 
 
 @pytest.mark.parametrize("seed", SEEDS)
