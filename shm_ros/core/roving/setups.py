@@ -97,6 +97,9 @@ class SetupCut:
     short_samples: int  # at a point, but for less than the minimum dwell
     gaps: list[Gap] = field(default_factory=list)
     point_index: np.ndarray | None = None  # (n, sensors): point of each sample, -1 none, -2 missing
+    # (n,): a roving sensor's filtered position beyond the tolerance of every point (before the
+    # setups' edge guard): the drive phases as the filtered positions show them
+    moving: np.ndarray | None = None
 
     def errors(self) -> list[str]:
         return [g.describe() for g in self.gaps]
@@ -112,7 +115,9 @@ def _filtered(position: np.ndarray, valid: np.ndarray, times_ns: np.ndarray, fil
     size = max(1, int(round(filter_s / dt)) | 1)
     edges = np.flatnonzero(np.diff(np.concatenate([[0], valid.astype(int), [0]])))
     for a, b in zip(edges[::2], edges[1::2], strict=True):
-        out[a:b] = ndi.median_filter(position[a:b], size=(size, 1), mode="nearest")
+        # mirrored ends: "nearest" would repeat the edge sample half a window long and make its noise
+        # the median (a last sample 6 cm off read as the robot leaving)
+        out[a:b] = ndi.median_filter(position[a:b], size=(size, 1), mode="mirror")
     return out
 
 
@@ -138,6 +143,7 @@ def cut_setups(tracks: Sequence[SensorTrack], points: Sequence[MeasurementPoint]
         idx[:, j] = np.where(~tr.valid, -2, np.where(ok, near, -1))
     missing = np.any(idx == -2, axis=1)
     at_point = np.all(idx >= 0, axis=1)
+    moving = np.any(idx == -1, axis=1) & ~missing
     key = [tuple(r) for r in idx]
     dt = float(np.median(np.diff(times))) * 1e-9 if times.size > 1 else 1.0
     min_n = int(np.ceil(min_dwell_s / dt))
@@ -174,7 +180,7 @@ def cut_setups(tracks: Sequence[SensorTrack], points: Sequence[MeasurementPoint]
             short += s.samples
     at_point = np.all(idx >= 0, axis=1)
     gaps = sorted({g for tr in tracks for g in tr.gaps}, key=lambda g: g.start_ns)
-    return SetupCut(kept, int(np.sum(~at_point & ~missing)), int(np.sum(missing)), short, gaps, idx)
+    return SetupCut(kept, int(np.sum(~at_point & ~missing)), int(np.sum(missing)), short, gaps, idx, moving)
 
 
 def _guard_edges(setup: Setup, idx: np.ndarray, guard: int, times: np.ndarray) -> None:
