@@ -41,3 +41,24 @@ def test_enough_needs_small_shape_std_and_stable_frequency():
     moving = setup_enough([0.02], [[6.0, 6.2, 6.1]])
     assert not moving.enough and "frequency moved" in moving.reasons[0]
     assert "2 of 3" in setup_enough([0.01], [[6.2, 6.2]]).reasons[0]
+
+
+def test_a_mode_not_found_yet_is_not_taken_by_its_neighbour():
+    # the live core's modes of interest: a global mode 8 % above nominal mode 2 but shaped like
+    # nominal mode 3 is mode 3, and mode 2 stays unassigned ("not identified yet"), not substituted
+    from shm_ros.core.roving.live import LiveRoving
+    from shm_ros.core.roving.merge_post import GlobalMode
+
+    live = LiveRoving(SPEC)
+    ids = live.references + ["p01", "p02", "p03"]
+    phi = live.rows(ids)
+    f = live.nominal
+
+    def mode(freq, shape):
+        return GlobalMode(freq, 0.01, float("nan"), dict(zip(ids, shape, strict=True)), {}, 1)
+
+    first, third = mode(f[0] * 0.99, phi[:, 0]), mode(f[1] * 1.08, phi[:, 2])
+    got = live._interest([first, third])
+    assert got[0] is first and got[1] is None and got[2] is third
+    reasons = setup_enough([0.01, float("nan"), 0.01], [[f[0]] * 3, [], [f[2]] * 3], 0.05, 0.005, 3).reasons
+    assert reasons[0] == "mode 2: not identified yet (no shape std at this point)"

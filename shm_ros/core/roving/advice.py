@@ -34,7 +34,9 @@ def setup_enough(point_std: Sequence[float], frequency_history: Sequence[Sequenc
     ``frequency_history[m]``: mode m's frequency estimates so far, oldest first."""
     reasons = []
     for m, (s, hist) in enumerate(zip(point_std, frequency_history, strict=True)):
-        if not np.isfinite(s) or s >= shape_std_max:
+        if not np.isfinite(s):
+            reasons.append(f"mode {m + 1}: not identified yet (no shape std at this point)")
+        elif s >= shape_std_max:
             reasons.append(f"mode {m + 1}: shape std at this point {s:.3g} (needs < {shape_std_max})")
         last = np.asarray(hist[-n_stable:], dtype=float)
         if last.size < n_stable:

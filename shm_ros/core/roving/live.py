@@ -31,6 +31,7 @@ from shm_ros.core.identify import identify_prepared
 from shm_ros.core.modal import mac
 from shm_ros.core.roving.advice import next_point, setup_enough
 from shm_ros.core.roving.merge_post import GlobalMode, merge_post
+from shm_ros.core.roving.nominal import MIN_MAC
 from shm_ros.core.roving.pipeline import AXIS, RovingConfig, RovingResult, prepare_setup, roving_modes
 from shm_ros.core.roving.setups import cut_setups, sensor_track, setup_channels
 from shm_ros.core.roving.transforms import TransformBuffer
@@ -192,7 +193,7 @@ class LiveRoving:
                                         or nominal_frequencies(self.spec, 6))).estimate
         modes = merge_post(self.finished + [est], self.references)
         freqs, stds = [], []
-        for g in self._interest(modes, p):
+        for g in self._interest(modes):
             freqs.append(np.nan if g is None else g.frequency_hz)
             stds.append(np.nan if g is None else self._point_std(g, y, fs))
         self._history.append(freqs)
@@ -225,18 +226,26 @@ class LiveRoving:
         y, self._names = setup_channels(setup, {r: v[start:] for r, v in refs.items()}, along)
         return y, fs
 
-    def _interest(self, modes: list[GlobalMode], point: str) -> list[GlobalMode | None]:
-        """The global mode (with a component at ``point``) that is each mode of interest: one optimal
-        assignment on the frequency's distance from the nominal one (within ``frequency_match``) and
-        the MAC of the references' components against the nominal model's."""
-        cands = [g for g in modes if point in g.shape]
+    def _interest(self, modes: list[GlobalMode]) -> list[GlobalMode | None]:
+        """The global mode that is each mode of interest: one optimal assignment on the frequency's
+        distance from the nominal one (within ``frequency_match``) and the MAC against the nominal
+        model over every component the mode has (the references, the points visited and this one: a
+        torsion mode beside a bending mode can look like it at two references, rarely along the whole
+        deck; at least ``nominal.MIN_MAC``, so a mode this survey has not found yet stays unassigned
+        rather than taken by its neighbour). Every global mode takes part, those this setup has not
+        found too: the point's shape std comes from the transmissibility, which needs no pick here,
+        and a mode found in the earlier setups is not replaced by a neighbour while this one has yet
+        to show it."""
+        cands = list(modes)
         if not cands:
             return [None] * len(self.nominal)
-        ref_nominal = self.rows(self.references)
-        ref_found = np.array([[g.shape[r] for r in self.references] for g in cands])
         df = np.abs(np.array([g.frequency_hz for g in cands])[None, :] / np.array(self.nominal)[:, None] - 1)
-        m = mac(ref_nominal.T[:, None, :], ref_found[None, :, :]) if len(self.references) > 1 else np.ones(df.shape)
-        ok = df <= self.advice.frequency_match
+        m = np.ones(df.shape)
+        for c, g in enumerate(cands):
+            ids = [k for k, v in g.shape.items() if k in self._rows and np.isfinite(v)]
+            if len(ids) > 1:
+                m[:, c] = mac(g.vector(ids)[None, :], self.rows(ids).T)
+        ok = (df <= self.advice.frequency_match) & (m >= MIN_MAC)
         rows, cols = linear_sum_assignment(np.where(ok, df / self.advice.frequency_match + (1 - m), 1e6))
         out: list[GlobalMode | None] = [None] * len(self.nominal)
         for r, c in zip(rows, cols, strict=True):
