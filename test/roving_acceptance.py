@@ -24,7 +24,8 @@ def acceptance_seeds(n: int = 10) -> list[int]:
     to the pipeline draws new ones), from 1,000 up, disjoint from the development seeds (0-999)."""
     tree = subprocess.run(["git", "rev-parse", "HEAD:shm_ros/core/roving"], cwd=ROOT, capture_output=True,
                           text=True, check=True).stdout.strip()
-    return [int(s) for s in np.random.default_rng(int(tree[:12], 16)).choice(np.arange(1000, 1_000_000), n, replace=False)]
+    rng = np.random.default_rng(int(tree[:12], 16))
+    return [int(s) for s in rng.choice(np.arange(1000, 1_000_000), n, replace=False)]
 
 
 @dataclass

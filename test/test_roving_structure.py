@@ -50,6 +50,7 @@ def test_roving_example_loads_and_round_trips(tmp_path):
      "rotation"),
     (lambda d: d["sensors"][2]["mount"].update(translation=[0, 1]), "sensors[2].mount.translation", "3 numbers"),
     (lambda d: d.update(frame=""), "frame", "non-empty"),
+    (lambda d: d["sensors"][2].update(carrier_mass_kg=-5.0), "sensors[2].carrier_mass_kg", ""),
     (lambda d: d.update(sensors=[d["sensors"][2]]), "sensors", "fixed sensor"),
 ])
 def test_roving_errors_name_the_field(edit, field, words):
@@ -66,6 +67,16 @@ def test_points_without_roving_sensor_refused():
     d["sensors"] = d["sensors"][:2]
     with pytest.raises(StructureError, match="no sensor is roving"):
         structure_from_dict(d, source="rov.yaml")
+
+
+def test_carrier_mass_round_trips(tmp_path):
+    d = copy.deepcopy(_data())
+    d["sensors"][2]["carrier_mass_kg"] = 2000.0
+    spec = structure_from_dict(d)
+    assert spec.roving[0].carrier_mass_kg == 2000.0
+    dump_structure(spec, tmp_path / "s.yaml")
+    assert load_structure(tmp_path / "s.yaml").roving[0].carrier_mass_kg == 2000.0
+    assert structure_from_dict(copy.deepcopy(_data())).roving[0].carrier_mass_kg is None
 
 
 def test_building_points_are_floors():

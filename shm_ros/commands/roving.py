@@ -2,7 +2,7 @@
 
 * ``shm-ros simulate girder-roving --out DIR``: DIR/bag (Imu per sample, ``/tf``), DIR/structure.yaml,
   DIR/truth.json (the modes without the robot at every point and reference, the clock offset, the
-  drive and dwell phases);
+  drive and dwell phases); ``building-roving``: the same for a drone perching on a building's floors;
 * ``shm-ros identify BAG --structure S.yaml --out modes.json`` with roving sensors in the structure
   file: setups cut from tf, merged into ``setups`` and ``global_modes``.
 """
@@ -18,18 +18,22 @@ def simulate(args: argparse.Namespace) -> int:
     import shutil
 
     from shm_ros.core.simulate.roving import RovingOptions, simulate_roving
+    from shm_ros.core.simulate.roving_building import DroneOptions, simulate_building_roving
     from shm_ros.io.jsonio import dump
     from shm_ros.io.roving_bag import write_roving_bag
     from shm_ros.io.structure import dump_structure, load_structure
 
     out = Path(args.out)
-    example = Path(__file__).resolve().parents[2] / "examples" / "girder_roving.yaml"
+    drone = args.scenario == "building-roving"
+    example = Path(__file__).resolve().parents[2] / "examples" / (
+        "building_roving.yaml" if drone else "girder_roving.yaml")
     try:
         spec = load_structure(getattr(args, "roving_structure", None) or example)
-        opts = RovingOptions(seed=args.seed or 0, fs=args.fs or 100.0)
+        opts: RovingOptions | DroneOptions = DroneOptions(seed=args.seed or 0, fs=args.fs or 50.0) if drone \
+            else RovingOptions(seed=args.seed or 0, fs=args.fs or 100.0)
         if args.duration is not None:
             opts.dwell_s = float(args.duration) / max(1, len(spec.measurement_points))
-        rec = simulate_roving(spec, opts)
+        rec = simulate_building_roving(spec, opts) if isinstance(opts, DroneOptions) else simulate_roving(spec, opts)
         if out.exists() and (out / "bag").exists():
             shutil.rmtree(out / "bag")
         out.mkdir(parents=True, exist_ok=True)
@@ -39,8 +43,9 @@ def simulate(args: argparse.Namespace) -> int:
         return 2
     dump_structure(spec, out / "structure.yaml")
     t = rec.truth
-    dump({"scenario": "girder-roving", "seed": opts.seed, "clock_offset_s": rec.clock_offset_s,
-          "robot_mass_kg": opts.robot_mass_kg, "robot_modal_mass_fraction_mode1": rec.robot_modal_mass_fraction,
+    dump({"scenario": args.scenario, "seed": opts.seed, "clock_offset_s": rec.clock_offset_s,
+          "robot_mass_kg": getattr(opts, "robot_mass_kg", 0.0),
+          "robot_modal_mass_fraction_mode1": rec.robot_modal_mass_fraction,
           "phases": [{"kind": k, "start_s": a, "end_s": b, "point": p} for k, a, b, p in rec.phases],
           "modes": [{"frequency_hz": float(t.frequencies_hz[j]), "damping_ratio": float(t.damping_ratios[j]),
                      "family": t.families[j] if t.families else "",

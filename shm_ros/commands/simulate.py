@@ -20,7 +20,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", nargs="?", default=None,
                    help="girder | building | building-earthquake | girder-roving (a robot with a roving sensor, "
-                        "docs/roving.md) (default: girder, or the scenario file's)")
+                        "docs/roving.md) | building-roving (a drone perching on the floors) (default: girder, "
+                        "or the scenario file's)")
     p.add_argument("--out", required=True, help="output directory (bag/, structure.yaml, truth.json, truth_modes.csv; "
                    "new or empty, see --overwrite)")
     add_overwrite(p)
@@ -110,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
 
     input_file(args.scenario_file, "--scenario-file")
     output_dir(args.out, "--out", args.overwrite)
-    if args.scenario == "girder-roving":
+    if args.scenario in ("girder-roving", "building-roving"):
         from shm_ros.commands.roving import simulate as simulate_roving
 
         return simulate_roving(args)

@@ -157,13 +157,16 @@ class MountSpec:
 class RovingSensorSpec:
     """A sensor carried by a robot (docs/interfaces.md section 8): no fixed ``at``; its position in
     the structure's frame at a sample's time is the tf chain from the structure's ``frame`` to
-    ``frame``. ``mount``: the last link of that chain when the bag has no ``/tf_static``."""
+    ``frame``. ``mount``: the last link of that chain when the bag has no ``/tf_static``.
+    ``carrier_mass_kg``: the mass of the robot or drone that carries it, which lowers the modes where
+    it stands (0: too light to matter; None: fitted from the setups, docs/roving.md)."""
 
     id: str
     frame: str
     direction: str
     source: SourceSpec
     mount: MountSpec | None = None
+    carrier_mass_kg: float | None = None
 
 
 @dataclass
@@ -338,6 +341,8 @@ def _roving_dict(r: RovingSensorSpec) -> dict[str, Any]:
     if r.mount is not None:
         out["mount"] = {"parent": r.mount.parent, "translation": [float(v) for v in r.mount.translation],
                         "rotation": [float(v) for v in r.mount.rotation]}
+    if r.carrier_mass_kg is not None:
+        out["carrier_mass_kg"] = float(r.carrier_mass_kg)
     return out
 
 
@@ -601,7 +606,7 @@ def _damping(c: FieldReader, v: Any) -> DampingSpec:
     return DampingSpec(kind=kind, ratios=ratios)
 
 
-ROVING_FIELDS = ("id", "roving", "frame", "direction", "source", "mount")
+ROVING_FIELDS = ("id", "roving", "frame", "direction", "source", "mount", "carrier_mass_kg")
 
 
 def _roving_sensors(c: FieldReader, v: Any) -> tuple[list[tuple[int, Any]], list[tuple[int, RovingSensorSpec]]]:
@@ -630,10 +635,12 @@ def _roving_sensors(c: FieldReader, v: Any) -> tuple[list[tuple[int, Any]], list
             raise c.err(f"unknown direction {direction!r} (expected one of: {', '.join(DIRECTIONS)})",
                         f"{fld}.direction")
         mount = None if s.get("mount") is None else _mount(c, s["mount"], f"{fld}.mount")
+        carrier = None if s.get("carrier_mass_kg") is None else \
+            c.number(s["carrier_mass_kg"], f"{fld}.carrier_mass_kg", nonneg=True)
         roving.append((i, RovingSensorSpec(id=sid, frame=c.string(s["frame"], f"{fld}.frame"),
                                            direction=direction, source=_source(c, s.get("source"), sid,
                                                                                direction, fld),
-                                           mount=mount)))
+                                           mount=mount, carrier_mass_kg=carrier)))
     return fixed, roving
 
 

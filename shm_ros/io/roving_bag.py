@@ -42,9 +42,15 @@ def write_roving_bag(rec, path: str | Path, prefix: str = PREFIX) -> Path:
     """Write a :class:`~shm_ros.core.simulate.roving.RovingRecording` (references, roving sensors, tf)."""
     path = Path(path)
     frames = {s.id: s.frame for s in rec.spec.roving}
+    src = {s.id: s.source for s in rec.spec.sensors}  # each reference on the axis the reader takes it from
+
+    def on_axis(rid: str, x: np.ndarray) -> np.ndarray:
+        out = np.zeros((x.size, 3))
+        out[:, {"x": 0, "y": 1, "z": 2}[src[rid].axis]] = x * src[rid].sign
+        return out
+
     with BagWriter(path) as w:
-        w.imu_streams({f"{prefix}/accel/{rid}": (rec.times_ns, np.column_stack(
-            [np.zeros_like(x), np.zeros_like(x), x])) for rid, x in rec.references.items()})
+        w.imu_streams({f"{prefix}/accel/{rid}": (rec.times_ns, on_axis(rid, x)) for rid, x in rec.references.items()})
         for sid, xyz in rec.roving.items():
             w._frame_id = frames[sid]
             w.imu_series(f"{prefix}/accel/{sid}", rec.times_ns, xyz)

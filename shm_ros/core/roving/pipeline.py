@@ -51,7 +51,7 @@ from shm_ros.core.roving.transforms import TransformBuffer
 from shm_ros.core.roving.transmissibility import apply_transmissibility
 from shm_ros.core.structure import StructureSpec
 from shm_ros.core.types import ModalEstimate
-from shm_ros.errors import NoWindowsError
+from shm_ros.errors import InputError, NoWindowsError
 
 __all__ = ["RovingConfig", "RovingResult", "prepare_setup", "roving_modes"]
 
@@ -98,11 +98,12 @@ class RovingResult:
                            "clock_offset_s": self.clock_offset_s, "notes": list(self.notes)}}
 
 
-def prepare_setup(y: np.ndarray, names: list[str], n_ref: int, fs: float, cfg: RovingConfig
-                  ) -> tuple[float, Prepared]:
-    """One setup's channels (references first): the roving sensors' clock offset, and the data
-    pre-processed for identification with that offset corrected (``cfg.correct_clock``)."""
-    off = estimate_clock_offset(y[:, n_ref], y[:, :n_ref], fs).offset_s
+def prepare_setup(y: np.ndarray, names: list[str], n_ref: int, fs: float, cfg: RovingConfig,
+                  offset_s: float | None = None) -> tuple[float, Prepared]:
+    """One setup's channels (references first): the roving sensors' clock offset (estimated unless
+    ``offset_s`` is given), and the data pre-processed for identification with that offset
+    corrected (``cfg.correct_clock``)."""
+    off = estimate_clock_offset(y[:, n_ref], y[:, :n_ref], fs).offset_s if offset_s is None else offset_s
     if cfg.correct_clock:
         y = y.copy()
         y[:, n_ref:] = shift(y[:, n_ref:], fs, off)
@@ -126,14 +127,12 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
     refs = list(references)
     icfg = replace(cfg.identify, reference_channels=refs,
                    nominal_frequencies_hz=cfg.identify.nominal_frequencies_hz or nominal_frequencies(spec, 6))
-    offsets, preps = [], []
-    for setup in cut.setups:
-        y, names = setup_channels(setup, references, along)
-        off, prep = prepare_setup(y, names, len(refs), fs, cfg)
-        offsets.append(off)
-        preps.append(prep)
+    channels = [setup_channels(setup, references, along) for setup in cut.setups]
+    offsets, failed = _clock_offsets([y for y, _ in channels], len(refs), fs)
+    preps = [prepare_setup(y, names, len(refs), fs, cfg, off)[1]
+             for (y, names), off in zip(channels, offsets, strict=True)]
     notes = [f"{len(cut.setups)} setups; clock offset of the roving sensors {1e3 * float(np.median(offsets)):.1f} ms "
-             f"({'corrected' if cfg.correct_clock else 'not corrected'})"]
+             f"({'corrected' if cfg.correct_clock else 'not corrected'})"] + failed
     results = [identify_prepared(p, icfg) for p in preps]
     if MergeMethod(cfg.merge) == MergeMethod.POST:
         modes = merge_post([r.estimate for r in results], refs)
@@ -148,7 +147,8 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
             notes.append("roving components from the references' transmissibility on the merged reference shapes")
         if cfg.unload:
             notes += _unload(modes, [r.estimate for r in results], cut,
-                             NominalAtPoints(spec, cfg.unload_modes) if cfg.unload_modes > 0 else None)
+                             NominalAtPoints(spec, cfg.unload_modes) if cfg.unload_modes > 0 else None,
+                             spec.roving[0].carrier_mass_kg)
     else:
         band = results[0].band
         assert band is not None
@@ -159,11 +159,32 @@ def roving_modes(spec: StructureSpec, times_ns: np.ndarray, fs: float, reference
     return RovingResult(cut, modes, offsets, refs, notes)
 
 
+def _clock_offsets(data: list[np.ndarray], n_ref: int, fs: float) -> tuple[list[float], list[str]]:
+    """Each setup's clock offset; a setup whose roving channel is too weakly coherent with the
+    references for an estimate (a point near a node of every mode) takes the median of the others."""
+    offsets, failed = [], []
+    for k, y in enumerate(data):
+        try:
+            offsets.append(estimate_clock_offset(y[:, n_ref], y[:, :n_ref], fs).offset_s)
+        except InputError as exc:
+            offsets.append(float("nan"))
+            failed.append(f"setup {k + 1}: {exc}; the other setups' median offset used")
+    good = [o for o in offsets if np.isfinite(o)]
+    if not good:
+        raise InputError(f"clock offset: no setup gives one ({failed[0] if failed else 'no setup'})")
+    fill = float(np.median(good))
+    return [o if np.isfinite(o) else fill for o in offsets], failed
+
+
 def _unload(modes: list[GlobalMode], estimates: list[ModalEstimate], cut: SetupCut,
-            nominal: NominalAtPoints | None) -> list[str]:
+            nominal: NominalAtPoints | None, known_mass_kg: float | None = None) -> list[str]:
     """Each merged mode's frequency without the robot (carrier_mass.py): the setups' frequencies
     against the squared merged component at the robot's point (the setup's roving points), one
-    robot mass for the modes ``nominal`` assigns, a fit per mode for the others."""
+    robot mass for the modes ``nominal`` assigns, a fit per mode for the others. A known mass (the
+    structure file's ``carrier_mass_kg``) is used as it is, for the assigned modes only; 0 corrects
+    nothing."""
+    if known_mass_kg == 0:
+        return ["the carrier's mass is given as 0: no frequency corrected for it"]
     freqs, phi2 = [], []
     for g in modes:
         group = g.members
@@ -174,14 +195,18 @@ def _unload(modes: list[GlobalMode], estimates: list[ModalEstimate], cut: SetupC
     assigned = nominal.assign([g.frequency_hz for g in modes], [g.shape for g in modes]) if nominal else {}
     u = {j: phi2[j] / nominal.unit_max_modal_mass([k for k, v in modes[j].shape.items() if np.isfinite(v)])[n]
          for j, n in assigned.items()} if nominal else {}
-    mass = carrier_mass([freqs[j] for j in u], list(u.values()))
-    notes = [] if mass is None else [f"robot's mass from the setups of the modes of interest: {mass:.0f} kg"]
+    if known_mass_kg is not None:
+        mass: float | None = known_mass_kg
+        notes = [f"robot's mass as the structure file gives it: {known_mass_kg:g} kg"]
+    else:
+        mass = carrier_mass([freqs[j] for j in u], list(u.values()))
+        notes = [] if mass is None else [f"robot's mass from the setups of the modes of interest: {mass:.0f} kg"]
     for j, g in enumerate(modes):
         if mass is not None and j in u and np.isfinite(f0 := shifted_median(freqs[j], u[j], mass)):
             g.notes.append(f"frequency without the robot {f0:.4g} Hz (setups' mean {np.mean(freqs[j]):.4g} Hz): "
                            f"the setups' median shifted back by the robot's {mass:.0f} kg")
             g.frequency_hz = f0
-        elif (fit := unloaded_frequency(freqs[j], phi2[j])) is not None:
+        elif known_mass_kg is None and (fit := unloaded_frequency(freqs[j], phi2[j])) is not None:
             g.notes.append(f"frequency without the robot {fit[0]:.4g} Hz (setups' mean {np.mean(freqs[j]):.4g} Hz): "
                            "the setups' frequencies fall with the squared component at the robot's point")
             g.frequency_hz = fit[0]

@@ -85,11 +85,14 @@ class RovingRecording:
 
 
 def _truth_structure(spec: StructureSpec) -> dict[str, Any]:
+    """The structure mapping for the truth: the roving sensor's points as fixed sensors along its
+    direction."""
     d = copy.deepcopy(spec.raw)
     d.pop("frame", None)
     d.pop("measurement_points", None)
+    direction = spec.roving[0].direction if spec.roving else "vertical"
     d["sensors"] = [s for s in d["sensors"] if not s.get("roving", False)] + [
-        {"id": p.id, "at": dict(p.at), "direction": "vertical"} for p in spec.measurement_points]
+        {"id": p.id, "at": dict(p.at), "direction": direction} for p in spec.measurement_points]
     d.pop("parameters", None)
     return d
 
