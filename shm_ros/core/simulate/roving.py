@@ -33,29 +33,36 @@ from shm_ros.core.simulate.effects import Conditions
 from shm_ros.core.simulate.truth import ModalTruth, build_truth
 from shm_ros.core.structure import StructureSpec
 
-__all__ = ["RovingOptions", "RovingRecording", "simulate_roving", "TfSample", "G"]
+__all__ = ["CarrierOptions", "RovingOptions", "RovingRecording", "simulate_roving", "TfSample", "G", "tf_stream"]
 
 G = 9.81
 IDENTITY_Q = (0.0, 0.0, 0.0, 1.0)
+DECK_Z = 0.3  # the girder robot's sensor height above the deck axis (m)
 
 
 @dataclass
-class RovingOptions:
+class CarrierOptions:
+    """What a roving scenario's carrier (a robot, a drone) and its recording share."""
+
     seed: int = 0
     fs: float = 100.0
     dwell_s: float = 120.0
     speed_m_s: float = 1.0
-    robot_mass_kg: float = 2000.0
-    mount_pitch_deg: float = 20.0
     clock_offset_s: float = 0.012
     tf_hz: float = 10.0
     localisation_noise_m: float = 0.02
-    ride_rms_m_s2: float = 0.5
     noise_rms_m_s2: float = 2.0e-4
-    n_points: int | None = None  # the first N measurement points (by x); None: all
     model_form: bool = True
     tf_static: bool = False  # publish the mount on /tf_static (else only the structure file has it)
     warmup_s: float = 20.0
+
+
+@dataclass
+class RovingOptions(CarrierOptions):
+    robot_mass_kg: float = 2000.0
+    mount_pitch_deg: float = 20.0
+    ride_rms_m_s2: float = 0.5
+    n_points: int | None = None  # the first N measurement points (by x); None: all
     refine: int = 2  # truth elements per nominal element
 
 
@@ -97,13 +104,19 @@ def _truth_structure(spec: StructureSpec) -> dict[str, Any]:
     return d
 
 
-def simulate_roving(spec: StructureSpec, options: RovingOptions | None = None) -> RovingRecording:
-    o = options or RovingOptions()
-    if spec.kind != "girder" or len(spec.roving) != 1:
-        raise ValueError("the girder-roving scenario needs a girder structure file with one roving sensor")
+def carried_sensor(spec: StructureSpec, kind: str, scenario: str):
+    """The one roving sensor of a ``kind`` structure file, with its mount (the scenarios need both)."""
+    if spec.kind != kind or len(spec.roving) != 1:
+        raise ValueError(f"the {scenario} scenario needs a {kind} structure file with one roving sensor")
     sensor = spec.roving[0]
     if sensor.mount is None:
         raise ValueError(f"roving sensor {sensor.id!r}: the scenario needs its mount in the structure file")
+    return sensor
+
+
+def simulate_roving(spec: StructureSpec, options: RovingOptions | None = None) -> RovingRecording:
+    o = options or RovingOptions()
+    sensor = carried_sensor(spec, "girder", "girder-roving")
     points = sorted(spec.measurement_points, key=lambda p: float(p.at["x"]))[: o.n_points]
     tm = build_truth(_truth_structure(spec), [], rng_for(o.seed, 0), refine=o.refine, misplacement_std_m=0.0,
                      fs=o.fs, model_form=o.model_form)
@@ -164,32 +177,41 @@ def simulate_roving(spec: StructureSpec, options: RovingOptions | None = None) -
     rov_all = rov_all + o.noise_rms_m_s2 * nrng.standard_normal(rov_all.shape)
     rov_all = shift(rov_all, o.fs, -o.clock_offset_s)  # stamped late by the offset
     times = np.round(np.arange(n_all) * dt * 1e9).astype(np.int64)
-    tf, static = _tf_stream(sensor, np.concatenate(x_parts), times, o, rng_for(o.seed, 13))
+    xs = np.concatenate(x_parts)
+    where = np.column_stack([xs, np.zeros_like(xs), np.full_like(xs, DECK_Z)])
+    tf, static = tf_stream(sensor, where, times, o, rng_for(o.seed, 13))
     truth_out = ModalTruth(truth.frequencies_hz, truth.damping_ratios, truth.shapes, list(truth.sensor_ids),
                            truth.families, truth.in_plane_family)
     return RovingRecording(spec, times, {r: ref_all[:, k] for k, r in enumerate(refs)}, {sensor.id: rov_all},
                            tf, static, truth_out, phases, o.clock_offset_s, fractions)
 
 
-def _tf_stream(sensor, sensor_x: np.ndarray, times: np.ndarray, o: RovingOptions, rng: np.random.Generator
-               ) -> tuple[list[TfSample], list[TfSample]]:
+def tf_stream(sensor, where: np.ndarray, times: np.ndarray, o: CarrierOptions, rng: np.random.Generator
+              ) -> tuple[list[TfSample], list[TfSample]]:
+    """``structure -> odom`` (the localiser's corrections, once a second) and ``odom -> <base>``
+    (odometry drifting 1 % of the distance travelled, with noise) at ``tf_hz`` for a sensor at
+    ``where`` (n, 3) in the structure's frame; the base frame is the mount's parent."""
     mount = np.array(sensor.mount.translation)
     step = int(round(o.fs / o.tf_hz))
     out: list[TfSample] = []
-    drift = correction = 0.0
-    last = float(sensor_x[0])
+    drift = np.zeros(3)
+    correction = np.zeros(3)
+    last = np.array(where[0], dtype=float)
     next_fix = 0
     for i in sorted(set(range(0, times.size, step)) | {times.size - 1}):  # the last sample localised too
-        x = float(sensor_x[i])
-        drift += 0.01 * abs(x - last)
+        x = np.array(where[i], dtype=float)
+        drift += 0.01 * np.abs(x - last)
         last = x
         if times[i] >= next_fix:
-            correction = -drift
+            correction = -drift.copy()
             next_fix += 1_000_000_000
-        out.append(TfSample("structure", "odom", int(times[i]), (correction, 0.0, 0.0), IDENTITY_Q))
-        base = np.array([x - mount[0] + drift, -mount[1], 0.3 - mount[2]]) + rng.normal(0, o.localisation_noise_m, 3)
-        out.append(TfSample("odom", "rover/base_link", int(times[i]), (float(base[0]), float(base[1]),
-                                                                        float(base[2])), IDENTITY_Q))
+        out.append(TfSample("structure", "odom", int(times[i]), _xyz(correction), IDENTITY_Q))
+        base = x - mount + drift + rng.normal(0, o.localisation_noise_m, 3)
+        out.append(TfSample("odom", sensor.mount.parent, int(times[i]), _xyz(base), IDENTITY_Q))
     static = [TfSample(sensor.mount.parent, sensor.frame, 0, sensor.mount.translation, sensor.mount.rotation)
               ] if o.tf_static else []
     return out, static
+
+
+def _xyz(v: np.ndarray) -> tuple[float, float, float]:
+    return float(v[0]), float(v[1]), float(v[2])

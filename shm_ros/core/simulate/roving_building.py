@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from shm_ros.core.delay import shift
 from shm_ros.core.simulate.campaign import rng_for
 from shm_ros.core.simulate.effects import Conditions
-from shm_ros.core.simulate.roving import IDENTITY_Q, G, RovingRecording, TfSample, _truth_structure
+from shm_ros.core.simulate.roving import CarrierOptions, G, RovingRecording, _truth_structure, carried_sensor, tf_stream
 from shm_ros.core.simulate.truth import ModalTruth, build_truth
 from shm_ros.core.structure import StructureSpec
 
@@ -40,31 +40,19 @@ AXES = {"x": 0, "y": 1, "vertical": 2}
 
 
 @dataclass
-class DroneOptions:
-    seed: int = 0
+class DroneOptions(CarrierOptions):
     fs: float = 50.0
-    dwell_s: float = 120.0
-    speed_m_s: float = 1.0
-    clock_offset_s: float = 0.012
-    tf_hz: float = 10.0
-    localisation_noise_m: float = 0.02
     rotor_hz: float = 18.0
     flight_rms_m_s2: float = 0.5
     noise_rms_m_s2: float = 1.0e-4
     wind_rms_n: float = 1.5e3
     microtremor_rms_m_s2: float = 5.0e-4
-    model_form: bool = True
-    tf_static: bool = False
     warmup_s: float = 30.0
 
 
 def simulate_building_roving(spec: StructureSpec, options: DroneOptions | None = None) -> RovingRecording:
     o = options or DroneOptions()
-    if spec.kind != "shear_building" or len(spec.roving) != 1:
-        raise ValueError("the building-roving scenario needs a shear-building structure file with one roving sensor")
-    sensor = spec.roving[0]
-    if sensor.mount is None:
-        raise ValueError(f"roving sensor {sensor.id!r}: the scenario needs its mount in the structure file")
+    sensor = carried_sensor(spec, "shear_building", "building-roving")
     if any(p.position is None for p in spec.measurement_points):
         raise ValueError("the building-roving scenario needs every measurement point's xyz")
     points = list(spec.measurement_points)
@@ -111,38 +99,8 @@ def simulate_building_roving(spec: StructureSpec, options: DroneOptions | None =
     rov = rov + o.noise_rms_m_s2 * nrng.standard_normal(rov.shape)
     rov = shift(rov, o.fs, -o.clock_offset_s)  # stamped late by the offset
     times = np.round(np.arange(n_all) * dt * 1e9).astype(np.int64)
-    tf, static = _tf_stream(sensor, where, times, o, rng_for(o.seed, 13))
+    tf, static = tf_stream(sensor, where, times, o, rng_for(o.seed, 13))
     truth_out = ModalTruth(truth.frequencies_hz, truth.damping_ratios, truth.shapes, list(truth.sensor_ids),
                            truth.families, truth.in_plane_family)
     return RovingRecording(spec, times, {r: ref_all[:, k] for k, r in enumerate(refs)}, {sensor.id: rov},
                            tf, static, truth_out, phases, o.clock_offset_s, {})
-
-
-def _tf_stream(sensor, where: np.ndarray, times: np.ndarray, o: DroneOptions, rng: np.random.Generator
-               ) -> tuple[list[TfSample], list[TfSample]]:
-    """``structure -> odom`` (the localiser's corrections) and ``odom -> <base>`` (odometry with drift
-    and noise) at ``tf_hz``; the base frame is the mount's parent."""
-    mount = np.array(sensor.mount.translation)
-    step = int(round(o.fs / o.tf_hz))
-    out: list[TfSample] = []
-    drift = np.zeros(3)
-    correction = np.zeros(3)
-    last = where[0].copy()
-    next_fix = 0
-    for i in sorted(set(range(0, times.size, step)) | {times.size - 1}):
-        x = where[i]
-        drift += 0.01 * np.abs(x - last)
-        last = x.copy()
-        if times[i] >= next_fix:
-            correction = -drift.copy()
-            next_fix += 1_000_000_000
-        out.append(TfSample("structure", "odom", int(times[i]), _xyz(correction), IDENTITY_Q))
-        base = x - mount + drift + rng.normal(0, o.localisation_noise_m, 3)
-        out.append(TfSample("odom", sensor.mount.parent, int(times[i]), _xyz(base), IDENTITY_Q))
-    static = [TfSample(sensor.mount.parent, sensor.frame, 0, sensor.mount.translation, sensor.mount.rotation)
-              ] if o.tf_static else []
-    return out, static
-
-
-def _xyz(v: np.ndarray) -> tuple[float, float, float]:
-    return float(v[0]), float(v[1]), float(v[2])
