@@ -146,14 +146,17 @@ def documented_figures(full: bool) -> list[str]:
 
 
 def _same(documented: str, measured: float) -> bool:
-    """``measured`` rounds to ``documented`` at the documented precision."""
+    """``measured`` is within one unit of ``documented``'s last digit: the rounding, plus what another
+    CPU's BLAS kernels move (OpenBLAS picks its kernels by CPU; on a second machine seed 0 gave 12.148 %
+    and 0.8562 where the first gave figures that round to 12.2 % and 0.857)."""
     decimals = len(documented.partition(".")[2])
-    return f"{measured:.{decimals}f}" == documented
+    return abs(measured - float(documented)) <= 10.0 ** -decimals + 1e-12
 
 
 def test_documented_figures_are_read_and_compared():
     assert len(documented_figures(False)) == 7 and len(documented_figures(True)) == 5
-    assert _same("0.856", 0.8563) and not _same("12.1", 12.2) and _same("10", 10)
+    assert _same("0.856", 0.8563) and _same("12.2", 12.148) and not _same("12.1", 12.25) and _same("10", 10)
+    assert not _same("10", 11.5) and not _same("0.857", 0.8555)
 
 
 @pytest.mark.parametrize("seeds", [SEEDS])
