@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
 from shm_ros.core.config import option
+
+
+class MisfitCorrelation(enum.StrEnum):
+    """How the misfit of one window relates to the window before (:mod:`.drift`)."""
+
+    DRIFT = "drift"  # a random-walk drift under the scatter, integrated (records of 40 windows or more)
+    INDEPENDENT = "independent"
 
 
 @dataclass
@@ -32,4 +40,7 @@ class ExplainConfig:
     mac_gate: float = option(0.8, "pairing of tracked modes with model modes: MAC gate")
     min_unpaired_fraction: float = option(0.5, "an unpaired mode seen in at least this share of windows is "
                                           "reported as unmodelled")
+    misfit_correlation: str = option(MisfitCorrelation.DRIFT, "misfit from window to window: drift (a slow "
+                                     "unmeasured driver is not read as an effect) or independent",
+                                     choices=MisfitCorrelation)
     seed: int = option(0, "random seed (the same seed gives the same verdict)")

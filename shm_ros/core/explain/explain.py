@@ -43,7 +43,8 @@ from shm_ros.core.structure import StructureSpec
 from shm_ros.errors import NoWindowsError, NumericalFailure
 
 from .candidates.base import CANDIDATES, Candidate, Context
-from .config import ExplainConfig
+from .config import ExplainConfig, MisfitCorrelation
+from .drift import Timing
 from .failures import failed_result, numerical
 from .fit import Box, FitResult, evidence_check, fit
 from .fit_ratio import combined, modal_fit_ratio
@@ -336,6 +337,14 @@ def _start(obs: ModalObservations, spec: StructureSpec, config: ExplainConfig, s
                times_s, float(obs.times[0]) if obs.time_kind == "iso" else 0.0, split(times_s, config))
 
 
+def _timing(run: Run, mask: np.ndarray) -> Timing | None:
+    """The times of the windows in ``mask`` for a misfit with drift (:mod:`.drift`), or None
+    (independent misfit: so configured, or a sparse record)."""
+    if run.config.misfit_correlation != MisfitCorrelation.DRIFT:
+        return None
+    return Timing.of(run.times_s[mask], SPARSE_WINDOWS)
+
+
 def _baseline(run: Run) -> None:
     """Calibrated nominal model, its groups and surrogate, the misfit per window, the likelihood and
     the scores before any effect."""
@@ -357,7 +366,7 @@ def _baseline(run: Run) -> None:
     run.context = Context(times_s=run.times_s, covariates=covariates, start_epoch_s=run.epoch)
     run.lik = CandidateLikelihood(run.r_all[train], run.J, None if run.rd_all is None else run.rd_all[train],
                                   tau=config.effect_form_error, noise_guess=config.noise_guess,
-                                  damping_noise_guess=config.damping_noise_guess)
+                                  damping_noise_guess=config.damping_noise_guess, timing=_timing(run, train))
     run.fit_before, run.held_before = scores(run.r_all, None, train)
     run.fit_before.damping_rmse_pct, run.held_before.damping_rmse_pct = damping_scores(run.z_all, None, train)
     run.noise = {"frequency_pct": scatter(run.r_all), "damping_points": scatter(run.z_all)}
@@ -462,7 +471,8 @@ def _final_estimates(run: Run) -> None:
     config = run.config
     run.say("final estimates on every window", 0.97)
     lik_all = CandidateLikelihood(run.r_all, run.J, run.rd_all, tau=config.effect_form_error,
-                                  noise_guess=config.noise_guess, damping_noise_guess=config.damping_noise_guess)
+                                  noise_guess=config.noise_guess, damping_noise_guess=config.damping_noise_guess,
+                                  timing=_timing(run, np.ones(len(run.times_s), bool)))
     twins = [(c, run.jobs[c.label][0].cand) for c in run.accepted
              if all(c is not x for x in run.chain) and c.label in run.jobs]
     final = list(run.fixed)
@@ -477,7 +487,8 @@ def _catch_all(run: Run) -> None:
         return
     threshold, accepted = run.threshold, run.accepted
     basis, names = catch_all_basis(run.context)
-    per_mode, fitted = catch_all_gain(run.r_all[run.train], basis[run.train], run.config.noise_guess)
+    per_mode, fitted = catch_all_gain(run.r_all[run.train], basis[run.train], run.config.noise_guess,
+                                      timing=_timing(run, run.train))
     run.catch = catch = float(per_mode.sum())
     # the named model: the accepted effects together (each one's gain is over those before it)
     best_named = (sum(c.log_evidence_gain for c in [accepted[0], *accepted[1 + len(accepted[0].tied_with):]])

@@ -36,9 +36,11 @@ so its Bayes factor over the nominal model is closed form.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from .drift import ModeDrift, Timing, log_mean_exp
 
 S_RANGE = (1e-4, 0.2)  # model-form offset scale, relative frequency, log-uniform
 N_S = 41
@@ -51,24 +53,52 @@ def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
     return np.log(np.sum(np.exp(a - mx), axis=axis)) + np.squeeze(mx, axis=axis)
 
 
+def _eta_marginal(S0: np.ndarray, A: np.ndarray, c: np.ndarray, alpha: np.ndarray, b: float,
+                  tau: np.ndarray) -> np.ndarray:
+    """Log marginal of residuals minus (1 + eta) d with eta ~ N(0, tau^2) and the inverse-gamma noise:
+    ``S0`` the residual's sum of squares after d, ``A`` d's, ``c`` their cross sum (batched)."""
+    sig2 = (b + 0.5 * S0) / (alpha + 1.0)
+    eta = np.zeros_like(S0)
+    ssw = S0
+    for _ in range(3):  # eta given sigma^2, sigma^2 given eta (converges in a few steps)
+        prec = A / sig2 + 1.0 / tau ** 2
+        # at most 3 tau: with thousands of windows a free eta could even flip the effect's sign
+        eta = np.clip((c / sig2) / prec, -ETA_MAX * tau, ETA_MAX * tau)
+        ssw = np.maximum(S0 - 2.0 * eta * c + eta ** 2 * A, 0.0)
+        sig2 = (b + 0.5 * ssw) / (alpha + 1.0)
+    prec = A / sig2 + 1.0 / tau ** 2
+    return -alpha * np.log(b + 0.5 * ssw) - 0.5 * eta ** 2 / tau ** 2 - 0.5 * np.log(tau ** 2 * prec)
+
+
+def _spread(tau: float, u2: np.ndarray) -> np.ndarray:
+    """tau_k = tau max(1, u / u_k) from the changes' mean squares u2 (B, K) (module docstring)."""
+    return tau * np.sqrt(np.maximum(1.0, np.mean(u2, axis=1, keepdims=True) / np.maximum(u2, 1e-300)))
+
+
 @dataclass
 class _Part:
-    """Centered residuals of one quantity (frequencies or damping) on the training windows."""
+    """Centered residuals of one quantity (frequencies or damping) on the training windows; with a
+    ``timing`` each mode's misfit is a random-walk drift plus scatter, the drift integrated
+    (:mod:`.drift`)."""
 
     r: np.ndarray  # (W, K) residuals, 0 where missing
     ok: np.ndarray  # (W, K) bool
     n: np.ndarray  # (K,) windows per mode
     a: float
     b: float
+    drifts: list[_Drift | None] = field(default_factory=list)
 
     @classmethod
-    def make(cls, r: np.ndarray, a: float, guess: float) -> _Part:
+    def make(cls, r: np.ndarray, a: float, guess: float, timing: Timing | None = None) -> _Part:
         ok = np.isfinite(r)
         n = ok.sum(axis=0)
         rr = np.where(ok, r, 0.0)
         mean = rr.sum(axis=0) / np.maximum(n, 1)
         rc = np.where(ok, rr - mean, 0.0)
-        return cls(rc, ok, n, a, a * guess ** 2)
+        part = cls(rc, ok, n, a, a * guess ** 2)
+        if timing is not None:
+            part.drifts = [_Drift.make(rc[:, k], ok[:, k], timing) for k in range(r.shape[1])]
+        return part
 
     def center(self, d: np.ndarray) -> np.ndarray:
         """d (B, W, K) centered per mode over the windows where the mode was seen."""
@@ -84,29 +114,59 @@ class _Part:
         alpha = self.a + 0.5 * m
         s0 = np.sum(self.r ** 2, axis=0)
         if d is None:
-            return (-alpha * np.log(self.b + 0.5 * s0))[None]
+            out = (-alpha * np.log(self.b + 0.5 * s0))[None]
+            for k, dr in enumerate(self.drifts):
+                if dr is not None:
+                    out[0, k] = dr.null(alpha[k], self.b)
+            return out
         dc = self.center(d)
         e = self.r[None] - dc
         S0 = np.sum(e ** 2, axis=1)
         A = np.sum(dc ** 2, axis=1)
         c = np.sum(dc * e, axis=1)
-        tau = np.full_like(A, tau)  # tau_k
-        if spread:
-            u2 = A / np.maximum(self.n, 1)
-            tau = tau * np.sqrt(np.maximum(1.0, np.mean(u2, axis=1, keepdims=True) / np.maximum(u2, 1e-300)))
-        sig2 = (self.b + 0.5 * S0) / (alpha + 1.0)
-        eta = np.zeros_like(S0)
-        for _ in range(3):  # eta given sigma^2, sigma^2 given eta (converges in a few steps)
-            prec = A / sig2 + 1.0 / tau ** 2
-            # at most 3 tau: with thousands of windows a free eta could even flip the effect's sign
-            eta = np.clip((c / sig2) / prec, -ETA_MAX * tau, ETA_MAX * tau)
-            ssw = np.maximum(S0 - 2.0 * eta * c + eta ** 2 * A, 0.0)
-            sig2 = (self.b + 0.5 * ssw) / (alpha + 1.0)
-        prec = A / sig2 + 1.0 / tau ** 2
-        return -alpha * np.log(self.b + 0.5 * ssw) - 0.5 * eta ** 2 / tau ** 2 - 0.5 * np.log(tau ** 2 * prec)
+        taus = _spread(tau, A / np.maximum(self.n, 1)) if spread else np.full_like(A, tau)
+        out = _eta_marginal(S0, A, c, alpha, self.b, taus)
+        for k, dr in enumerate(self.drifts):
+            if dr is not None:
+                out[:, k] = dr.loglik(d[:, :, k], alpha[k], self.b, taus[:, k])
+        return out
 
     def sigma(self) -> np.ndarray:
         return np.sqrt(np.sum(self.r ** 2, axis=0) / np.maximum(self.n - 1, 1))
+
+
+@dataclass
+class _Drift:
+    """One mode's misfit as drift plus scatter (:mod:`.drift`): its differences, and per ratio on the
+    grid T^-1 of them and their quadratic form."""
+
+    mode: ModeDrift
+    dr: np.ndarray  # differences of the residuals (n - 1,)
+    v: list[np.ndarray]  # T_i^-1 dr
+    syy: np.ndarray  # dr . T_i^-1 dr
+
+    @classmethod
+    def make(cls, r: np.ndarray, ok: np.ndarray, timing: Timing) -> _Drift | None:
+        mode = ModeDrift.make(ok, timing)
+        if mode is None:
+            return None
+        dr = mode.diff(r)
+        v = [mode.solve(i, dr) for i in range(len(timing.lam))]
+        return cls(mode, dr, v, np.array([float(dr @ x) for x in v]))
+
+    def null(self, alpha: float, b: float) -> float:
+        return float(log_mean_exp(-alpha * np.log(b + 0.5 * self.syy) - 0.5 * self.mode.logdets))
+
+    def loglik(self, d: np.ndarray, alpha: float, b: float, tau: np.ndarray) -> np.ndarray:
+        """(B,) for changes d (B, W) of this mode."""
+        dd = self.mode.diff(d)  # (B, n - 1)
+        lls = []
+        for i, v in enumerate(self.v):
+            A = np.einsum("bj,jb->b", dd, self.mode.solve(i, dd.T))
+            cy = dd @ v
+            S0 = np.maximum(self.syy[i] - 2.0 * cy + A, 0.0)
+            lls.append(_eta_marginal(S0, A, cy - A, alpha, b, tau) - 0.5 * self.mode.logdets[i])
+        return log_mean_exp(np.stack(lls), axis=0)
 
 
 class CandidateLikelihood:
@@ -119,11 +179,12 @@ class CandidateLikelihood:
 
     def __init__(self, r: np.ndarray, nominal_sens: np.ndarray | None = None, rd: np.ndarray | None = None,
                  tau: float = 0.1, noise_guess: float = 0.003, damping_noise_guess: float = 0.2,
-                 ig_shape: float = 1.0):
+                 ig_shape: float = 1.0, timing: Timing | None = None):
         self.tau = float(tau)
         self.noise_guess = float(noise_guess)
-        self.freq = _Part.make(r, ig_shape, noise_guess)
-        self.damp = None if rd is None or not np.isfinite(rd).any() else _Part.make(rd, ig_shape, damping_noise_guess)
+        self.freq = _Part.make(r, ig_shape, noise_guess, timing)
+        self.damp = (None if rd is None or not np.isfinite(rd).any()
+                     else _Part.make(rd, ig_shape, damping_noise_guess, timing))
         ok = self.freq.ok
         rr = np.where(ok, r, 0.0)
         self.ybar = rr.sum(axis=0) / np.maximum(self.freq.n, 1)
@@ -170,32 +231,49 @@ class CandidateLikelihood:
         return self._total(d, dd) - self._null
 
 
-def catch_all_gain(r: np.ndarray, basis: np.ndarray, noise_guess: float = 0.003, ig_shape: float = 1.0
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def _g_prior_loglik(y: np.ndarray, X: np.ndarray, a: float, b: float) -> tuple[float, float, np.ndarray | None]:
+    """Log marginals (nominal, g-prior model) of ``y`` on ``X`` (both free of the offset; g = number of
+    values) with the inverse-gamma noise of shape ``a`` after the data (constants shared by both left
+    out), and the model's fitted values."""
+    s0 = float(y @ y)
+    null = -a * math.log(b + 0.5 * s0)
+    X = X[:, np.linalg.norm(X, axis=0) > 1e-12]
+    if X.shape[1] == 0:
+        return null, null, None
+    q, sv, _ = np.linalg.svd(X, full_matrices=False)
+    q = q[:, sv > 1e-8 * sv.max()]
+    g = float(y.size)
+    proj = q @ (q.T @ y)
+    sg = s0 - g / (1 + g) * float(y @ proj)
+    return null, -0.5 * q.shape[1] * math.log1p(g) - a * math.log(b + 0.5 * sg), g / (1 + g) * proj
+
+
+def catch_all_gain(r: np.ndarray, basis: np.ndarray, noise_guess: float = 0.003, ig_shape: float = 1.0,
+                   timing: Timing | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per-mode log Bayes factor (K,) of a g-prior linear model in ``basis`` (W, p) over the nominal
-    model, and the fitted values (W, K). Missing residuals (NaN) are left out mode by mode."""
+    model, and the fitted values (W, K). Missing residuals (NaN) are left out mode by mode. With a
+    ``timing`` the misfit is drift plus scatter (:mod:`.drift`): both models are fitted to the
+    whitened differences and each integrates the drift ratio over the grid."""
     W, K = r.shape
     gains = np.zeros(K)
     fitted = np.full((W, K), np.nan)
+    b = ig_shape * noise_guess ** 2
     for k in range(K):
         ok = np.isfinite(r[:, k])
         n = int(ok.sum())
         if n < 5:
             continue
         y = r[ok, k] - r[ok, k].mean()
-        X = basis[ok] - basis[ok].mean(axis=0)
-        X = X[:, np.linalg.norm(X, axis=0) > 1e-12]
-        if X.shape[1] == 0:
+        null, alt, fit = _g_prior_loglik(y, basis[ok] - basis[ok].mean(axis=0), ig_shape + 0.5 * (n - 1), b)
+        if fit is None:
             continue
-        q, sv, _ = np.linalg.svd(X, full_matrices=False)
-        q = q[:, sv > 1e-8 * sv.max()]
-        p = q.shape[1]
-        g = float(n)
-        proj = q @ (q.T @ y)
-        s0 = float(y @ y)
-        sg = s0 - g / (1 + g) * float(y @ proj)
-        a, b = ig_shape + 0.5 * (n - 1), ig_shape * noise_guess ** 2
-        gains[k] = -0.5 * p * math.log1p(g) - a * (math.log(b + 0.5 * sg) - math.log(b + 0.5 * s0))
-        fitted[ok, k] = g / (1 + g) * proj
+        gains[k] = alt - null
+        fitted[ok, k] = fit
+        mode = None if timing is None else ModeDrift.make(ok, timing)
+        if mode is None:
+            continue
+        dy, dX = mode.diff(np.where(ok, r[:, k], 0.0)), mode.diff(basis.T).T
+        lls = np.array([_g_prior_loglik(mode.whiten(i, dy), mode.whiten(i, dX), ig_shape + 0.5 * (n - 1), b)[:2]
+                        for i in range(len(timing.lam))]) - 0.5 * mode.logdets[:, None]
+        gains[k] = float(log_mean_exp(lls[:, 1]) - log_mean_exp(lls[:, 0]))
     return gains, fitted
-
