@@ -86,6 +86,21 @@ class ModeDrift:
             logdets.append(2.0 * np.sum(np.log(c[0])))
         return cls(idx, factors, np.array(logdets))
 
+    def forms(self, x: np.ndarray, zr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per ratio on the grid, ``|L^-1 x|^2`` and ``(L^-1 x) . zr`` over the differences (T = L L^T),
+        by forward substitution on the bidiagonal factor, every ratio and column at once:
+        ``x`` (n - 1, *cols), ``zr`` (n_lam, n - 1, *cols or broadcastable) -> two (n_lam, *cols)."""
+        ext = (slice(None),) + (None,) * (x.ndim - 1)
+        inv = 1.0 / np.array([f[0] for f in self.factors])  # (n_lam, n - 1)
+        sub = np.array([f[1] for f in self.factors])
+        z = x[0][None] * inv[:, 0][ext]
+        a, c = z * z, z * zr[:, 0]
+        for j in range(1, x.shape[0]):
+            z = (x[j][None] - sub[:, j - 1][ext] * z) * inv[:, j][ext]
+            a += z * z
+            c += z * zr[:, j]
+        return a, c
+
     def diff(self, x: np.ndarray) -> np.ndarray:
         """Differences along the mode's windows; ``x`` (..., W) -> (..., n - 1)."""
         return np.diff(x[..., self.idx], axis=-1)

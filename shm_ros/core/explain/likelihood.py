@@ -23,6 +23,9 @@ candidate's change ``D_wk(theta) = ln f_model(theta) - ln f_baseline`` (:mod:`.s
   windows, pulls the effect's size far off (a span's knee 30 % too steep).
 * ``eps_wk`` ~ N(0, sigma_k^2): identification scatter, sigma_k^2 inverse-gamma (shape a, mode
   ``noise_guess^2``) and integrated out in closed form: ``-(a + m/2) ln(b + SSW/2)``.
+  On dense records (a ``timing``) the misfit also drifts: a random walk under the scatter, its
+  ratio to the scatter integrated on a grid (:mod:`.drift`); the sums of squares are then those of
+  the mode's differences between successive windows in the metric of their covariance.
 
 Damping (a candidate with ``Modification.damping``) enters the same way on ``ln zeta``, within part
 only (no model baseline for damping). All functions are batched over parameter vectors (B, ...).
@@ -86,7 +89,7 @@ class _Part:
     n: np.ndarray  # (K,) windows per mode
     a: float
     b: float
-    drifts: list[_Drift | None] = field(default_factory=list)
+    drifts: list[_Drift] = field(default_factory=list)
 
     @classmethod
     def make(cls, r: np.ndarray, a: float, guess: float, timing: Timing | None = None) -> _Part:
@@ -97,7 +100,7 @@ class _Part:
         rc = np.where(ok, rr - mean, 0.0)
         part = cls(rc, ok, n, a, a * guess ** 2)
         if timing is not None:
-            part.drifts = [_Drift.make(rc[:, k], ok[:, k], timing) for k in range(r.shape[1])]
+            part.drifts = _Drift.groups(rc, ok, timing)
         return part
 
     def center(self, d: np.ndarray) -> np.ndarray:
@@ -115,9 +118,8 @@ class _Part:
         s0 = np.sum(self.r ** 2, axis=0)
         if d is None:
             out = (-alpha * np.log(self.b + 0.5 * s0))[None]
-            for k, dr in enumerate(self.drifts):
-                if dr is not None:
-                    out[0, k] = dr.null(alpha[k], self.b)
+            for g in self.drifts:
+                out[0, g.modes] = g.null(alpha, self.b)
             return out
         dc = self.center(d)
         e = self.r[None] - dc
@@ -126,9 +128,8 @@ class _Part:
         c = np.sum(dc * e, axis=1)
         taus = _spread(tau, A / np.maximum(self.n, 1)) if spread else np.full_like(A, tau)
         out = _eta_marginal(S0, A, c, alpha, self.b, taus)
-        for k, dr in enumerate(self.drifts):
-            if dr is not None:
-                out[:, k] = dr.loglik(d[:, :, k], alpha[k], self.b, taus[:, k])
+        for g in self.drifts:
+            out[:, g.modes] = g.loglik(d, alpha, self.b, taus)
         return out
 
     def sigma(self) -> np.ndarray:
@@ -137,36 +138,41 @@ class _Part:
 
 @dataclass
 class _Drift:
-    """One mode's misfit as drift plus scatter (:mod:`.drift`): its differences, and per ratio on the
-    grid T^-1 of them and their quadratic form."""
+    """Modes seen in the same windows, their misfit as drift plus scatter (:mod:`.drift`): the
+    residuals' whitened differences per ratio on the grid and their sums of squares."""
 
+    modes: np.ndarray  # (G,) mode indices
     mode: ModeDrift
-    dr: np.ndarray  # differences of the residuals (n - 1,)
-    v: list[np.ndarray]  # T_i^-1 dr
-    syy: np.ndarray  # dr . T_i^-1 dr
+    zr: np.ndarray  # (n_lam, n - 1, 1, G) L^-1 of the residuals' differences
+    syy: np.ndarray  # (n_lam, G)
 
     @classmethod
-    def make(cls, r: np.ndarray, ok: np.ndarray, timing: Timing) -> _Drift | None:
-        mode = ModeDrift.make(ok, timing)
-        if mode is None:
-            return None
-        dr = mode.diff(r)
-        v = [mode.solve(i, dr) for i in range(len(timing.lam))]
-        return cls(mode, dr, v, np.array([float(dr @ x) for x in v]))
+    def groups(cls, r: np.ndarray, ok: np.ndarray, timing: Timing) -> list[_Drift]:
+        out = []
+        patterns: dict[bytes, list[int]] = {}
+        for k in range(r.shape[1]):
+            patterns.setdefault(ok[:, k].tobytes(), []).append(k)
+        for ks in patterns.values():
+            mode = ModeDrift.make(ok[:, ks[0]], timing)
+            if mode is None:
+                continue
+            dr = mode.diff(r[:, ks].T).T  # (n - 1, G)
+            zr = np.stack([mode.whiten(i, dr) for i in range(len(timing.lam))])
+            out.append(cls(np.array(ks), mode, zr[:, :, None, :], np.sum(zr ** 2, axis=1)))
+        return out
 
-    def null(self, alpha: float, b: float) -> float:
-        return float(log_mean_exp(-alpha * np.log(b + 0.5 * self.syy) - 0.5 * self.mode.logdets))
+    def null(self, alpha: np.ndarray, b: float) -> np.ndarray:
+        """(G,) log marginal of the nominal model."""
+        ll = -alpha[self.modes] * np.log(b + 0.5 * self.syy) - 0.5 * self.mode.logdets[:, None]
+        return log_mean_exp(ll, axis=0)
 
-    def loglik(self, d: np.ndarray, alpha: float, b: float, tau: np.ndarray) -> np.ndarray:
-        """(B,) for changes d (B, W) of this mode."""
-        dd = self.mode.diff(d)  # (B, n - 1)
-        lls = []
-        for i, v in enumerate(self.v):
-            A = np.einsum("bj,jb->b", dd, self.mode.solve(i, dd.T))
-            cy = dd @ v
-            S0 = np.maximum(self.syy[i] - 2.0 * cy + A, 0.0)
-            lls.append(_eta_marginal(S0, A, cy - A, alpha, b, tau) - 0.5 * self.mode.logdets[i])
-        return log_mean_exp(np.stack(lls), axis=0)
+    def loglik(self, d: np.ndarray, alpha: np.ndarray, b: float, tau: np.ndarray) -> np.ndarray:
+        """(B, G) for changes d (B, W, K)."""
+        dd = np.diff(d[:, self.mode.idx][:, :, self.modes], axis=1).transpose(1, 0, 2)  # (n - 1, B, G)
+        A, cy = self.mode.forms(dd, self.zr)  # (n_lam, B, G)
+        S0 = np.maximum(self.syy[:, None, :] - 2.0 * cy + A, 0.0)
+        ll = _eta_marginal(S0, A, cy - A, alpha[self.modes], b, tau[:, self.modes])
+        return log_mean_exp(ll - 0.5 * self.mode.logdets[:, None, None], axis=0)
 
 
 class CandidateLikelihood:
