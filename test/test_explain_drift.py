@@ -98,3 +98,27 @@ def test_the_catch_all_does_not_take_a_wander_for_structure():
     assert max(gains) < THRESHOLD < max(plain)
     # a step at the basis's step is structure either way
     assert catch_all_gain(stepped(0, 0.006), basis, timing=drift)[0].sum() > THRESHOLD
+
+
+def test_the_spectral_forms_are_the_banded_solves():
+    """T(lam)^-1 by the sine transform with the longer steps' correction equals the banded Cholesky
+    solve, with a held-out block, a shorter spacing and missing windows."""
+    from scipy.linalg import cho_solve_banded
+
+    from shm_ros.core.explain.drift import ModeDrift
+
+    rng = np.random.default_rng(1)
+    t = np.arange(200) * 600.0
+    t[80:] += 5 * 600.0
+    t[150:] += 0.5 * 600.0
+    ok = np.ones(200, bool)
+    ok[[10, 11, 40]] = False
+    mode = ModeDrift.make(ok, Timing.of(t))
+    m = mode.idx.size - 1
+    x, y = rng.normal(size=(7, m, 3)), rng.normal(size=(m, 3))
+    a, c = mode.forms(x, y)
+    xx = x.transpose(1, 0, 2)
+    for i in range(len(mode.lam)):
+        tx = cho_solve_banded((mode.factors[i], True), xx.reshape(m, -1)).reshape(xx.shape)
+        assert np.allclose(a[i], np.sum(xx * tx, axis=0), rtol=1e-10)
+        assert np.allclose(c[i], np.einsum("mbg,mg->bg", tx, y), rtol=1e-10, atol=1e-12)

@@ -25,9 +25,10 @@ the misfit is independent.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.fft import dst
 from scipy.linalg import cho_solve_banded, cholesky_banded, solve_banded
 
 LAM_GRID = (0.0, 1e-3, 3e-3, 0.01, 0.03, 0.1, 0.3, 1.0)
@@ -64,11 +65,21 @@ class Timing:
 
 @dataclass
 class ModeDrift:
-    """One mode's differences and, per ratio on the grid, the banded Cholesky factor of T and log|T|."""
+    """One mode's differences and, per ratio on the grid, the banded Cholesky factor of T and log|T|.
+
+    The quadratic forms of a batch (:meth:`forms`) use the spectrum of T's regular part: with unit
+    steps T(lam) = D + lam I, D the second-difference matrix (2 on the diagonal, -1 beside it), whose
+    eigenvectors are the discrete sine transform's (eigenvalues ``2 - 2 cos(pi k / (m + 1))``); the
+    longer steps (held-out blocks, missing windows) are a correction of rank p at their rows
+    (Woodbury). One transform serves every ratio on the grid."""
 
     idx: np.ndarray  # windows where the mode was seen
     factors: list[np.ndarray]
     logdets: np.ndarray
+    lam: tuple[float, ...] = LAM_GRID
+    mu: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (m,) eigenvalues of D
+    rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (p, m) sine vectors at the longer steps
+    kinv: list[np.ndarray | None] = field(default_factory=list)  # per ratio (p, p) Woodbury inverse
 
     @classmethod
     def make(cls, ok: np.ndarray, timing: Timing) -> ModeDrift | None:
@@ -76,29 +87,46 @@ class ModeDrift:
         if idx.size < 4:
             return None
         gaps = np.diff(timing.steps[idx])
+        m = gaps.size
         factors, logdets = [], []
         for lam in timing.lam:
-            ab = np.zeros((2, idx.size - 1))
+            ab = np.zeros((2, m))
             ab[0] = 2.0 + lam * gaps
             ab[1, :-1] = -1.0
             c = cholesky_banded(ab, lower=True)
             factors.append(c)
             logdets.append(2.0 * np.sum(np.log(c[0])))
-        return cls(idx, factors, np.array(logdets))
+        k = np.arange(1, m + 1)
+        mu = 2.0 - 2.0 * np.cos(np.pi * k / (m + 1))
+        long = np.flatnonzero(np.abs(gaps - 1.0) > 1e-9)
+        rows = np.sqrt(2.0 / (m + 1)) * np.sin(np.pi * np.outer(long + 1, k) / (m + 1))
+        kinv: list[np.ndarray | None] = []
+        for lam in timing.lam:
+            if lam == 0.0 or long.size == 0:
+                kinv.append(None)
+                continue
+            kmat = np.diag(1.0 / (lam * (gaps[long] - 1.0))) + (rows / (mu + lam)) @ rows.T
+            kinv.append(np.linalg.inv(kmat))
+        return cls(idx, factors, np.array(logdets), tuple(timing.lam), mu, rows, kinv)
 
-    def forms(self, x: np.ndarray, zr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per ratio on the grid, ``|L^-1 x|^2`` and ``(L^-1 x) . zr`` over the differences (T = L L^T),
-        by forward substitution on the bidiagonal factor, every ratio and column at once:
-        ``x`` (n - 1, *cols), ``zr`` (n_lam, n - 1, *cols or broadcastable) -> two (n_lam, *cols)."""
-        ext = (slice(None),) + (None,) * (x.ndim - 1)
-        inv = 1.0 / np.array([f[0] for f in self.factors])  # (n_lam, n - 1)
-        sub = np.array([f[1] for f in self.factors])
-        z = x[0][None] * inv[:, 0][ext]
-        a, c = z * z, z * zr[:, 0]
-        for j in range(1, x.shape[0]):
-            z = (x[j][None] - sub[:, j - 1][ext] * z) * inv[:, j][ext]
-            a += z * z
-            c += z * zr[:, j]
+    def forms(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per ratio on the grid, ``x' T^-1 x`` and ``x' T^-1 y`` over the differences, every ratio and
+        column at once: ``x`` (B, m, G), ``y`` (m, G) -> two (n_lam, B, G)."""
+        xh = dst(np.ascontiguousarray(x.transpose(0, 2, 1)), type=1, norm="ortho", axis=2, overwrite_x=True)
+        yh = dst(y, type=1, norm="ortho", axis=0).T  # (G, m)
+        w = 1.0 / (self.mu[:, None] + np.asarray(self.lam)[None, :])  # (m, n_lam)
+        a = np.moveaxis(np.square(xh) @ w, 2, 0)  # (B, G, m) @ (m, n_lam) -> (n_lam, B, G)
+        c = np.moveaxis((xh * yh[None]) @ w, 2, 0)
+        xh = np.moveaxis(xh, 2, 1)  # (B, m, G) view
+        yh = yh.T
+        for i, kinv in enumerate(self.kinv):
+            if kinv is None:
+                continue
+            rw = self.rows * w[:, i][None]  # (p, m)
+            ax = np.einsum("pm,bmg->pbg", rw, xh, optimize=True)
+            kx = np.tensordot(kinv, ax, axes=(1, 0))
+            a[i] -= np.sum(ax * kx, axis=0)
+            c[i] -= np.einsum("pbg,pg->bg", kx, rw @ yh)
         return a, c
 
     def diff(self, x: np.ndarray) -> np.ndarray:

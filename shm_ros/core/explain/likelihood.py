@@ -121,13 +121,18 @@ class _Part:
             for g in self.drifts:
                 out[0, g.modes] = g.null(alpha, self.b)
             return out
-        dc = self.center(d)
-        e = self.r[None] - dc
-        S0 = np.sum(e ** 2, axis=1)
-        A = np.sum(dc ** 2, axis=1)
-        c = np.sum(dc * e, axis=1)
+        if sum(g.modes.size for g in self.drifts) == self.r.shape[1]:  # every mode drifts: A for the taus only
+            dm = np.where(self.ok, d, 0.0)
+            A = np.einsum("bwk,bwk->bk", dm, dm) - dm.sum(axis=1) ** 2 / np.maximum(self.n, 1)
+            out = np.zeros_like(A)
+        else:
+            dc = self.center(d)
+            e = self.r[None] - dc
+            A = np.sum(dc ** 2, axis=1)
+            out = None
         taus = _spread(tau, A / np.maximum(self.n, 1)) if spread else np.full_like(A, tau)
-        out = _eta_marginal(S0, A, c, alpha, self.b, taus)
+        if out is None:
+            out = _eta_marginal(np.sum(e ** 2, axis=1), A, np.sum(dc * e, axis=1), alpha, self.b, taus)
         for g in self.drifts:
             out[:, g.modes] = g.loglik(d, alpha, self.b, taus)
         return out
@@ -139,12 +144,12 @@ class _Part:
 @dataclass
 class _Drift:
     """Modes seen in the same windows, their misfit as drift plus scatter (:mod:`.drift`): the
-    residuals' whitened differences per ratio on the grid and their sums of squares."""
+    residuals' differences and, per ratio on the grid, their quadratic form."""
 
     modes: np.ndarray  # (G,) mode indices
     mode: ModeDrift
-    zr: np.ndarray  # (n_lam, n - 1, 1, G) L^-1 of the residuals' differences
-    syy: np.ndarray  # (n_lam, G)
+    dr: np.ndarray  # (m, G) differences of the residuals
+    syy: np.ndarray  # (n_lam, G) dr' T^-1 dr
 
     @classmethod
     def groups(cls, r: np.ndarray, ok: np.ndarray, timing: Timing) -> list[_Drift]:
@@ -156,9 +161,9 @@ class _Drift:
             mode = ModeDrift.make(ok[:, ks[0]], timing)
             if mode is None:
                 continue
-            dr = mode.diff(r[:, ks].T).T  # (n - 1, G)
-            zr = np.stack([mode.whiten(i, dr) for i in range(len(timing.lam))])
-            out.append(cls(np.array(ks), mode, zr[:, :, None, :], np.sum(zr ** 2, axis=1)))
+            dr = mode.diff(r[:, ks].T).T  # (m, G)
+            syy = np.stack([np.sum(dr * mode.solve(i, dr), axis=0) for i in range(len(timing.lam))])
+            out.append(cls(np.array(ks), mode, dr, syy))
         return out
 
     def null(self, alpha: np.ndarray, b: float) -> np.ndarray:
@@ -168,8 +173,11 @@ class _Drift:
 
     def loglik(self, d: np.ndarray, alpha: np.ndarray, b: float, tau: np.ndarray) -> np.ndarray:
         """(B, G) for changes d (B, W, K)."""
-        dd = np.diff(d[:, self.mode.idx][:, :, self.modes], axis=1).transpose(1, 0, 2)  # (n - 1, B, G)
-        A, cy = self.mode.forms(dd, self.zr)  # (n_lam, B, G)
+        if self.mode.idx.size < d.shape[1]:
+            d = d[:, self.mode.idx]
+        if self.modes.size < d.shape[2]:
+            d = d[:, :, self.modes]
+        A, cy = self.mode.forms(np.diff(d, axis=1), self.dr)  # (n_lam, B, G)
         S0 = np.maximum(self.syy[:, None, :] - 2.0 * cy + A, 0.0)
         ll = _eta_marginal(S0, A, cy - A, alpha[self.modes], b, tau[:, self.modes])
         return log_mean_exp(ll - 0.5 * self.mode.logdets[:, None, None], axis=0)
