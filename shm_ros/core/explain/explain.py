@@ -60,6 +60,7 @@ from .types import Baseline, CandidateResult, FitScores, Mismatch, Proposal, Ver
 from .whiteness import residual_whiteness
 
 Progress = Callable[[str, float], None]
+DRIFT_NOTE_NATS = 5.0  # a drift in the nominal misfit this strongly supported is said in a note
 SPARSE_WINDOWS = 40  # fewer training windows: sparse records (a few events), every candidate is tried
 # held-out blocks of a campaign of days: a third of a day, so that every n-th block (n = 4) goes round
 # the times of day, and a change the training windows place only within a held-out block (its time is
@@ -345,6 +346,17 @@ def _timing(run: Run, mask: np.ndarray) -> Timing | None:
     return Timing.of(run.times_s[mask], SPARSE_WINDOWS)
 
 
+def _drift_note(run: Run) -> None:
+    """Say which modes' nominal misfit drifts (:mod:`.drift`): a slow driver no covariate explains,
+    taken as noise by every model compared, not as an effect."""
+    strong = {run.base.mode_numbers[k]: v for k, v in run.lik.drift().items() if v[0] > DRIFT_NOTE_NATS}
+    if strong:
+        run.notes.append("the nominal misfit drifts from window to window in modes " + ", ".join(
+            f"{m} (drift over none {bf:.0f} nats, drift-to-scatter ratio {lam:.2g})" for m, (bf, lam) in strong.items())
+            + ": a slow driver no covariate explains (moisture, a structure temperature the sensor misses, a "
+            "drifting gauge), taken as noise by every candidate, not as an effect")
+
+
 def _baseline(run: Run) -> None:
     """Calibrated nominal model, its groups and surrogate, the misfit per window, the likelihood and
     the scores before any effect."""
@@ -367,6 +379,7 @@ def _baseline(run: Run) -> None:
     run.lik = CandidateLikelihood(run.r_all[train], run.J, None if run.rd_all is None else run.rd_all[train],
                                   tau=config.effect_form_error, noise_guess=config.noise_guess,
                                   damping_noise_guess=config.damping_noise_guess, timing=_timing(run, train))
+    _drift_note(run)
     run.fit_before, run.held_before = scores(run.r_all, None, train)
     run.fit_before.damping_rmse_pct, run.held_before.damping_rmse_pct = damping_scores(run.z_all, None, train)
     run.noise = {"frequency_pct": scatter(run.r_all), "damping_points": scatter(run.z_all)}

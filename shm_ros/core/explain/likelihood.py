@@ -168,8 +168,19 @@ class _Drift:
 
     def null(self, alpha: np.ndarray, b: float) -> np.ndarray:
         """(G,) log marginal of the nominal model."""
-        ll = -alpha[self.modes] * np.log(b + 0.5 * self.syy) - 0.5 * self.mode.logdets[:, None]
-        return log_mean_exp(ll, axis=0)
+        return log_mean_exp(self._null_grid(alpha, b), axis=0)
+
+    def _null_grid(self, alpha: np.ndarray, b: float) -> np.ndarray:
+        return -alpha[self.modes] * np.log(b + 0.5 * self.syy) - 0.5 * self.mode.logdets[:, None]
+
+    def evidence(self, alpha: np.ndarray, b: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per mode of the group, the log Bayes factor of a drift (the grid's ratios above 0) over
+        none in the nominal misfit, and the ratio's posterior mean."""
+        ll = self._null_grid(alpha, b)  # (n_lam, G)
+        lam = np.asarray(self.mode.lam)[:, None]
+        post = np.exp(ll - ll.max(axis=0, keepdims=True))
+        post /= post.sum(axis=0, keepdims=True)
+        return log_mean_exp(ll[1:], axis=0) - ll[0], np.sum(post * lam, axis=0)
 
     def loglik(self, d: np.ndarray, alpha: np.ndarray, b: float, tau: np.ndarray) -> np.ndarray:
         """(B, G) for changes d (B, W, K)."""
@@ -215,6 +226,17 @@ class CandidateLikelihood:
         sig = self.freq.sigma()
         self.mean_var = float(np.mean(sig ** 2 / np.maximum(self.freq.n, 1)))
         self._null = float(self._total(None, None)[0])
+
+    def drift(self) -> dict[int, tuple[float, float]]:
+        """Mode index -> (log Bayes factor of a drift over none in the nominal frequency misfit, the
+        drift-to-scatter ratio's posterior mean); empty when the misfit is independent."""
+        part = self.freq
+        alpha = part.a + 0.5 * np.maximum(part.n - 1, 0)
+        out: dict[int, tuple[float, float]] = {}
+        for g in part.drifts:
+            bf, lam = g.evidence(alpha, part.b)
+            out.update({int(k): (float(x), float(y)) for k, x, y in zip(g.modes, bf, lam, strict=True)})
+        return out
 
     def _mean_part(self, dbar: np.ndarray | None) -> np.ndarray:
         y = self.ybar[None] if dbar is None else self.ybar[None] - dbar
