@@ -110,6 +110,21 @@ def quantile_interval(x: np.ndarray, q: float, level: float = 0.9) -> tuple[floa
     return float(xs[max(lo - 1, 0)]), float(xs[min(hi - 1, n - 1)])
 
 
+def combine(calibrations: list[dict[str, Any]]) -> dict[str, Any]:
+    """One threshold from several calibrations (each a JSON as this script writes, or one combined
+    before): the largest of their thresholds, so that the false-alarm rate holds under every null
+    family calibrated; each calibration kept whole under ``calibrations``."""
+    flat: list[dict[str, Any]] = []
+    for c in calibrations:
+        flat += c.get("calibrations", [c])
+    best = max(flat, key=lambda c: c["log_bayes_factor"])
+    return {"log_bayes_factor": best["log_bayes_factor"], "provisional": any(c.get("provisional") for c in flat),
+            "statistic": "the largest of the calibrations' thresholds (each its null family's percentile)",
+            "from": best.get("generator", "test/explain_cases.py clean tables"),
+            "command": " ; ".join(c["command"] for c in flat),
+            "calibrations": flat}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--replicates", type=int, default=80)
@@ -123,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
                     "(seed, kind, n_windows) -> (obs, spec); default: the clean tables of test/explain_cases.py")
     ap.add_argument("--with-locate", action="store_true", help="explain as for a user (locate on): the "
                     "statistic is the largest gain among locate's proposals")
+    ap.add_argument("--combine", nargs="+", default=[], help="threshold JSON files of other calibrations: the "
+                    "threshold written is the largest (every calibration kept in the file)")
     ap.add_argument("--log", default="", help="every replicate's row (JSON lines); rows already there are reused")
     a = ap.parse_args(argv)
     t0 = time.time()
@@ -179,6 +196,8 @@ def main(argv: list[str] | None = None) -> int:
                     "distribution-free (order statistics). Most replicates' largest gain comes from candidates "
                     "that act as a constant factor (absorbed by the calibration), whose gain stays near 0."),
            "wall_s_last_invocation": round(time.time() - t0, 1)}
+    if a.combine:
+        out = combine([json.loads(Path(f).read_text()) for f in a.combine] + [out])
     Path(a.out).write_text(json.dumps(out, indent=2) + "\n")
     print(json.dumps(out, indent=2))
     return 0

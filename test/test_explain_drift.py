@@ -23,7 +23,7 @@ import pytest
 from shm_ros.core.explain.drift import Timing, log_mean_exp
 from shm_ros.core.explain.likelihood import CandidateLikelihood, catch_all_gain
 
-THRESHOLD = 5.24  # shm_ros/core/explain/threshold.json
+THRESHOLD = 5.24  # the threshold the bounds below were derived at (shm_ros/core/explain/threshold.json)
 W, K = 300, 3
 TIMES = np.arange(W) * 3600.0
 
