@@ -310,6 +310,6 @@ def catch_all_gain(r: np.ndarray, basis: np.ndarray, noise_guess: float = 0.003,
             continue
         dy, dX = mode.diff(np.where(ok, r[:, k], 0.0)), mode.diff(basis.T).T
         lls = np.array([_g_prior_loglik(mode.whiten(i, dy), mode.whiten(i, dX), ig_shape + 0.5 * (n - 1), b)[:2]
-                        for i in range(len(timing.lam))]) - 0.5 * mode.logdets[:, None]
+                        for i in range(len(mode.lam))]) - 0.5 * mode.logdets[:, None]
         gains[k] = float(log_mean_exp(lls[:, 1]) - log_mean_exp(lls[:, 0]))
     return gains, fitted
