@@ -116,7 +116,7 @@ def test_the_spectral_forms_are_the_banded_solves():
     mode = ModeDrift.make(ok, Timing.of(t))
     m = mode.idx.size - 1
     x, y = rng.normal(size=(7, m, 3)), rng.normal(size=(m, 3))
-    a, c = mode.forms(x, y)
+    a, c = mode.forms(x, mode.prepare(y))
     xx = x.transpose(1, 0, 2)
     for i in range(len(mode.lam)):
         tx = cho_solve_banded((mode.factors[i], True), xx.reshape(m, -1)).reshape(xx.shape)

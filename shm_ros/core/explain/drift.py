@@ -77,9 +77,10 @@ class ModeDrift:
     factors: list[np.ndarray]
     logdets: np.ndarray
     lam: tuple[float, ...] = LAM_GRID
-    mu: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (m,) eigenvalues of D
-    rows: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (p, m) sine vectors at the longer steps
-    kinv: list[np.ndarray | None] = field(default_factory=list)  # per ratio (p, p) Woodbury inverse
+    w: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # (m, n_lam) 1 / (eigenvalue of D + lam)
+    # (n_lam, p, m) the sine vectors at the longer steps, weighted by w
+    rw: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 0)))
+    kinv: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 0)))  # (n_lam, p, p) Woodbury inverses
 
     @classmethod
     def make(cls, ok: np.ndarray, timing: Timing) -> ModeDrift | None:
@@ -100,33 +101,35 @@ class ModeDrift:
         mu = 2.0 - 2.0 * np.cos(np.pi * k / (m + 1))
         long = np.flatnonzero(np.abs(gaps - 1.0) > 1e-9)
         rows = np.sqrt(2.0 / (m + 1)) * np.sin(np.pi * np.outer(long + 1, k) / (m + 1))
-        kinv: list[np.ndarray | None] = []
-        for lam in timing.lam:
-            if lam == 0.0 or long.size == 0:
-                kinv.append(None)
-                continue
-            kmat = np.diag(1.0 / (lam * (gaps[long] - 1.0))) + (rows / (mu + lam)) @ rows.T
-            kinv.append(np.linalg.inv(kmat))
-        return cls(idx, factors, np.array(logdets), tuple(timing.lam), mu, rows, kinv)
+        lams = np.asarray(timing.lam)
+        w = 1.0 / (mu[:, None] + lams[None, :])  # (m, n_lam)
+        rw = rows[None] * w.T[:, None, :]  # (n_lam, p, m)
+        kinv = np.zeros((lams.size, long.size, long.size))
+        for i, lam in enumerate(lams):
+            if lam > 0.0 and long.size:
+                kinv[i] = np.linalg.inv(np.diag(1.0 / (lam * (gaps[long] - 1.0))) + rw[i] @ rows.T)
+        return cls(idx, factors, np.array(logdets), tuple(timing.lam), w, rw, kinv)
 
-    def forms(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def prepare(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What :meth:`forms` needs of the fixed right-hand side ``y`` (m, G), computed once."""
+        yh = dst(y, type=1, norm="ortho", axis=0)  # (m, G)
+        return yh.T, self.rw @ yh  # (G, m), (n_lam, p, G)
+
+    def forms(self, x: np.ndarray, prepared: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """Per ratio on the grid, ``x' T^-1 x`` and ``x' T^-1 y`` over the differences, every ratio and
-        column at once: ``x`` (B, m, G), ``y`` (m, G) -> two (n_lam, B, G)."""
+        column at once: ``x`` (B, m, G), ``prepared`` :meth:`prepare` of y (m, G) -> two (n_lam, B, G).
+        The sine transform diagonalises the regular walk; the longer steps' rank-p correction (Woodbury)
+        is one matrix product for every ratio (zero at lam = 0)."""
+        yh, ay = prepared
+        B, m, G = x.shape
         xh = dst(np.ascontiguousarray(x.transpose(0, 2, 1)), type=1, norm="ortho", axis=2, overwrite_x=True)
-        yh = dst(y, type=1, norm="ortho", axis=0).T  # (G, m)
-        w = 1.0 / (self.mu[:, None] + np.asarray(self.lam)[None, :])  # (m, n_lam)
-        a = np.moveaxis(np.square(xh) @ w, 2, 0)  # (B, G, m) @ (m, n_lam) -> (n_lam, B, G)
-        c = np.moveaxis((xh * yh[None]) @ w, 2, 0)
-        xh = np.moveaxis(xh, 2, 1)  # (B, m, G) view
-        yh = yh.T
-        for i, kinv in enumerate(self.kinv):
-            if kinv is None:
-                continue
-            rw = self.rows * w[:, i][None]  # (p, m)
-            ax = np.einsum("pm,bmg->pbg", rw, xh, optimize=True)
-            kx = np.tensordot(kinv, ax, axes=(1, 0))
-            a[i] -= np.sum(ax * kx, axis=0)
-            c[i] -= np.einsum("pbg,pg->bg", kx, rw @ yh)
+        a = np.moveaxis(np.square(xh) @ self.w, 2, 0)  # (B, G, m) @ (m, n_lam) -> (n_lam, B, G)
+        c = np.moveaxis((xh * yh[None]) @ self.w, 2, 0)
+        if self.rw.shape[1]:
+            ax = self.rw @ xh.reshape(B * G, m).T  # (n_lam, p, B G)
+            kx = self.kinv @ ax
+            a -= np.sum(ax * kx, axis=1).reshape(a.shape)
+            c -= np.sum(kx.reshape(*kx.shape[:2], B, G) * ay[:, :, None, :], axis=1)
         return a, c
 
     def diff(self, x: np.ndarray) -> np.ndarray:

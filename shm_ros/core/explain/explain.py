@@ -40,7 +40,7 @@ from shm_ros.core.models import build_model
 from shm_ros.core.observations import ModalObservations
 from shm_ros.core.priors import priors_from_specs
 from shm_ros.core.structure import StructureSpec
-from shm_ros.errors import NoWindowsError, NumericalFailure
+from shm_ros.errors import InputError, NoWindowsError, NumericalFailure
 
 from .candidates.base import CANDIDATES, Candidate, Context
 from .config import ExplainConfig, MisfitCorrelation
@@ -137,14 +137,27 @@ def calibrate_baseline(obs: ModalObservations, spec: StructureSpec, train: np.nd
     f_mean = np.nanmean(obs.frequencies_hz[train], axis=0)
     ref = obs.reference_shapes()
 
-    def pairing(theta):
+    def pairing(theta, scale: float = 1.0):
         f, phi = _model_modes(model, theta, n_model, sensors)
-        return _second_chance(gated_pairing(f_mean, ref if phi is not None else None, f, phi, gate,
+        return _second_chance(gated_pairing(f_mean, ref if phi is not None else None, scale * f, phi, gate,
                                             obs.mode_numbers), obs.mode_numbers)
 
     names = [p.name for p in spec.parameters]
     theta0 = model.nominal_theta()
     pr = pairing(theta0)
+    if len(pr.observed) < min(2, int(np.isfinite(f_mean).sum())):
+        # a nominal model further off than the gate everywhere: pair after one common frequency scale
+        # (the lowest observed modes on the lowest model modes), then calibrate from that pairing
+        fo = np.sort(f_mean[np.isfinite(f_mean)])
+        fm = np.sort(_model_modes(model, theta0, n_model, [])[0])[:fo.size]
+        scaled = pairing(theta0, float(np.median(fo[:fm.size] / fm)))
+        if len(scaled.observed) > len(pr.observed):
+            pr = scaled
+    if not len(pr.observed):
+        raise InputError(f"no tracked mode pairs with a mode of the structure's model (observed "
+                         f"{', '.join(f'{x:.3g}' for x in f_mean[np.isfinite(f_mean)])} Hz; the model's lowest "
+                         f"{', '.join(f'{x:.3g}' for x in _model_modes(model, theta0, n_model, [])[0][:4])} Hz): "
+                         "check the structure file's masses, stiffnesses and units")
     if names:
         prior = priors_from_specs(spec.parameters)
         s2 = np.exp(np.linspace(np.log(S_RANGE[0]), np.log(S_RANGE[1]), 41)) ** 2

@@ -150,6 +150,7 @@ class _Drift:
     mode: ModeDrift
     dr: np.ndarray  # (m, G) differences of the residuals
     syy: np.ndarray  # (n_lam, G) dr' T^-1 dr
+    prepared: tuple[np.ndarray, np.ndarray]  # ModeDrift.prepare(dr)
 
     @classmethod
     def groups(cls, r: np.ndarray, ok: np.ndarray, timing: Timing) -> list[_Drift]:
@@ -163,7 +164,7 @@ class _Drift:
                 continue
             dr = mode.diff(r[:, ks].T).T  # (m, G)
             syy = np.stack([np.sum(dr * mode.solve(i, dr), axis=0) for i in range(len(timing.lam))])
-            out.append(cls(np.array(ks), mode, dr, syy))
+            out.append(cls(np.array(ks), mode, dr, syy, mode.prepare(dr)))
         return out
 
     def null(self, alpha: np.ndarray, b: float) -> np.ndarray:
@@ -188,7 +189,7 @@ class _Drift:
             d = d[:, self.mode.idx]
         if self.modes.size < d.shape[2]:
             d = d[:, :, self.modes]
-        A, cy = self.mode.forms(np.diff(d, axis=1), self.dr)  # (n_lam, B, G)
+        A, cy = self.mode.forms(np.diff(d, axis=1), self.prepared)  # (n_lam, B, G)
         S0 = np.maximum(self.syy[:, None, :] - 2.0 * cy + A, 0.0)
         ll = _eta_marginal(S0, A, cy - A, alpha[self.modes], b, tau[:, self.modes])
         return log_mean_exp(ll - 0.5 * self.mode.logdets[:, None, None], axis=0)
