@@ -100,11 +100,12 @@ def test_the_catch_all_does_not_take_a_wander_for_structure():
     assert catch_all_gain(stepped(0, 0.006), basis, timing=drift)[0].sum() > THRESHOLD
 
 
-def test_the_spectral_forms_are_the_banded_solves():
+def test_the_spectral_forms_are_the_banded_solves(monkeypatch):
     """T(lam)^-1 by the sine transform with the longer steps' correction equals the banded Cholesky
     solve, with a held-out block, a shorter spacing and missing windows."""
     from scipy.linalg import cho_solve_banded
 
+    from shm_ros.core.explain import drift
     from shm_ros.core.explain.drift import ModeDrift
 
     rng = np.random.default_rng(1)
@@ -122,32 +123,15 @@ def test_the_spectral_forms_are_the_banded_solves():
         tx = cho_solve_banded((mode.factors[i], True), xx.reshape(m, -1)).reshape(xx.shape)
         assert np.allclose(a[i], np.sum(xx * tx, axis=0), rtol=1e-10)
         assert np.allclose(c[i], np.einsum("mbg,mg->bg", tx, y), rtol=1e-10, atol=1e-12)
-
-
-def test_explain_takes_a_wander_for_noise_and_says_so(tmp_path):
-    """Wiring: the building's own truth (no effect) with a common random-walk wander of 1 % peak to peak
-    in the frequencies: with the drift model explain names nothing and says the misfit drifts; with
-    ``misfit_correlation: independent`` the wander is named (what the drift model prevents)."""
-    from dataclasses import replace
-
-    from explain_fit_synth import building_table
-
-    from shm_ros.core.explain.config import ExplainConfig
-    from shm_ros.core.explain.explain import explain
-    from shm_ros.io.structure import load_structure
-    from shm_ros.io.tables import read_tracked_modes
-
-    structure, table = building_table(tmp_path, seed=3)
-    obs = read_tracked_modes(table)
-    rng = np.random.default_rng(7)
-    walk = np.cumsum(rng.normal(size=obs.frequencies_hz.shape[0]))
-    walk = 0.01 * (walk - walk.mean()) / np.ptp(walk)
-    obs = replace(obs, frequencies_hz=obs.frequencies_hz * (1.0 + walk)[:, None])
-    spec = load_structure(structure)
-    fast = dict(nested_check=False, prior_sensitivity=False, n_importance=1500)
-    v = explain(obs, spec, ExplainConfig(**fast))
-    named = [c.name for c in v.missing_physics if c.name != "unmodelled_modes"]
-    assert not named, named
-    assert any("drifts from window to window" in n for n in v.notes), v.notes
-    plain = explain(obs, spec, ExplainConfig(misfit_correlation="independent", **fast))
-    assert [c.name for c in plain.missing_physics if c.name != "unmodelled_modes"], "without drift the wander is named"
+    # a mode seen in every other window of a stretch: many longer steps, where forms takes banded
+    # solves; the spectral path (forced) gives the same
+    ok[100:180:2] = False
+    many = ModeDrift.make(ok, Timing.of(t))
+    assert many.rw.shape[1] > 32
+    m = many.idx.size - 1
+    x, y = rng.normal(size=(5, m, 2)), rng.normal(size=(m, 2))
+    banded = many.forms(x, many.prepare(y))
+    monkeypatch.setattr(drift, "MAX_LONG_STEPS", 10 ** 6)
+    spectral = many.forms(x, many.prepare(y))
+    for u, v in zip(banded, spectral, strict=True):
+        assert np.allclose(u, v, rtol=1e-9, atol=1e-12)

@@ -33,6 +33,7 @@ from scipy.linalg import cho_solve_banded, cholesky_banded, solve_banded
 
 LAM_GRID = (0.0, 1e-3, 3e-3, 0.01, 0.03, 0.1, 0.3, 1.0)
 MIN_WINDOWS = 40  # fewer windows: independent misfit (as explain.SPARSE_WINDOWS)
+MAX_LONG_STEPS = 32  # more longer steps (and more than a tenth of the steps): banded solves instead
 
 
 def log_mean_exp(a: np.ndarray, axis: int = 0) -> np.ndarray:
@@ -110,18 +111,25 @@ class ModeDrift:
                 kinv[i] = np.linalg.inv(np.diag(1.0 / (lam * (gaps[long] - 1.0))) + rw[i] @ rows.T)
         return cls(idx, factors, np.array(logdets), tuple(timing.lam), w, rw, kinv)
 
-    def prepare(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def prepare(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What :meth:`forms` needs of the fixed right-hand side ``y`` (m, G), computed once."""
         yh = dst(y, type=1, norm="ortho", axis=0)  # (m, G)
-        return yh.T, self.rw @ yh  # (G, m), (n_lam, p, G)
+        return yh.T, self.rw @ yh, y  # (G, m), (n_lam, p, G), (m, G)
 
-    def forms(self, x: np.ndarray, prepared: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    def forms(self, x: np.ndarray, prepared: tuple[np.ndarray, np.ndarray, np.ndarray]
+              ) -> tuple[np.ndarray, np.ndarray]:
         """Per ratio on the grid, ``x' T^-1 x`` and ``x' T^-1 y`` over the differences, every ratio and
         column at once: ``x`` (B, m, G), ``prepared`` :meth:`prepare` of y (m, G) -> two (n_lam, B, G).
         The sine transform diagonalises the regular walk; the longer steps' rank-p correction (Woodbury)
         is one matrix product for every ratio (zero at lam = 0)."""
-        yh, ay = prepared
+        yh, ay, y = prepared
         B, m, G = x.shape
+        if self.rw.shape[1] > max(MAX_LONG_STEPS, m // 10):  # many longer steps: banded solves per ratio
+            xt = np.ascontiguousarray(x.transpose(1, 0, 2)).reshape(m, B * G)
+            tx = [self.solve(i, xt).reshape(m, B, G) for i in range(len(self.lam))]
+            xx = xt.reshape(m, B, G)
+            return (np.stack([np.sum(xx * t, axis=0) for t in tx]),
+                    np.stack([np.einsum("mbg,mg->bg", t, y) for t in tx]))
         xh = dst(np.ascontiguousarray(x.transpose(0, 2, 1)), type=1, norm="ortho", axis=2, overwrite_x=True)
         a = np.moveaxis(np.square(xh) @ self.w, 2, 0)  # (B, G, m) @ (m, n_lam) -> (n_lam, B, G)
         c = np.moveaxis((xh * yh[None]) @ self.w, 2, 0)

@@ -150,7 +150,7 @@ class _Drift:
     mode: ModeDrift
     dr: np.ndarray  # (m, G) differences of the residuals
     syy: np.ndarray  # (n_lam, G) dr' T^-1 dr
-    prepared: tuple[np.ndarray, np.ndarray]  # ModeDrift.prepare(dr)
+    prepared: tuple[np.ndarray, np.ndarray, np.ndarray]  # ModeDrift.prepare(dr)
 
     @classmethod
     def groups(cls, r: np.ndarray, ok: np.ndarray, timing: Timing) -> list[_Drift]:
