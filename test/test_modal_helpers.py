@@ -119,6 +119,16 @@ def test_json_round_trip_of_numpy_values(tmp_path):
     assert isinstance(back["i"], int) and not math.isnan(back["f"])
 
 
+def test_json_arrays_keep_strict_nulls_and_types_on_the_fast_path():
+    doc = {"f": np.array([[1.0, np.nan], [-np.inf, 2.5]]), "f32": np.array([0.5], dtype=np.float32),
+           "u": np.array([3], dtype=np.uint8), "b": np.array([True, False]), "empty": np.zeros((0, 2))}
+    back = jsonio.loads(jsonio.dumps(doc, indent=None))
+    assert back == {"f": [[1.0, None], [None, 2.5]], "f32": [0.5], "u": [3], "b": [True, False], "empty": []}
+    assert isinstance(back["u"][0], int) and isinstance(back["b"][0], bool)
+    with pytest.raises(TypeError, match="complex"):
+        jsonio.dumps({"c": np.array([1j])})
+
+
 def test_json_refuses_unknown_objects():
     with pytest.raises(TypeError, match="object"):
         jsonio.dumps({"x": object()})

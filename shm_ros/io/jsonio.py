@@ -38,6 +38,11 @@ def to_jsonable(x: Any) -> Any:
     if isinstance(x, (list, tuple)):
         return [to_jsonable(v) for v in x]
     if isinstance(x, np.ndarray):
+        if x.dtype.kind in "iu":
+            return x.tolist()
+        if x.dtype.kind == "f":  # a trace of a million samples: no Python call per number
+            finite = np.isfinite(x)
+            return x.tolist() if finite.all() else np.where(finite, x, None).tolist()
         return to_jsonable(x.tolist())
     if isinstance(x, PurePath):
         return str(x)

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -19,8 +20,27 @@ def series_of(pred: Any) -> dict[str, Any]:
                                   "values": c.values} for c in pred.channels}}
 
 
+def series_text(pred: Any) -> str:
+    """One event's traces as compact JSON text (tens of MB for a long record at a high rate: encoded
+    once, where the prediction is made, and joined by :func:`write_series`)."""
+    return jsonio.dumps(series_of(pred), indent=None)
+
+
+def write_series(out: str | Path, texts: Iterable[str]) -> Path:
+    """prediction_series.json of events already encoded by :func:`series_text`, atomically."""
+    from shm_ros.io.atomic import atomic_path
+
+    path = Path(out) / SERIES
+    with atomic_path(path) as tmp, tmp.open("w", encoding="utf-8") as fh:
+        fh.write('{"events": [')
+        for i, text in enumerate(texts):
+            fh.write(("," if i else "") + text)
+        fh.write("]}\n")
+    return path
+
+
 def write_prediction_series(out: str | Path, preds: list[Any]) -> Path:
-    return jsonio.dump({"events": [series_of(p) for p in preds]}, Path(out) / SERIES)
+    return write_series(out, (series_text(p) for p in preds))
 
 
 def read_prediction(path: str | Path) -> tuple[dict[str, Any], dict[str, Any]]:

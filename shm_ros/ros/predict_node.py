@@ -39,7 +39,8 @@ from shm_ros.ros.timers import steady_timer
 from shm_ros.ros.worker_pool import WorkerPool
 
 REQUEST = topics.PREDICT_REQUEST
-MAX_FILED = 100  # predictions kept for output_dir's files (the newest)
+MAX_FILED = 100  # predictions kept for output_dir's prediction.json (the newest)
+MAX_SERIES = 20  # and for its prediction_series.json (the traces: tens of MB an event)
 
 
 @dataclass
@@ -60,7 +61,8 @@ class PredictNodeConfig:
                                                    "or, without a wait, not used; unset: the calibration's "
                                                    "in-sample error")
     output_dir: str | None = option(None, "directory of prediction.json and prediction_series.json (as `shm-ros "
-                                    "predict` writes them), rewritten after every prediction (unset: not written)")
+                                    "predict` writes them; the series file with the newest 20 events' traces), rewritten after every "
+                                    "prediction (unset: not written)")
 
 
 def prediction_to_msg(pred: Any) -> Any:
@@ -157,7 +159,7 @@ class PredictNode(ManagedNode):
         if self.future is not None and self.future.done():
             future, self.future = self.future, None
             try:
-                pred, row = future.result()
+                pred, row, series = future.result()
             except BrokenProcessPool as exc:
                 self.diag.report("error", f"prediction failed: worker process lost ({exc})", "prediction")
                 if self.workers is not None:
@@ -169,7 +171,7 @@ class PredictNode(ManagedNode):
                 fault_point(self.get_name(), "published", delivered(self.pub))  # a test hook: killed after a prediction
                 self.done += 1
                 if self.settings.output_dir:
-                    self.results.append((pred, row, self.future_model))
+                    self.results.append((pred, row, self.future_model, series))
                     self._write_files()
                 self.diag.report("ok", f"{pred.window_id}: NRMS floor 4 {row.get('accel_floor4')}, "
                                  f"floor 8 {row.get('accel_floor8')}", "prediction")
@@ -189,18 +191,18 @@ class PredictNode(ManagedNode):
         from shm_ros.core.predict import event_json, summary_json
         from shm_ros.core.provenance import stamp_output
         from shm_ros.io import jsonio
-        from shm_ros.io.prediction_files import write_prediction_series
+        from shm_ros.io.prediction_files import write_series
 
-        preds = [p for p, _, _ in self.results]
-        models = sorted({m for _, _, m in self.results})
+        preds = [p for p, _, _, _ in self.results]
+        models = sorted({m for _, _, m, _ in self.results})
         payload = {"model": models[0] if len(models) == 1 else "mixed",
-                   "events": [event_json(p) for p in preds], "table3": [r for _, r, _ in self.results],
+                   "events": [event_json(p) for p in preds], "table3": [r for _, r, _, _ in self.results],
                    "summary": summary_json(preds), "errors": []}
         cfg = asdict(self.config) | {"structure": self.structure, "posterior": self.settings.posterior}
         try:
             jsonio.dump(stamp_output(payload, cfg, self.config.seed), Path(self.settings.output_dir or ".")
                         / "prediction.json", indent=2)
-            write_prediction_series(self.settings.output_dir or ".", preds)
+            write_series(self.settings.output_dir or ".", [t for _, _, _, t in self.results][-MAX_SERIES:])
         except OSError as exc:  # a full disk must not take the node down
             self.diag.report("error", f"cannot write {self.settings.output_dir}: {exc}", "output")
 

@@ -61,9 +61,11 @@ def _model_error(posterior: Any, config: PredictConfig) -> Any:
 
 
 def run(window: Any, config: PredictConfig, posterior_path: str | None) -> Any:
-    """The prediction of one window (as ``shm-ros predict`` computes it) and its Table-3 row."""
+    """The prediction of one window (as ``shm-ros predict`` computes it), its Table-3 row and its
+    traces as JSON text (encoded here, not in the node: tens of MB of numbers)."""
     from shm_ros.commands.predict import predict_windows
     from shm_ros.core.predict import table3_row
+    from shm_ros.io.prediction_files import series_text
 
     model = _state["model"]
     posterior = _posterior(posterior_path)
@@ -71,4 +73,4 @@ def run(window: Any, config: PredictConfig, posterior_path: str | None) -> Any:
                                     model_error=_model_error(posterior, config))
     if errors:
         raise ValueError(errors[0])
-    return preds[0], table3_row(model, preds[0])
+    return preds[0], table3_row(model, preds[0]), series_text(preds[0])
