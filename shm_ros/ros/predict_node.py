@@ -61,8 +61,8 @@ class PredictNodeConfig:
                                                    "or, without a wait, not used; unset: the calibration's "
                                                    "in-sample error")
     output_dir: str | None = option(None, "directory of prediction.json and prediction_series.json (as `shm-ros "
-                                    "predict` writes them; the series file with the newest 20 events' traces), rewritten after every "
-                                    "prediction (unset: not written)")
+                                    "predict` writes them; the series file with the newest 20 events' traces), "
+                                    "rewritten after every prediction (unset: not written)")
 
 
 def prediction_to_msg(pred: Any) -> Any:
