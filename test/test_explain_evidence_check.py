@@ -30,3 +30,20 @@ def test_a_sharp_peak_between_the_grid_points_is_integrated():
     told, err = quadrature_check(_gain, box, PEAK[None])
     assert blind < exact - 50  # the grid alone sees the bump only
     assert abs(told - exact) < max(0.05, 3 * err), (told, exact, err)
+
+
+def test_a_change_time_on_a_plateau_takes_its_middle():
+    """A change time anywhere in a gap between training windows fits alike (the gain is flat there):
+    the MAP is the gap's middle, not wherever the optimiser stopped, for any seed."""
+    from shm_ros.core.explain.fit import find_map
+
+    def gain(theta: np.ndarray) -> np.ndarray:
+        size, t0 = theta[:, 0], theta[:, 1]
+        in_gap = (t0 >= 40.0) & (t0 < 70.0)  # no training window between 40 s and 70 s
+        return np.where(in_gap, 20.0 - 50.0 * (size - 0.3) ** 2, -5.0)
+
+    box = Box([ParamSpec("size", 0.0, 1.0), ParamSpec("t0_s", 0.0, 100.0, grid=True)])
+    for seed in range(5):
+        u, g, _ = find_map(gain, box, np.random.default_rng(seed))
+        theta = box.to_theta(u)[0]
+        assert abs(theta[1] - 55.0) < 0.5 and abs(theta[0] - 0.3) < 0.01 and g > 19.99, (seed, theta, g)

@@ -149,7 +149,25 @@ def find_map(fn: GainFn, box: Box, rng: np.random.Generator, n_draws: int = 512,
         n += N_GRID
         if gs.max() > top_g:
             top_u, top_g = scan[np.argmax(gs)].copy(), float(gs.max())
+        top_u[i] = plateau_middle(scan[:, i], gs, top_u[i], top_g)
     return top_u, top_g, n
+
+
+def plateau_middle(u: np.ndarray, g: np.ndarray, at: float, top: float, tol: float = 1e-6) -> float:
+    """The middle of the run of grid cells ``u`` (ascending) around ``at`` whose gain ``g`` equals
+    ``top`` (within ``tol`` nats), or ``at`` off such a run. A change time anywhere between two
+    training windows (a held-out block between them) or a knee between two measured temperatures fits
+    the training data alike: the optimiser's point on that plateau is arbitrary, its middle is not."""
+    j = int(np.argmin(np.abs(u - at)))
+    flat = np.abs(g - top) <= tol
+    if not flat[j]:
+        return float(at)
+    lo, hi = j, j
+    while lo > 0 and flat[lo - 1]:
+        lo -= 1
+    while hi < len(u) - 1 and flat[hi + 1]:
+        hi += 1
+    return float(0.5 * (u[lo] + u[hi])) if hi > lo else float(at)
 
 
 class _Proposal:
