@@ -499,7 +499,7 @@ def _final_estimates(run: Run) -> None:
     lik_all = CandidateLikelihood(run.r_all, run.J, run.rd_all, tau=config.effect_form_error,
                                   noise_guess=config.noise_guess, damping_noise_guess=config.damping_noise_guess,
                                   timing=_timing(run, np.ones(len(run.times_s), bool)))
-    twins = [(c, run.jobs[c.label][0].cand) for c in run.accepted
+    twins = [(c, run.jobs[c.label][0].cand, run.jobs[c.label][1].theta_map) for c in run.accepted
              if all(c is not x for x in run.chain) and c.label in run.jobs]
     final = list(run.fixed)
     final_estimates(run.chain, final, twins, run.sur, lik_all, run.epoch, config)

@@ -9,7 +9,7 @@ import numpy as np
 
 from .candidates.base import Candidate, Modification, ParamSpec
 from .config import ExplainConfig
-from .fit import FitResult, fit
+from .fit import Box, FitResult, fit
 from .form_check import form_gain
 from .likelihood import CandidateLikelihood
 from .scoring import damping_scores, judged_windows, scores
@@ -221,14 +221,19 @@ def _form_on_damping(res: CandidateResult, job: Job, theta: np.ndarray, z_all: n
 
 
 def fit_on_top(cand: Candidate, fixed: list[tuple[Candidate, np.ndarray]], sur, lik, train, seed: int,
-               config: ExplainConfig):
+               config: ExplainConfig, start: dict[str, float] | None = None):
     """``cand`` fitted on top of the ``fixed`` effects (held at their values): a first fit, the cross
-    term anchored at its MAP, then the final fit (one fit when nothing is fixed). Returns the job and
-    the final fit."""
+    term anchored at its MAP, then the final fit (one fit when nothing is fixed). ``start`` (values by
+    parameter name, e.g. an earlier fit's MAP) is one more starting point of the MAP search. Returns
+    the job and the final fit."""
     job = OnTopJob(OnTop(cand, fixed), sur, lik, train)
-    fr = fit(job.gain, job.specs, seed=seed, n_is=config.n_importance, sensitivity=False)
+    hint = None
+    if start is not None and all(s.name in start for s in job.specs):
+        hint = np.clip(Box(job.specs).to_unit(np.array([[start[s.name] for s in job.specs]]))[0], 0.0, 1.0)
+    fr = fit(job.gain, job.specs, seed=seed, n_is=config.n_importance, sensitivity=False, hint_u=hint)
     if fixed:
         job.anchor(fr.theta_map)
-        fr = fit(job.gain, job.specs, seed=seed, n_is=config.n_importance, sensitivity=False)
+        fr = fit(job.gain, job.specs, seed=seed, n_is=config.n_importance, sensitivity=False,
+                 hint_u=Box(job.specs).to_unit(np.atleast_2d(fr.theta_map))[0])
     return job, fr
 

@@ -15,7 +15,7 @@ from .candidates.base import Candidate
 from .config import ExplainConfig
 from .failures import failed_result, numerical
 from .fit import Box, FitResult, evidence_check
-from .jobs import Job, fit_on_top, iso_time, result
+from .jobs import Job, OnTop, OnTopJob, fit_on_top, iso_time, result
 from .likelihood import CandidateLikelihood
 from .shapes import shape_terms_of
 from .surrogate import Surrogate
@@ -184,9 +184,31 @@ def time_unhinted(cand: Candidate) -> Candidate:
     return type(cand)(cand.group, dataclasses.replace(cand.context, hints=hints))
 
 
+def placed_in_span(cand: Candidate, theta: np.ndarray | None, others: list[tuple[Candidate, np.ndarray]], sur,
+                   lik_all: CandidateLikelihood) -> Candidate:
+    """``cand`` starting at the window of locate's ``change_span`` that fits every window best at
+    ``theta``, for a candidate that starts at the hinted window without a time parameter (a mass, a
+    damper's loss, a support's step). A change inside a held-out block is placed by the training
+    windows only to that block, and locate hints its first window: on every window a start some
+    windows early is misfit there, which a drifting misfit (scored by its jumps) charges like the
+    whole change. Others are returned as they are."""
+    h = cand.context.hints
+    if theta is None or "change_index" not in h or "change_span" not in h or any(s.moment for s in cand.params()):
+        return cand
+    a, b = (int(x) for x in h["change_span"])
+    every = np.ones(len(lik_all.freq.r), dtype=bool)
+    best, best_gain = cand, -math.inf
+    for i in range(max(a, 1), min(b, len(every) - 1) + 1):
+        moved = type(cand)(cand.group, dataclasses.replace(cand.context, hints={**h, "change_index": i}))
+        gain = float(OnTopJob(OnTop(moved, others), sur, lik_all, every).gain(np.atleast_2d(theta))[0])
+        if gain > best_gain:
+            best, best_gain = moved, gain
+    return best
+
+
 def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, np.ndarray]],
-                    twins: list[tuple[CandidateResult, Candidate]], sur, lik_all: CandidateLikelihood,
-                    epoch: float, config: ExplainConfig) -> None:
+                    twins: list[tuple[CandidateResult, Candidate, np.ndarray | None]], sur,
+                    lik_all: CandidateLikelihood, epoch: float, config: ExplainConfig) -> None:
     """The reported parameters (MAP and 95 % intervals) of the accepted effects, refitted on every
     window, training and held-out: the held-out windows have done their part (the acceptance) and
     hold information the parameters need (a change inside a held-out block is placed only by its
@@ -194,8 +216,10 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
     their latest values, so that the first, fitted alone, gives back what it took of the second's
     misfit (a step fitted before a knee takes some of the cold spell). A change time is searched over
     the whole campaign (:func:`time_unhinted`). Effects tied with the first are refitted on top of
-    the later ones. The evidences, the acceptance and the fit scores stay those of the training
-    windows."""
+    the later ones; an effect that starts at locate's hinted window without a time parameter starts
+    at the window of the hinted span that fits best (:func:`placed_in_span`), and each search also
+    starts from the training fit's MAP. The evidences, the acceptance and the fit scores stay those
+    of the training windows."""
     every = np.ones(len(lik_all.freq.r), dtype=bool)
 
     def report(res: CandidateResult, cand: Candidate, fr: FitResult) -> None:
@@ -206,15 +230,24 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
             res.extra["change_window"] = int(np.searchsorted(cand.context.times_s, t0))
         res.extra["estimated_on"] = "all windows"
 
+    def named(cand: Candidate, theta: np.ndarray | None) -> dict[str, float] | None:
+        # the training fit's MAP: one more start of the search on every window (with a drifting
+        # misfit, a search from random draws alone can stop on a small effect the drift absorbs)
+        if theta is None:
+            return None
+        return {s.name: float(v) for s, v in zip(cand.params(), np.ravel(theta), strict=False)}
+
     for k, res in enumerate(chain):
-        cand = time_unhinted(fixed[k][0])
+        start = named(*fixed[k])
         others = [f for j, f in enumerate(fixed) if j != k]
-        _, fr = fit_on_top(cand, others, sur, lik_all, every, config.seed + 300 + k, config)
+        cand = placed_in_span(time_unhinted(fixed[k][0]), fixed[k][1], others, sur, lik_all)
+        _, fr = fit_on_top(cand, others, sur, lik_all, every, config.seed + 300 + k, config, start)
         fixed[k] = (cand, fr.theta_map)
         report(res, cand, fr)
-    for k, (res, cand) in enumerate(twins):
-        cand = time_unhinted(cand)
-        _, fr = fit_on_top(cand, fixed[1:], sur, lik_all, every, config.seed + 400 + k, config)
+    for k, (res, cand, theta) in enumerate(twins):
+        start = named(cand, theta)
+        cand = placed_in_span(time_unhinted(cand), theta, fixed[1:], sur, lik_all)
+        _, fr = fit_on_top(cand, fixed[1:], sur, lik_all, every, config.seed + 400 + k, config, start)
         report(res, cand, fr)
 
 
