@@ -42,7 +42,11 @@ def to_jsonable(x: Any) -> Any:
             return x.tolist()
         if x.dtype.kind == "f":  # a trace of a million samples: no Python call per number
             finite = np.isfinite(x)
-            return x.tolist() if finite.all() else np.where(finite, x, None).tolist()
+            if finite.all():
+                return x.tolist()
+            out = x.astype(object)
+            out[~finite] = None
+            return out.tolist()
         return to_jsonable(x.tolist())
     if isinstance(x, PurePath):
         return str(x)

@@ -207,7 +207,7 @@ def placed_in_span(cand: Candidate, theta: np.ndarray | None, others: list[tuple
 
 
 def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, np.ndarray]],
-                    twins: list[tuple[CandidateResult, Candidate, np.ndarray | None]], sur,
+                    twins: list[tuple[CandidateResult, Candidate, np.ndarray]], sur,
                     lik_all: CandidateLikelihood, epoch: float, config: ExplainConfig) -> None:
     """The reported parameters (MAP and 95 % intervals) of the accepted effects, refitted on every
     window, training and held-out: the held-out windows have done their part (the acceptance) and
