@@ -5,7 +5,10 @@ Everything works in the unit cube of the candidate's bounded priors (uniform, or
 ``ln E_prior[exp(gain(theta))]`` with ``gain`` from :class:`.likelihood.CandidateLikelihood`.
 
 * MAP: a batch of random prior draws plus a scan of each grid parameter (knee, change time) on a
-  fine grid with the others at the best draw, then Nelder-Mead (bounded) from the best few.
+  fine grid with the others at the best draw and at ``PROFILE`` settings spread over their prior
+  (a Latin hypercube), then Nelder-Mead (bounded) from the best few. With a misfit that drifts a
+  change time's peak is one window wide and high only near the right size: random draws rarely hit
+  both, and a scan at a wrong size sees nothing.
 * Evidence, primary: **importance sampling** with a defensive mixture proposal (15 % the prior,
   85 % a product of a multivariate Student-t for the smooth parameters and a piecewise-constant
   density on a fine grid for the grid parameters), adapted in two stages (the second stage's
@@ -33,6 +36,7 @@ GainFn = Callable[[np.ndarray], np.ndarray]  # theta (B, p) -> gain (B,)
 DEFENSIVE = 0.15
 N_GRID = 512
 BATCH = 64
+PROFILE = 8  # settings of the other parameters at which each grid parameter is scanned
 
 
 @dataclass
@@ -125,11 +129,10 @@ def find_map(fn: GainFn, box: Box, rng: np.random.Generator, n_draws: int = 512,
     best = u0[np.argmax(g0)].copy()
     grid_ix = [i for i, s in enumerate(box.specs) if s.grid]
     starts = [best]
-    for i in grid_ix:  # scan the grid parameter with the others at the best draw
-        scan = np.repeat(best[None], N_GRID, axis=0)
-        scan[:, i] = (np.arange(N_GRID) + 0.5) / N_GRID
+    for i in grid_ix:  # scan the grid parameter with the others at the best draw and spread over their prior
+        scan = _profile_scan(box, best, i, rng)
         gs = _evaluate(fn, box, scan)
-        n += N_GRID
+        n += len(scan)
         if gs.max() > g0.max():
             best = scan[np.argmax(gs)].copy()
         starts.append(scan[np.argmax(gs)].copy())
@@ -151,6 +154,19 @@ def find_map(fn: GainFn, box: Box, rng: np.random.Generator, n_draws: int = 512,
             top_u, top_g = scan[np.argmax(gs)].copy(), float(gs.max())
         top_u[i] = plateau_middle(scan[:, i], gs, top_u[i], top_g)
     return top_u, top_g, n
+
+
+def _profile_scan(box: Box, at: np.ndarray, i: int, rng: np.random.Generator) -> np.ndarray:
+    """Points (N_GRID (1 + PROFILE), p): grid parameter ``i`` on its fine grid, the smooth parameters
+    at ``at`` and at ``PROFILE`` Latin-hypercube settings of their prior (other grid parameters stay
+    at ``at``)."""
+    settings = np.repeat(at[None], 1 + PROFILE, axis=0)
+    for j, s in enumerate(box.specs):
+        if not s.grid:
+            settings[1:, j] = (rng.permutation(PROFILE) + rng.random(PROFILE)) / PROFILE
+    scan = np.repeat(settings, N_GRID, axis=0)
+    scan[:, i] = np.tile((np.arange(N_GRID) + 0.5) / N_GRID, 1 + PROFILE)
+    return scan
 
 
 def plateau_middle(u: np.ndarray, g: np.ndarray, at: float, top: float, tol: float = 1e-6) -> float:

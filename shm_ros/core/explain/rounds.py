@@ -33,7 +33,10 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
     ``threshold``, it improves the held-out windows further and its key parameter excludes the null;
     repeated up to ``MAX_EFFECTS`` effects, with the ``POOL`` candidates most supported alone. Every
     refit joins ``tried`` (the report's table of candidates), accepted or not. Candidates tied with an
-    accepted one, or of the same name and group, are not tried again."""
+    accepted one, or of the same name and group, are not tried again. A refit searches its change time
+    over the whole campaign (:func:`time_unhinted`): locate's hint was read off the misfit with the
+    accepted effect unmodelled (a freezing knee moved a later loss's hint fifteen windows late and its
+    narrowed prior left the loss out)."""
     best = accepted[0]
     fixed = [(jobs[best.label][0].cand, jobs[best.label][1].theta_map)]
     base_gain = float(jobs[best.label][1].gain_map)
@@ -55,7 +58,8 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
             say(f"fit {c.label} on top of {len(fixed)} effect(s)", 0.9)
             try:
                 with numerical(f"{c.label} on top of {len(fixed)} effect(s)"):
-                    job, fr = fit_on_top(job0.cand, fixed, sur, lik, train, config.seed + 100 + i, config)
+                    job, fr = fit_on_top(time_unhinted(job0.cand), fixed, sur, lik, train,
+                                         config.seed + 100 + i, config)
                     res = result(job, fr, r_all, train, epoch, z_all)
             except NumericalFailure as exc:  # named numerical failures only: this refit failed
                 tried.append(failed_result(c.name, c.label, c.where, exc, c.explanation))
