@@ -33,10 +33,7 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
     ``threshold``, it improves the held-out windows further and its key parameter excludes the null;
     repeated up to ``MAX_EFFECTS`` effects, with the ``POOL`` candidates most supported alone. Every
     refit joins ``tried`` (the report's table of candidates), accepted or not. Candidates tied with an
-    accepted one, or of the same name and group, are not tried again. A refit searches its change time
-    over the whole campaign (:func:`time_unhinted`): locate's hint was read off the misfit with the
-    accepted effect unmodelled (a freezing knee moved a later loss's hint fifteen windows late and its
-    narrowed prior left the loss out)."""
+    accepted one, or of the same name and group, are not tried again."""
     best = accepted[0]
     fixed = [(jobs[best.label][0].cand, jobs[best.label][1].theta_map)]
     base_gain = float(jobs[best.label][1].gain_map)
@@ -58,8 +55,7 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
             say(f"fit {c.label} on top of {len(fixed)} effect(s)", 0.9)
             try:
                 with numerical(f"{c.label} on top of {len(fixed)} effect(s)"):
-                    job, fr = fit_on_top(time_unhinted(job0.cand), fixed, sur, lik, train,
-                                         config.seed + 100 + i, config)
+                    job, fr = fit_on_top(job0.cand, fixed, sur, lik, train, config.seed + 100 + i, config)
                     res = result(job, fr, r_all, train, epoch, z_all)
             except NumericalFailure as exc:  # named numerical failures only: this refit failed
                 tried.append(failed_result(c.name, c.label, c.where, exc, c.explanation))
@@ -175,19 +171,6 @@ def _set_aside_same_course(results: list, fixed: list[tuple[Candidate, np.ndarra
     return kept
 
 
-def time_unhinted(cand: Candidate) -> Candidate:
-    """``cand`` with its change time searched over the whole campaign instead of around locate's
-    hinted window. The hint comes from a change-point search with the other effects only roughly
-    accounted for (a cold spell just after a loss moved it 17-28 windows late on simulated girders);
-    with them fitted and every window in the likelihood, the time's profile peaks by hundreds of nats
-    at the change. Candidates whose change window is not a parameter (it only places their on/off
-    pattern) are returned as they are."""
-    if "change_index" not in cand.context.hints or not any(s.moment for s in cand.params()):
-        return cand
-    hints = {k: v for k, v in cand.context.hints.items() if k != "change_index"}
-    return type(cand)(cand.group, dataclasses.replace(cand.context, hints=hints))
-
-
 def placed_in_span(cand: Candidate, theta: np.ndarray | None, others: list[tuple[Candidate, np.ndarray]], sur,
                    lik_all: CandidateLikelihood) -> Candidate:
     """``cand`` starting at the window of locate's ``change_span`` that fits every window best at
@@ -218,11 +201,10 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
     hold information the parameters need (a change inside a held-out block is placed only by its
     windows). With several effects, one pass of backfitting: each refitted on top of the others at
     their latest values, so that the first, fitted alone, gives back what it took of the second's
-    misfit (a step fitted before a knee takes some of the cold spell). A change time is searched over
-    the whole campaign (:func:`time_unhinted`). Effects tied with the first are refitted on top of
-    the later ones; an effect that starts at locate's hinted window without a time parameter starts
-    at the window of the hinted span that fits best (:func:`placed_in_span`), and each search also
-    starts from the training fit's MAP. The evidences, the acceptance and the fit scores stay those
+    misfit (a step fitted before a knee takes some of the cold spell). Effects tied with the first
+    are refitted on top of the later ones; an effect that starts at locate's hinted window without a
+    time parameter starts at the window of the hinted span that fits best (:func:`placed_in_span`),
+    and each search also starts from the training fit's MAP. The evidences, the acceptance and the fit scores stay those
     of the training windows."""
     every = np.ones(len(lik_all.freq.r), dtype=bool)
 
@@ -244,13 +226,13 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
     for k, res in enumerate(chain):
         start = named(*fixed[k])
         others = [f for j, f in enumerate(fixed) if j != k]
-        cand = placed_in_span(time_unhinted(fixed[k][0]), fixed[k][1], others, sur, lik_all)
+        cand = placed_in_span(fixed[k][0], fixed[k][1], others, sur, lik_all)
         _, fr = fit_on_top(cand, others, sur, lik_all, every, config.seed + 300 + k, config, start)
         fixed[k] = (cand, fr.theta_map)
         report(res, cand, fr)
     for k, (res, cand, theta) in enumerate(twins):
         start = named(cand, theta)
-        cand = placed_in_span(time_unhinted(cand), theta, fixed[1:], sur, lik_all)
+        cand = placed_in_span(cand, theta, fixed[1:], sur, lik_all)
         _, fr = fit_on_top(cand, fixed[1:], sur, lik_all, every, config.seed + 400 + k, config, start)
         report(res, cand, fr)
 
