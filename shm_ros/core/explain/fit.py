@@ -6,9 +6,9 @@ Everything works in the unit cube of the candidate's bounded priors (uniform, or
 
 * MAP: a batch of random prior draws plus a scan of each grid parameter (knee, change time) on a
   fine grid with the others at the best draw and at ``PROFILE`` settings spread over their prior
-  (a Latin hypercube), then a batched pattern search (:func:`pattern_search`) from the best few. With a misfit that drifts a
-  change time's peak is one window wide and high only near the right size: random draws rarely hit
-  both, and a scan at a wrong size sees nothing.
+  (a Latin hypercube), then a batched pattern search (:func:`pattern_search`) from the best few.
+  With a misfit that drifts a change time's peak is one window wide and high only near the right
+  size: random draws rarely hit both, and a scan at a wrong size sees nothing.
 * Evidence, primary: **importance sampling** with a defensive mixture proposal (15 % the prior,
   85 % a product of a multivariate Student-t for the smooth parameters and a piecewise-constant
   density on a fine grid for the grid parameters), adapted in two stages (the second stage's
