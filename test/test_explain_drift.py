@@ -20,8 +20,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from shm_ros.core.explain.drift import Timing, log_mean_exp
+from shm_ros.core.explain.drift import Timing
 from shm_ros.core.explain.likelihood import CandidateLikelihood, catch_all_gain
+from shm_ros.core.logexp import log_mean_exp
 
 THRESHOLD = 5.24  # the threshold the bounds below were derived at (shm_ros/core/explain/threshold.json)
 W, K = 300, 3

@@ -47,6 +47,7 @@ import math
 import numpy as np
 from scipy.special import roots_genlaguerre, roots_hermitenorm
 
+from shm_ros.core.logexp import logsumexp
 from shm_ros.core.observations import ModalObservations
 
 from .forward import ModalPredictor
@@ -64,13 +65,6 @@ from .likelihoods import (
 FREQ_SCALE_RANGE = (1e-4, 0.2)  # model-error scale s of the frequencies (relative), log-uniform
 SHAPE_SCALE_RANGE = (1e-3, 0.3)  # model-error scale t of a unit shape's components, log-uniform
 _LOG2PI = math.log(2.0 * math.pi)
-
-
-def logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
-    """log sum exp along ``axis`` (numpy only: scipy's version costs more than the sums here)."""
-    mx = np.max(a, axis=axis, keepdims=True)
-    mx = np.where(np.isfinite(mx), mx, 0.0)
-    return np.log(np.sum(np.exp(a - mx), axis=axis)) + np.squeeze(mx, axis=axis)
 
 
 def autocorrelation(values: np.ndarray, lags: int) -> np.ndarray:

@@ -36,13 +36,6 @@ MIN_WINDOWS = 40  # fewer windows: independent misfit (as explain.SPARSE_WINDOWS
 MAX_LONG_STEPS = 32  # more longer steps (and more than a tenth of the steps): banded solves instead
 
 
-def log_mean_exp(a: np.ndarray, axis: int = 0) -> np.ndarray:
-    """ln of the mean of exp(a) along ``axis`` (the grid prior's average)."""
-    mx = np.max(a, axis=axis, keepdims=True)
-    mx = np.where(np.isfinite(mx), mx, 0.0)
-    return np.log(np.mean(np.exp(a - mx), axis=axis)) + np.squeeze(mx, axis=axis)
-
-
 @dataclass(frozen=True)
 class Timing:
     """The windows' times in typical spacings (median interval = 1) and the ratio grid."""

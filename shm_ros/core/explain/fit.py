@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from shm_ros.core.logexp import logsumexp
+
 from .candidates.base import ParamSpec
 
 GainFn = Callable[[np.ndarray], np.ndarray]  # theta (B, p) -> gain (B,)
@@ -312,11 +314,6 @@ def _laplace_pilot(fn: GainFn, box: Box, u_map: np.ndarray, rng: np.random.Gener
     return u, w / w.sum()
 
 
-def _logsumexp(a: np.ndarray) -> float:
-    m = float(np.max(a))
-    return m + math.log(float(np.sum(np.exp(a - m)))) if np.isfinite(m) else -math.inf
-
-
 def _grid_log_z(fn: GainFn, box: Box, lo: np.ndarray, hi: np.ndarray, n: int) -> tuple[float, np.ndarray]:
     """ln of the integral of exp(gain) over the box [lo, hi] of the unit cube by the midpoint rule on
     n points per dimension; also the values (n,)*d."""
@@ -325,7 +322,7 @@ def _grid_log_z(fn: GainFn, box: Box, lo: np.ndarray, hi: np.ndarray, n: int) ->
     mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
     vals = np.concatenate([_evaluate(fn, box, mesh[i:i + 4096]) for i in range(0, len(mesh), 4096)])
     cell = float(np.prod((hi - lo) / n))
-    return _logsumexp(vals) + math.log(cell), vals.reshape((n,) * d)
+    return float(logsumexp(vals)) + math.log(cell), vals.reshape((n,) * d)
 
 
 def quadrature_check(fn: GainFn, box: Box, u_peak: np.ndarray | None = None) -> tuple[float, float]:

@@ -43,17 +43,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .drift import ModeDrift, Timing, log_mean_exp
+from shm_ros.core.logexp import log_mean_exp
+
+from .drift import ModeDrift, Timing
 
 S_RANGE = (1e-4, 0.2)  # model-form offset scale, relative frequency, log-uniform
 N_S = 41
 ETA_MAX = 3.0  # |eta| <= 3 tau
-
-
-def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
-    mx = np.max(a, axis=axis, keepdims=True)
-    mx = np.where(np.isfinite(mx), mx, 0.0)
-    return np.log(np.sum(np.exp(a - mx), axis=axis)) + np.squeeze(mx, axis=axis)
 
 
 def _eta_marginal(S0: np.ndarray, A: np.ndarray, c: np.ndarray, alpha: np.ndarray, b: float,
@@ -245,7 +241,7 @@ class CandidateLikelihood:
         q = np.sum(e ** 2, axis=1)  # (B,)
         v = self.s_grid ** 2 + self.mean_var
         ll = -0.5 * self.dof * np.log(2 * math.pi * v)[None] - 0.5 * q[:, None] / v[None]
-        return _logsumexp(ll, axis=1) - math.log(len(v))
+        return log_mean_exp(ll, axis=1)
 
     def _total(self, d: np.ndarray | None, dd: np.ndarray | None) -> np.ndarray:
         out = self.freq.loglik(d, self.tau, spread=True).sum(axis=1)

@@ -27,12 +27,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import uniform_filter1d
 from scipy.optimize import minimize
-from scipy.special import logsumexp
 from scipy.stats import norm
 
 from shm_ros.core.bayes.likelihoods import ig_marginal_loglik
 from shm_ros.core.bayes.records import JointTimeDomainLikelihood
 from shm_ros.core.bayes.timedomain import ar_fit
+from shm_ros.core.logexp import logsumexp
 from shm_ros.core.predict.signals import nrms_pct
 from shm_ros.core.priors import JointPrior
 from shm_ros.core.response.batch import batch_responses
