@@ -71,13 +71,19 @@ def _run(case):
     return v, v.to_dict()
 
 
-def _check_evidence(d):
+def _evidence_gaps(d) -> list[str]:
+    """Accepted candidates whose two evidence estimators differ by more than max(0.5, 3 standard
+    errors): a criterion of every row, logged with its figures before the row asserts (a full-size
+    row stopped at its first such case used to leave no line in the log)."""
+    out = []
     for c in d["candidates"]:
         if not c["accepted"] or c.get("log_evidence_gain_check") is None:
             continue
         se = math.hypot(c["log_evidence_gain_err"] or 0.0, c.get("log_evidence_gain_check_err") or 0.0)
         gap = abs(c["log_evidence_gain_check"] - c["log_evidence_gain"])
-        assert gap <= max(0.5, 3 * se), (c["label"], c["log_evidence_gain"], c["log_evidence_gain_check"], se)
+        if gap > max(0.5, 3 * se):
+            out.append(f"{c['label']} {c['log_evidence_gain']:.2f} vs {c['log_evidence_gain_check']:.2f} (se {se:.2f})")
+    return out
 
 
 DOC_TALLIES = {  # where docs/explain.md quotes the full-size tallies (whitespace normalised)
@@ -113,12 +119,12 @@ def test_documented_tallies_are_found():
 
 
 def test_named_effects_found_and_fitted():
-    results = []
+    results, gaps = [], []
     for name in NAMES:
         for seed in seeds(f"named:{name}", PER_NAME):
             case = draw_case(seed, name, n_windows=WINDOWS)
             v, d = _run(case)
-            _check_evidence(d)
+            gaps += [f"{seed}: {g}" for g in _evidence_gaps(d)]
             results.append(score(d, case, v.figures))
     lines = [f"{s.name}: top {s.top} {s.checks} {s.details.get('listed', '')}" for s in results]
     report = "\n".join(lines)
@@ -130,6 +136,7 @@ def test_named_effects_found_and_fitted():
                                    f"{sum(k in s.checks for s in right)}"
                                    for k in sorted({k for s in right for k in s.checks})))
     print(report)
+    print(f"evidence estimators disagree: {gaps}")
     if FULL:  # the tallies docs/explain.md quotes (test_documented_results.py compares them)
         record_tallies({"top": f"{len(right)}/{len(results)}",
                         "every_check": f"{sum(s.ok for s in results)}/{len(results)}"})
@@ -137,7 +144,9 @@ def test_named_effects_found_and_fitted():
             mine = [s for s in results if s.name == name]
             append_log(f"named:{name}", seeds(f"named:{name}", PER_NAME),
                        f"right top name {sum(s.top_ok for s in mine)}/{len(mine)}, every check "
-                       f"{sum(s.ok for s in mine)}/{len(mine)}", sum(s.top_ok for s in mine) >= 0.6 * len(mine))
+                       f"{sum(s.ok for s in mine)}/{len(mine)}, evidence estimators disagree on "
+                       f"{[g for g in gaps if int(g.split(':')[0]) in seeds(f'named:{name}', PER_NAME)]}",
+                       sum(s.top_ok for s in mine) >= 0.6 * len(mine))
         assert sum(s.top_ok for s in results) >= 0.9 * len(results), report
         for name in NAMES:
             mine = [s for s in results if s.name == name]
@@ -149,6 +158,7 @@ def test_named_effects_found_and_fitted():
             assert sum(have) >= 0.9 * len(have), (k, report)
     else:
         assert sum(s.ok for s in results) >= 5, report
+    assert not gaps, gaps
 
 
 def test_clean_recordings_raise_no_false_alarm():
@@ -191,10 +201,11 @@ def _two_effects(seed: int) -> dict[str, bool]:
     case = draw_case(seed, "temperature_dependent_stiffness", kind="girder", n_windows=WINDOWS,
                      form="bilinear", second_step=True)
     v, d = _run(case)
-    _check_evidence(d)
+    gaps = _evidence_gaps(d)
     found = [m for m in d["missing_physics"] if m["name"] != "unmodelled_modes"]
     names = [m["name"] for m in found]
-    out = {"both": "temperature_dependent_stiffness" in names and "stiffness_change_at_time" in names}
+    out = {"both": "temperature_dependent_stiffness" in names and "stiffness_change_at_time" in names,
+           "evidence": not gaps}
     if not out["both"]:
         return out
     knee = next(m for m in found if m["name"] == "temperature_dependent_stiffness")
@@ -229,6 +240,7 @@ def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss():
             break
     print(f"two effects, reduced: {rows}")
     assert any(c["both"] for c in rows.values()), rows
+    assert all(c["evidence"] for c in rows.values()), rows
 
 
 @pytest.mark.skipif(not FULL, reason="full size only (SHM_FULL=1)")
