@@ -1,7 +1,8 @@
 """The joint time-domain posterior of a set of events, with or without a candidate; MAP and evidence.
 
-The likelihood is :class:`shm_ros.core.bayes.records.JointTimeDomainLikelihood` (the records share each
-channel's prediction-error variance, integrated out with its inverse-gamma prior; an AR(p) residual model
+The likelihood is :class:`shm_ros.core.bayes.records.JointTimeDomainLikelihood` (each record has its own
+prediction-error variance per channel by default, or the records share it, integrated out with its
+inverse-gamma prior; an AR(p) residual model
 per record whose coefficients are fixed once per model compared, at that model's white-noise MAP: a
 model's residual model is estimated from its own residuals, as for the nominal model, so that the
 nominal's large residual, whitened, does not make the misfit an effect removes cheap). Each event
@@ -194,10 +195,10 @@ class EventPosterior:
         if not ok.any():
             return out
         v = u[ok]
-        ss = np.zeros((v.shape[0], len(self.lik.outputs)))
+        ss = {int(e): np.zeros((v.shape[0], len(self.lik.outputs))) for e in self.idx}
         for e, a, Y in self._responses(v, self.idx):
-            ss[a:a + Y.shape[0]] += self.lik.parts[e].innovation_ss_batch(Y)
-        ll = sum(ig_marginal_loglik(ss[:, j], self.n, p) for j, p in enumerate(self.lik.priors))
+            ss[e][a:a + Y.shape[0]] += self.lik.parts[e].innovation_ss_batch(Y)
+        ll = self._marginal(ss)
         # the file's parameters' prior, and the damping shape's (the last baseline column)
         lp = self.prior.logpdf(v[:, :self.nb - 1]) if self.nb > 1 else 0.0
         lp = lp + shape_logprior(v[:, self.nb - 1])
@@ -205,6 +206,17 @@ class EventPosterior:
         logp = ll + lp
         out[ok] = np.where(np.isnan(logp), -np.inf, logp)  # a wild draw (response inf - inf)
         return out
+
+    def _marginal(self, ss: dict[int, np.ndarray]) -> np.ndarray:
+        """log p(events | u) with each channel's variance integrated out: one variance per event and
+        channel (``lik.per_record``: the model error of a yielding or twisting building is relative, and
+        one pooled variance lets the strongest event decide the fit alone), else one per channel."""
+        lik = self.lik
+        if lik.per_record:
+            return sum(ig_marginal_loglik(s[:, j], lik.parts[e].n_innovations, p)
+                       for e, s in ss.items() for j, p in enumerate(lik.parts[e].priors))
+        pooled = sum(ss.values())
+        return sum(ig_marginal_loglik(pooled[:, j], self.n, p) for j, p in enumerate(lik.priors))
 
     def predict(self, u: np.ndarray, e: int) -> np.ndarray:
         """Response (N, channels) of event ``e`` at ``u`` (dim,)."""
