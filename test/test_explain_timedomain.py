@@ -17,8 +17,8 @@ amplitude entry; evidence check within max(0.5, 3 SE) on accepted candidates. Se
 each series; SHM_FULL=1 runs 5 softening and 10 clean seeds. Each criterion is applied per seed, none
 is a pooled statistic, so CI needs no relaxed threshold; the clean false-alarm rate is the shipped
 threshold's calibration (``threshold_timedomain.json``: 99th percentile of 100 clean replicates).
-Seed 0 (2026-11-24): NRMS 74.0 -> 13.7 %, held out 81.9 -> 12.6 %, within-event k 0.303 vs the truth's
-0.283 s^2/m.
+Seed 0 (2026-11-29, a variance per event): NRMS 56.9 -> 13.5 %, held out 55.3 -> 12.3 %, within-event k
+0.296 vs the truth's 0.283 s^2/m.
 """
 
 from __future__ import annotations
