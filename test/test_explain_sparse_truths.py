@@ -14,10 +14,11 @@ Thresholds (binomial, a method meeting the acceptance's rates passes with >= 99 
 * breathing crack (outside the vocabulary, >= 90 % acceptable): P(X = 0 | n=1, p=0.9) = 0.1 > 1 %,
   so one campaign cannot be judged at 99 %; it is run (a verdict) and not counted.
 
-The in-vocabulary figure is not met at this code: on seed 0 only the stiffness loss is named
-(development figures over seeds 0-3 in docs/explain.md, "Input-driven modes": stiffness loss 4/4,
-damper loss 3/4, amplitude damping 1/4, hysteretic and soil 0/4), so that test is marked as an
-expected failure (strict: it turns red when it starts passing, to be promoted).
+The in-vocabulary count is met on seed 0 since the time path gives each event its own error variance and
+holds out the second strongest event (2 of 5: the stiffness loss and the amplitude damping; before, the
+stiffness loss alone, and the test was an expected failure). Development figures over seeds 0-3
+(docs/explain.md, "Input-driven modes"): stiffness loss 4/4, amplitude damping 4/4, damper loss 3/4,
+hysteretic 2/4, soil 0/4 (13 of 20: a per-campaign rate of 0.65, below the acceptance's 0.8).
 """
 
 from __future__ import annotations
@@ -54,7 +55,6 @@ def test_no_step_on_clean_or_transient_softening(results):
     assert len(steps) <= 1, steps
 
 
-@pytest.mark.xfail(strict=True, reason="not met at this code: see the module docstring and docs/explain.md's log")
 def test_in_vocabulary_sparse_kinds_are_named(results):
     right = [k for k in IN_VOCABULARY.values() if results[k].get("ok")]
     assert len(right) >= 2, {k: results[k].get("names") for k in IN_VOCABULARY.values()}

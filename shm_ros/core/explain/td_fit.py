@@ -212,11 +212,16 @@ class EventPosterior:
         channel (``lik.per_record``: the model error of a yielding or twisting building is relative, and
         one pooled variance lets the strongest event decide the fit alone), else one per channel."""
         lik = self.lik
+        out = np.zeros(next(iter(ss.values())).shape[0])
         if lik.per_record:
-            return sum(ig_marginal_loglik(s[:, j], lik.parts[e].n_innovations, p)
-                       for e, s in ss.items() for j, p in enumerate(lik.parts[e].priors))
-        pooled = sum(ss.values())
-        return sum(ig_marginal_loglik(pooled[:, j], self.n, p) for j, p in enumerate(lik.priors))
+            for e, s in ss.items():
+                for j, p in enumerate(lik.parts[e].priors):
+                    out = out + ig_marginal_loglik(s[:, j], lik.parts[e].n_innovations, p)
+            return out
+        pooled = np.sum(list(ss.values()), axis=0)
+        for j, p in enumerate(lik.priors):
+            out = out + ig_marginal_loglik(pooled[:, j], self.n, p)
+        return out
 
     def predict(self, u: np.ndarray, e: int) -> np.ndarray:
         """Response (N, channels) of event ``e`` at ``u`` (dim,)."""

@@ -13,8 +13,9 @@ Input: the structure (a building with a declared base input, docs/interfaces.md 
    only); fitted with the nominal parameters re-fitted jointly and the candidate's own residual model (AR
    coefficients at its white-noise MAP); evidence gain by Laplace (checked by importance sampling
    once accepted, step 4);
-3. held out: a fixed split of events (in amplitude order every ``held_out_every``-th from the second,
-   so the weakest and strongest events stay in the fit: the held-out ones are interpolated); nominal
+3. held out: a fixed split of events (in amplitude order every ``held_out_every``-th from the second
+   strongest down, so the weakest and strongest events stay in the fit: the held-out ones are
+   interpolated, and one of them is strong enough to show an amplitude effect); nominal
    and candidate are re-fitted without them and predict them;
 4. acceptance (:func:`.select.decide`): gain above the time-domain threshold (``threshold_timedomain.json``,
    calibrated on clean replicates), held-out NRMS improved, 95 % interval of the key parameter
@@ -74,7 +75,7 @@ class TimeDomainConfig:
     variance_per_event: bool = option(True, "each event its own prediction-error variance per channel (a model "
                                       "error relative to the response weighs every event alike; else one per "
                                       "channel, which the strongest event's residuals dominate)")
-    held_out_every: int = option(3, "in amplitude order, every n-th event from the second is held out")
+    held_out_every: int = option(3, "in amplitude order, every n-th event from the second strongest down is held out")
     n_importance: int = option(300, "importance samples of the evidence check")
     threshold: float | None = option(None, "log Bayes factor to accept a candidate (unset: the shipped "
                                      "calibration, threshold_timedomain.json)")
@@ -89,8 +90,10 @@ class TimeDomainConfig:
 
 
 def held_out_events(amplitude: np.ndarray, every: int) -> np.ndarray:
-    """(E,) bool: in amplitude order, ranks 1, 1 + every, ... (never the weakest or the strongest)."""
-    rank = np.argsort(np.argsort(amplitude))
+    """(E,) bool: counted down from the strongest, ranks 2, 2 + every, ... (never the weakest or the
+    strongest): an amplitude effect is tested where it shows, so the second strongest event is always
+    among the held-out ones (a weak event is predicted alike with and without the effect)."""
+    rank = np.argsort(np.argsort(-np.asarray(amplitude, float)))  # 0: the strongest
     held = (rank % max(every, 2) == 1) & (rank < amplitude.size - 1)
     return held if (~held).sum() >= 2 else np.zeros(amplitude.size, bool)
 
