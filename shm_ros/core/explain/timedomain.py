@@ -167,10 +167,7 @@ def _nominal(run: EventsRun) -> None:
     and on the training events alone (the held-out score)."""
     run.say("calibrating the nominal parameters on every event")
     nominal = run.nominal = EventPosterior(run.lik, run.prior, None)
-    # the file's values are a start too: with a relative model error the likelihood's peak near them can
-    # sit beyond a valley (a stiffness off by 20-40 % is out of phase) that the spectral starts fall into
-    file_values = np.r_[np.ones(nominal.nb), np.zeros(nominal.dim - nominal.nb)]
-    u_w, _ = find_map(nominal, [file_values, *spectral_starts(nominal, run.rng)])
+    u_w, _ = find_map(nominal, spectral_starts(nominal, run.rng))
     nominal.fix_ar(u_w)  # the residual model of every comparison below
     run.u_n, f_n = newton_polish(nominal, *find_map(nominal, [u_w]))
     run.lap_n = laplace(nominal, run.u_n, f_n)
