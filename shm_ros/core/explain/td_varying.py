@@ -4,8 +4,8 @@ A structure that softens as it shakes harder changes within an earthquake: softe
 motion, recovering after it. One factor per event (:mod:`.td_model`) follows that only on average.
 Here one column of the parameter row (the stiffness or the damping factor of :class:`.td_model.FactorModel`)
 takes a value per *segment* of an event (a fraction of a second), and the system is linear within a
-segment: the exact first-order-hold step (:func:`shm_ros.core.response.discretize_foh`) of the segment's
-model carries the state across.
+segment: the exact first-order-hold step (:func:`shm_ros.core.response.discretize_foh`; many at once by
+:func:`shm_ros.core.response.discretize.discretize_foh_batch`) of the segment's model carries the state across.
 
 **The approximation that makes it affordable.** An event has hundreds of segments and every
 parameter draw its own values, so one matrix exponential per segment is too many. The step matrices
@@ -27,6 +27,7 @@ import numpy as np
 
 from shm_ros.core.models.base import AffineModel
 from shm_ros.core.response import Output, build_state_space, build_state_spaces, discretize_foh
+from shm_ros.core.response.discretize import discretize_foh_batch
 from shm_ros.core.response.kernels import segment_response
 
 MAX_NODES = 24
@@ -88,9 +89,13 @@ def node_steps(model: AffineModel, rows: np.ndarray, col: int, lo: np.ndarray, h
     B, n = nodes.shape
     at = np.repeat(rows, n, axis=0)
     at[:, col] = nodes.ravel()
-    steps = [discretize_foh(ss, dt) for ss in build_state_spaces(model, at, outputs)]
-    return NodeSteps(nodes, *(np.stack([getattr(d, m) for d in steps]).reshape(B, n, *getattr(steps[0], m).shape)
-                              for m in ("Phi", "G1", "G2", "C", "D")))
+    # draws that differ only where the segments' factor is set (a finite-difference step in a candidate's
+    # own parameters) share every node's system: each distinct one is built and discretised once
+    at, back = np.unique(at, axis=0, return_inverse=True)
+    systems = build_state_spaces(model, at, outputs)
+    A, Bm, C, D = (np.stack([getattr(ss, m) for ss in systems]) for m in ("A", "B", "C", "D"))
+    Phi, G1, G2 = discretize_foh_batch(A, Bm, dt)
+    return NodeSteps(nodes, *(M[back.ravel()].reshape(B, n, *M.shape[1:]) for M in (Phi, G1, G2, C, D)))
 
 
 def varying_responses(steps: NodeSteps, values: np.ndarray, seg_len: int, u: np.ndarray) -> np.ndarray:

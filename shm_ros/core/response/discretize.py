@@ -37,12 +37,21 @@ class DiscreteSystem:
 
 def discretize_foh(ss: StateSpace, dt: float) -> DiscreteSystem:
     """The first-order-hold step of ``ss`` for sample interval ``dt`` (s)."""
+    Phi, G1, G2 = discretize_foh_batch(ss.A[None], ss.B[None], dt)
+    return DiscreteSystem(Phi[0], G1[0], G2[0], ss.C, ss.D, float(dt))
+
+
+def discretize_foh_batch(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``Phi, G1, G2`` (K, n, n), (K, n, m), (K, n, m) of the stacked systems ``A`` (K, n, n), ``B``
+    (K, n, m) for the sample interval ``dt``: the matrix exponentials of :func:`discretize_foh`, taken
+    together (the same numbers, without a call per system)."""
     if not dt > 0:
         raise ValueError(f"dt must be > 0, got {dt}")
-    n, m = ss.B.shape
-    aug = np.zeros((n + 2 * m, n + 2 * m))
-    aug[:n, :n] = ss.A * dt
-    aug[:n, n:n + m] = ss.B * dt
-    aug[n:n + m, n + m:] = np.eye(m)  # (I/h) * h
-    E = expm(aug)
-    return DiscreteSystem(E[:n, :n], E[:n, n:n + m], E[:n, n + m:], ss.C, ss.D, float(dt))
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    K, n, m = B.shape
+    aug = np.zeros((K, n + 2 * m, n + 2 * m))
+    aug[:, :n, :n] = A * dt
+    aug[:, :n, n:n + m] = B * dt
+    aug[:, n:n + m, n + m:] = np.eye(m)
+    E = expm(aug) if K else aug
+    return E[:, :n, :n], E[:, :n, n:n + m], E[:, :n, n + m:]

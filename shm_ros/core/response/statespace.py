@@ -124,7 +124,10 @@ def build_state_spaces(model: AffineModel, thetas: np.ndarray, outputs: Sequence
         out_rows.append((o, row[f], rs))
     need_v |= need_d
     key = np.hstack([need_v, need_d])
-    layouts, which = (key, np.zeros(1, int)) if nb == 1 else np.unique(key, axis=0, return_inverse=True)
+    if nb == 1 or not np.any(key != key[0]):  # one layout (the usual case): no sort of the rows
+        layouts, which = key[:1], np.zeros(nb, int)
+    else:
+        layouts, which = np.unique(key, axis=0, return_inverse=True)
     out: list[StateSpace | None] = [None] * nb
     parts = _Parts(Mi, Kff, Cff, G, E, Sa, L, maxwell, out_rows)
     for g, lay in enumerate(layouts):
