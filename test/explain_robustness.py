@@ -71,13 +71,15 @@ class Outcome:
         return [c["label"] for c in (self.verdict or {}).get("candidates", []) if c.get("failed")]
 
 
-def explain(bag: Path, structure: Path, path: str, window: float | None, out: Path) -> Outcome:
-    """One ``shm-ros explain`` run (``path``: "bag" or "events"), per event only on the time path
-    (the within-event fits have their own tests and cost most of a run)."""
+def explain(bag: Path, structure: Path, path: str, window: float | None, out: Path, within_event: bool = False
+            ) -> Outcome:
+    """One ``shm-ros explain`` run (``path``: "bag" or "events"). The time-domain path (``--events``, and
+    ``--bag`` beside the per-event modal estimates) fits per event only unless ``within_event``: the
+    within-event fits have their own tests and cost about half of a run."""
     args = ["explain", "--structure", str(structure), f"--{path}", str(bag), "--out", str(out), "--no-report"]
     if window is not None:
         args += ["--window", str(window)]
-    if path == "events":
+    if not within_event:
         args += ["--time-domain.resolutions", "per_event"]
     code = main(args)
     f = out / "verdict.json"
