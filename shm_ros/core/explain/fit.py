@@ -339,8 +339,10 @@ def quadrature_check(fn: GainFn, box: Box, u_peak: np.ndarray | None = None) -> 
     n = {1: 2001, 2: 101, 3: 31}[d]  # points a side (61 and 21 missed a change time's one-window peak by 1.1 nats)
     lo, hi = np.zeros(d), np.ones(d)
     g_peak = -math.inf if u_peak is None else float(_evaluate(fn, box, u_peak)[0])
+    z, zoomed = math.nan, True  # zoomed: (lo, hi) has not been integrated yet
     for _ in range(3):
         z, vals = _grid_log_z(fn, box, lo, hi, n)
+        zoomed = False
         step = (hi - lo) / n
         idx = np.argwhere(vals >= max(float(np.max(vals)), g_peak) - 30.0)
         if u_peak is not None:  # the peak's own cell is in the region, whatever the grid saw
@@ -350,8 +352,9 @@ def quadrature_check(fn: GainFn, box: Box, u_peak: np.ndarray | None = None) -> 
         new_hi = np.clip(lo + (idx.max(axis=0) + 1) * step + 2 * step, 0.0, 1.0)
         if np.all(new_hi - new_lo > 0.8 * (hi - lo)):
             break  # the likelihood fills the box: no zoom gains resolution
-        lo, hi = new_lo, new_hi
-    z, _ = _grid_log_z(fn, box, lo, hi, n)
+        lo, hi, zoomed = new_lo, new_hi, True
+    if zoomed:
+        z, _ = _grid_log_z(fn, box, lo, hi, n)
     half, _ = _grid_log_z(fn, box, lo, hi, (n + 1) // 2)
     return z, abs(z - half)
 
