@@ -34,6 +34,8 @@ class ExplainConfig:
     prior_sensitivity: bool = option(True, "report the evidence with prior widths halved and doubled")
     catch_all: bool = option(True, "fit the catch-all discrepancy (reports unexplained structure)")
     second_round: bool = option(True, "after accepting one effect, fit the others on top of it")
+    backfit_passes: int = option(3, "with several accepted effects, passes of refitting each on top of the "
+                                 "others on every window (fewer when they settle)")
     surrogate_check: bool = option(True, "check the surrogate against the exact model at each fit")
     surrogate_tolerance: float = option(1e-4, "largest relative frequency error of the surrogate")
     frequency_gate: float = option(0.2, "pairing of tracked modes with model modes: relative frequency gate")

@@ -23,6 +23,7 @@ from .types import CandidateResult, FitScores
 
 MAX_EFFECTS = 2  # effects reported together (each more costs a round of fits on top of the others)
 POOL = 4  # candidates refitted on top per round: the most supported ones alone
+BACKFIT_SETTLED = 0.01  # a backfitting pass that moves no parameter by more than this share of its range
 
 
 def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_all, epoch, threshold, config,
@@ -193,15 +194,24 @@ def placed_in_span(cand: Candidate, theta: np.ndarray | None, others: list[tuple
     return best
 
 
+def _moved(cand: Candidate, before: np.ndarray, after: np.ndarray) -> float:
+    """Largest change of a parameter between two fits, as a fraction of its prior range."""
+    box = Box(cand.params())
+    return float(np.max(np.abs(box.to_unit(np.atleast_2d(after)) - box.to_unit(np.atleast_2d(before)))))
+
+
 def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, np.ndarray]],
                     twins: list[tuple[CandidateResult, Candidate, np.ndarray]], sur,
                     lik_all: CandidateLikelihood, epoch: float, config: ExplainConfig) -> None:
     """The reported parameters (MAP and 95 % intervals) of the accepted effects, refitted on every
     window, training and held-out: the held-out windows have done their part (the acceptance) and
     hold information the parameters need (a change inside a held-out block is placed only by its
-    windows). With several effects, one pass of backfitting: each refitted on top of the others at
-    their latest values, so that the first, fitted alone, gives back what it took of the second's
-    misfit (a step fitted before a knee takes some of the cold spell). Effects tied with the first
+    windows). With several effects, backfitting: each refitted on top of the others at their latest
+    values, so that the first, fitted alone, gives back what it took of the second's misfit (a step
+    fitted before a knee takes some of the cold spell); passes repeat (``backfit_passes`` at most)
+    while a parameter still moves by more than :data:`BACKFIT_SETTLED` of its prior range: two
+    effects that overlap in time (a knee whose cold spells fall after a step) trade misfit for
+    several passes before they settle. Effects tied with the first
     are refitted on top of the later ones; an effect that starts at locate's hinted window without a
     time parameter starts at the window of the hinted span that fits best (:func:`placed_in_span`),
     and each search also starts from the training fit's MAP. The evidences, the acceptance and the fit scores stay those
@@ -223,13 +233,18 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
             return None
         return {s.name: float(v) for s, v in zip(cand.params(), np.ravel(theta), strict=False)}
 
-    for k, res in enumerate(chain):
-        start = named(*fixed[k])
-        others = [f for j, f in enumerate(fixed) if j != k]
-        cand = placed_in_span(fixed[k][0], fixed[k][1], others, sur, lik_all)
-        _, fr = fit_on_top(cand, others, sur, lik_all, every, config.seed + 300 + k, config, start)
-        fixed[k] = (cand, fr.theta_map)
-        report(res, cand, fr)
+    for sweep in range(config.backfit_passes if len(chain) > 1 else 1):
+        moved = 0.0
+        for k, res in enumerate(chain):
+            start = named(*fixed[k])
+            others = [f for j, f in enumerate(fixed) if j != k]
+            cand = placed_in_span(fixed[k][0], fixed[k][1], others, sur, lik_all) if sweep == 0 else fixed[k][0]
+            _, fr = fit_on_top(cand, others, sur, lik_all, every, config.seed + 300 + 10 * sweep + k, config, start)
+            moved = max(moved, math.inf if sweep == 0 else _moved(cand, fixed[k][1], fr.theta_map))
+            fixed[k] = (cand, fr.theta_map)
+            report(res, cand, fr)
+        if moved < BACKFIT_SETTLED:
+            break
     for k, (res, cand, theta) in enumerate(twins):
         start = named(cand, theta)
         cand = placed_in_span(cand, theta, fixed[1:], sur, lik_all)
