@@ -129,24 +129,27 @@ def _merge_disjoint(labels: np.ndarray, d: np.ndarray, win: np.ndarray, cutoff: 
     hold three or more. In a window both hold, the member that lies farther from its own cluster
     leaves and stands alone."""
     labels = labels.copy()
-    few = np.unique(win).size < 10
+    _, window = np.unique(win, return_inverse=True)
+    few = int(window.max()) + 1 < 10
+    dists: dict[tuple[int, int], float] = {}  # mean distance of two clusters, kept until one changes
     while True:
-        labs = np.unique(labels)
+        labs, which = np.unique(labels, return_inverse=True)
+        members = [np.flatnonzero(which == i) for i in range(labs.size)]
+        mergeable = _disjoint_pairs(which, window, few)
         best, pair = 3 * cutoff, None
-        for i, a in enumerate(labs):
-            ma = np.flatnonzero(labels == a)
-            for b in labs[i + 1:]:
-                mb = np.flatnonzero(labels == b)
-                shared = np.intersect1d(win[ma], win[mb]).size
-                na, nb = np.unique(win[ma]).size, np.unique(win[mb]).size
-                if shared > max(0.1 * min(na, nb), 1.0 if few and min(na, nb) >= 3 else 0.0):
-                    continue
-                dist = float(np.mean(d[np.ix_(ma, mb)]))
-                if dist < best:
-                    best, pair = dist, (a, b)
+        for i, j in zip(*np.nonzero(mergeable), strict=True):  # pairs in order: ties go to the first
+            a, b = int(labs[i]), int(labs[j])
+            dist = dists.get((a, b))
+            if dist is None:  # two single modes: their distance is the mean
+                ma, mb = members[i], members[j]
+                dist = dists[(a, b)] = float(d[ma[0], mb[0]]) if ma.size == mb.size == 1 else \
+                    float(np.mean(d[np.ix_(ma, mb)]))
+            if dist < best:
+                best, pair = dist, (a, b)
         if pair is None:
             return labels
         a, b = pair
+        dists = {k: v for k, v in dists.items() if a not in k and b not in k}
         ma, mb = np.flatnonzero(labels == a), np.flatnonzero(labels == b)
         for w in np.intersect1d(win[ma], win[mb]):
             # each member's mean distance to the rest of its own cluster: the worse fit leaves
@@ -155,6 +158,21 @@ def _merge_disjoint(labels: np.ndarray, d: np.ndarray, win: np.ndarray, cutoff: 
             for _, k in sorted(cands)[1:]:
                 labels[k] = labels.max() + 1
         labels[labels == b] = a
+
+
+def _disjoint_pairs(which: np.ndarray, window: np.ndarray, few: bool) -> np.ndarray:
+    """Pairs (i < j) of clusters that (almost) never share a window, as a boolean upper triangle;
+    ``which``: each member's cluster, ``window``: each member's window, both numbered from 0. The
+    windows two clusters share are counted for all pairs at once (a product of their window
+    incidences), not pair by pair: the tracker's pool of unassigned modes holds tens of clusters,
+    most of one mode each, and is searched for new modes every few windows."""
+    seen = np.zeros((int(which.max()) + 1, int(window.max()) + 1))
+    seen[which, window] = 1.0
+    shared = seen @ seen.T  # distinct windows held by both (exact: sums of ones)
+    held = np.diag(shared)
+    fewer = np.minimum.outer(held, held)
+    allowed = np.maximum(0.1 * fewer, np.where(few & (fewer >= 3), 1.0, 0.0))
+    return np.triu(shared <= allowed, 1)
 
 
 def model_modes(spec: StructureSpec, sensors: list[str], n_modes: int = 8,
