@@ -13,6 +13,7 @@ model shapes read at the sensors (B, s, m). Two kinds:
 
 from __future__ import annotations
 
+import weakref
 from typing import Protocol
 
 import numpy as np
@@ -182,7 +183,8 @@ def build_predictor(model: AffineModel, sensor_ids: list[str], n_modes: int,
                              f"cover at least {n_required} and fewer than {model.n_dof} DOFs")
         return ReducedModalPredictor(model, sensor_ids, n_modes)
     full = FullModalPredictor(model, sensor_ids, n_modes)
-    if not ok:
+    key = (id(model), tuple(sensor_ids), int(n_modes), int(n_required))
+    if not ok or key in _FULL_CHOSEN:
         return full
     reduced = ReducedModalPredictor(model, sensor_ids, n_modes)
     rng = np.random.default_rng(0)
@@ -199,7 +201,19 @@ def build_predictor(model: AffineModel, sensor_ids: list[str], n_modes: int,
         cost[name] = min(runs)
     f_full, f_red = out["full"][0][:, :n_required], out["iirs"][0][:, :n_required]
     agree = bool(np.all(np.abs(f_red / f_full - 1.0) < 1e-6)) and reduced.last_converged
-    return reduced if agree and cost["iirs"] < cost["full"] else full
+    if agree and cost["iirs"] < cost["full"]:
+        return reduced
+    _FULL_CHOSEN[key] = None
+    weakref.finalize(model, _FULL_CHOSEN.pop, key, None)
+    return full
+
+
+# ``auto`` choices of the full model, by (model id, sensors, modes): a model updated again and again
+# (a node's runs, a study's seeds) is timed once. Only this choice is kept: the full predictor is
+# exact and has no state, so keeping it can cost time but never change a result, whereas a reduced
+# one comes out of the trial warm-started on its batch, as each run's must. An entry leaves with its
+# model, so a later model at the same address is timed afresh.
+_FULL_CHOSEN: dict[tuple[int, tuple[str, ...], int, int], None] = {}
 
 
 class RitzModalPredictor:
