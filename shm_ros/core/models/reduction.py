@@ -204,7 +204,7 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
     likelihood (a dozen members, a few DOFs) numpy's per-call overhead costs many times the
     arithmetic. Returns (t, iterations, last change, converged, members that did not converge).
     """
-    from shm_ros.core.models.iirs_kernel import iterate
+    from shm_ros.core.models.iirs_kernel import SINGULAR, iterate
 
     if min(t.shape[-2:]) == 1:
         return _iterate_numpy(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, tol, accelerate)
@@ -215,9 +215,12 @@ def _iterate(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, 
     active = np.ones(t.shape[0], dtype=bool)
     Mmm, Mms, Mss, tG, Kss_inv, KG, Kss = (np.ascontiguousarray(a, dtype=float)
                                            for a in (Mmm, Mms, Mss, tG, Kss_inv, KG, Kss))
-    converged, it, change = iterate(Mmm, Mms, Mss, tG, Kss_inv, KG, Kss, t, KR, tol / n_masters,
-                                    int(max_iter), bool(accelerate), R_MAX, active)
-    return t, it, float(change), bool(converged), None if converged else np.flatnonzero(active)
+    status, it, change = iterate(Mmm, Mms, Mss, tG, Kss_inv, KG, Kss, t, KR, tol / n_masters,
+                                 int(max_iter), bool(accelerate), R_MAX, active)
+    if status == SINGULAR:  # as np.linalg.solve raises
+        raise np.linalg.LinAlgError("Singular matrix")
+    converged = status == 1
+    return t, it, float(change), converged, None if converged else np.flatnonzero(active)
 
 
 def _iterate_numpy(Kmm, Kms, Kss, Mmm, Mms, Mss, tG, Kss_inv, t, n_masters, max_iter, tol, accelerate=True):
