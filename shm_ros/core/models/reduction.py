@@ -81,8 +81,7 @@ class Reduction:
     @property
     def t(self) -> np.ndarray:
         """Slave block of ``T`` ((s, m) or (B, s, m)), usable as ``t0`` to warm-start ``iirs``."""
-        s = np.setdiff1d(np.arange(self.T.shape[-2]), self.masters)
-        return self.T[..., s, :]
+        return self.T[..., _others(self.T.shape[-2], self.masters), :]
 
     @property
     def batched(self) -> bool:
@@ -107,8 +106,15 @@ def _split(n: int, masters: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError("need at least one master DOF")
     if len(set(m.tolist())) != m.size or m.min() < 0 or m.max() >= n:
         raise ValueError(f"masters must be distinct DOF indices in [0, {n}), got {list(masters)}")
-    s = np.setdiff1d(np.arange(n), m)
-    return m, s
+    return m, _others(n, m)
+
+
+def _others(n: int, masters: Sequence[int] | np.ndarray) -> np.ndarray:
+    """The DOFs of ``range(n)`` that are not masters, ascending (``np.setdiff1d`` without its
+    sort: a likelihood reduces thousands of times)."""
+    keep = np.ones(n, dtype=bool)
+    keep[np.asarray(masters, dtype=int)] = False
+    return np.flatnonzero(keep)
 
 
 def _assemble_T(t: np.ndarray, m: np.ndarray, s: np.ndarray, n: int) -> np.ndarray:
