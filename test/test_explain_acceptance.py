@@ -230,7 +230,7 @@ def test_two_effects_a_freezing_knee_and_a_later_stiffness_loss():
     least one. At this size with the drifting misfit both were named on 18 of development seeds
     9300-9319 (d313ab1; 3 of 9300-9307 before the step's full prior, docs/explain.md "Tests and
     benchmarks"): at that rate three cases all fail with (2/20)^3 = 0.1 %. Every criterion together
-    holds on too few cases for a 99 % check (11 of those 20 at this size; 11 of 15 at full size at
+    holds on too few cases for a 99 % check (11 of those 20 at this size; 12 of 15 at full size at dec662b, 11 at
     f75f73e, both named on all 15): the cases' other checks are printed, and asserted at full size. A further case runs only
     when the ones before do not name both (about 50 s each)."""
     rows = {}
