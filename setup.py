@@ -30,7 +30,7 @@ setup(
     package_data={"shm_ros": ["py.typed", "core/explain/*.json", "examples_data/*.yaml"]},
     python_requires=">=3.11",
     install_requires=["numpy", "scipy", "PyYAML", "rosbags", "mcap", "zstandard", "lz4", "emcee",
-                      "dynesty", "arviz", "arviz-stats", "matplotlib", "threadpoolctl", "obspy", "numba",
+                      "dynesty", "arviz", "arviz-stats", "matplotlib", "threadpoolctl", "obspy", "numba", "llvmlite",
                       "dask[distributed]"],
     zip_safe=True,
     maintainer="shm_ros maintainers",

@@ -35,6 +35,7 @@ DEPENDENCIES: dict[str, tuple[str, str | None]] = {
     "yaml": ("python3-yaml", "PyYAML"),
     "matplotlib": ("python3-matplotlib", "matplotlib"),
     "numba": ("python3-numba", "numba"),
+    "llvmlite": ("python3-llvmlite-pip", "llvmlite"),  # numba's own back end (a compiled kernel binds a LAPACK symbol)
     "rosbags": ("python3-rosbags-pip", "rosbags"),
     "mcap": ("python3-mcap-pip", "mcap"),
     "zstandard": ("python3-zstandard-pip", "zstandard"),
