@@ -11,6 +11,7 @@ from .candidates.base import Candidate, Modification, ParamSpec
 from .config import ExplainConfig
 from .fit import Box, FitResult, fit
 from .form_check import form_gain
+from .joint import joint_modification
 from .likelihood import CandidateLikelihood
 from .scoring import damping_scores, judged_windows, scores
 from .surrogate import Surrogate
@@ -124,17 +125,7 @@ class OnTop(Candidate):
         return self.new.params()
 
     def modify(self, theta: np.ndarray):
-        m = self.new.modify(theta)
-        B = np.atleast_2d(theta).shape[0]
-        groups = {g: np.array(x, dtype=float) for g, x in m.groups.items()}
-        damping = None if m.damping is None else np.array(m.damping, dtype=float)
-        for cand, th in self.fixed:
-            f = cand.modify(th[None])
-            for g, x in f.groups.items():
-                groups[g] = groups[g] * x if g in groups else np.repeat(x, B, axis=0)
-            if f.damping is not None:
-                damping = f.damping.repeat(B, axis=0) if damping is None else damping * f.damping
-        return Modification(groups, damping)
+        return joint_modification([(self.new, theta), *((c, th[None]) for c, th in self.fixed)])
 
     def form(self, theta: np.ndarray) -> str:
         return self.new.form(theta)

@@ -16,6 +16,7 @@ from .config import ExplainConfig
 from .failures import failed_result, numerical
 from .fit import Box, FitResult, evidence_check
 from .jobs import Job, OnTop, OnTopJob, fit_on_top, iso_time, result
+from .joint import joint_refine
 from .likelihood import CandidateLikelihood
 from .shapes import shape_terms_of
 from .surrogate import Surrogate
@@ -211,7 +212,9 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
     fitted before a knee takes some of the cold spell); passes repeat (``backfit_passes`` at most)
     while a parameter still moves by more than :data:`BACKFIT_SETTLED` of its prior range: two
     effects that overlap in time (a knee whose cold spells fall after a step) trade misfit for
-    several passes before they settle. Effects tied with the first
+    several passes before they settle, and may settle short of the top of the ridge they trade
+    along: then every effect's parameters move together (:func:`.joint.joint_refine`), and a last
+    pass refits each from there. Effects tied with the first
     are refitted on top of the later ones; an effect that starts at locate's hinted window without a
     time parameter starts at the window of the hinted span that fits best (:func:`placed_in_span`),
     and each search also starts from the training fit's MAP. The evidences, the acceptance and the fit scores stay those
@@ -245,6 +248,15 @@ def final_estimates(chain: list[CandidateResult], fixed: list[tuple[Candidate, n
             report(res, cand, fr)
         if moved < BACKFIT_SETTLED:
             break
+    refined = joint_refine(fixed, sur, lik_all, config.seed + 390) if len(chain) > 1 else None
+    if refined is not None:  # the effects moved together to a better point: one more pass from there
+        fixed[:] = [(c, th) for (c, _), th in zip(fixed, refined, strict=True)]
+        for k, res in enumerate(chain):
+            others = [f for j, f in enumerate(fixed) if j != k]
+            _, fr = fit_on_top(fixed[k][0], others, sur, lik_all, every, config.seed + 380 + k, config,
+                               named(*fixed[k]))
+            fixed[k] = (fixed[k][0], fr.theta_map)
+            report(res, fixed[k][0], fr)
     for k, (res, cand, theta) in enumerate(twins):
         start = named(cand, theta)
         cand = placed_in_span(cand, theta, fixed[1:], sur, lik_all)
