@@ -20,7 +20,11 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser; with ``command`` (a command's name, e.g. ``run``) that command's
+    subparser only: each command's options import its core's configuration, and a process started
+    for one command (a graph, a replay) need not import every other stage's numerics."""
+    modules = [name for name in COMMANDS if command is None or name.rstrip("_") == command]
     parser = OneLineParser(
         prog="shm-ros",
         description="Structural health monitoring on ROS 2: recordings -> windows -> modes -> "
@@ -28,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"shm-ros {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
+    for name in modules or COMMANDS:
         module_name = f"shm_ros.commands.{name}"
         if importlib.util.find_spec(module_name) is None:
             continue  # stage not shipped in this build
@@ -39,7 +43,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run one command. An error the user can act on (:class:`shm_ros.errors.ShmError`) is printed as
     one line and exits with its code; any other exception is a bug and shows its traceback."""
-    parser = build_parser()
+    given = sys.argv[1:] if argv is None else argv
+    parser = build_parser(given[0] if given else None)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
