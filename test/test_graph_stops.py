@@ -37,6 +37,7 @@ import numpy as np
 import pytest
 import yaml
 from conftest import full_size
+from ros_helpers.graph import ids_written
 from test_graph_faults import _signal
 from test_supervisor import _children, _identity, _Lines, _still_running, _wait_for
 
@@ -44,6 +45,7 @@ FS = 100.0
 T0 = 1_714_521_600_000_000_000
 WINDOW_S = 5.0
 N_WINDOWS = 6
+RESULTS = ("/shm/windows", "/shm/modal_estimates", "/shm/tracked_modes")  # recorded once per window each
 STRUCTURE = """
 name: three-storey-test-frame
 kind: shear_building
@@ -224,12 +226,12 @@ def _up_again(text: str, node: str) -> bool:
 
 class _Recovered:
     """``stop_when`` of a session: the three faults fired, each killed node is running again (set up
-    and spinning), and the graph is quiet: every window ingest published is in the track store and
-    neither count changed for ``quiet_s`` (the restarted recorder has taken up what was published
-    while it was down)."""
+    and spinning), and the graph is quiet: every window ingest published is in the track store,
+    neither count changed for ``quiet_s``, and the recorder's bag holds each of those windows and its
+    estimate (the restarted recorder has taken up what was published while it was down)."""
 
-    def __init__(self, marks: Path, store: Path, quiet_s: float = 3.0) -> None:
-        self.marks, self.store, self.quiet_s = marks, store, quiet_s
+    def __init__(self, marks: Path, store: Path, out: Path, quiet_s: float = 1.0) -> None:
+        self.marks, self.store, self.out, self.quiet_s = marks, store, out, quiet_s
         self.state, self.since = (-1, -1), time.monotonic()
 
     def __call__(self, lines) -> bool:
@@ -241,7 +243,9 @@ class _Recovered:
         state = (lines.count("[ingest]: window"), _estimates_in_store(self.store))
         if state != self.state:
             self.state, self.since = state, time.monotonic()
-        return 1 <= state[0] == state[1] and time.monotonic() - self.since >= self.quiet_s
+        if not (1 <= state[0] == state[1] and time.monotonic() - self.since >= self.quiet_s):
+            return False
+        return all(len(ids) >= state[0] for ids in ids_written(self.out, RESULTS[:2]).values())
 
 
 @pytest.mark.parametrize(("fault", "recovered"), _fault_sets())
@@ -259,7 +263,7 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
     faults = {**os.environ, "SHM_FAULT_MARK": str(marks), "SHM_FAULT": fault}
     # stopped once the three faults fired, or once the killed nodes are back (a slower replay, so
     # that it still runs then: the stop cuts it short, it adds no time)
-    stop_when = _Recovered(marks, store) if recovered else lambda out: len(list(marks.iterdir())) == 3
+    stop_when = _Recovered(marks, store, tmp_path / "out") if recovered else lambda out: len(list(marks.iterdir())) == 3
     code, text, replay_code, replay_out, seen, replaying = _session(
         tmp_path, bag, faults, stop_when, signal.SIGTERM, "--rate", "0.5" if recovered else "1")
     print(text[-3000:], replay_out[-1000:])
@@ -299,9 +303,11 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
     else:  # stopped while the recorder waited for its restart: its split cut short waits for the next
         assert list((tmp_path / "out").glob("out_*/out_*.mcap")), "the split cut short must be kept"
     # 2: rerun (no faults): the same bag again resumes; then Ctrl-C to the whole process group
+    # stopped once the store holds every window and the recorder's bag every window, estimate and
+    # tracked row (it writes each message through to its file): what comes after is a duplicate at most
     code2, text2, replay_code2, replay_out2, seen2, _ = _session(
-        tmp_path, bag, dict(os.environ), lambda out: _estimates_in_store(store) == N_WINDOWS and time.sleep(3) is None,
-        signal.SIGINT)
+        tmp_path, bag, dict(os.environ), lambda out: _estimates_in_store(store) == N_WINDOWS and all(
+            len(ids) >= N_WINDOWS for ids in ids_written(tmp_path / "out", RESULTS).values()), signal.SIGINT)
     print(text2[-3000:], replay_out2[-1000:])
     assert code2 == 0 and "exit code 0" in text2, text2  # nothing died, nothing lost
     assert replay_code2 == 0 and "lost 0" in replay_out2, replay_out2
@@ -333,17 +339,15 @@ def test_faults_sigterm_during_a_replay_and_ctrl_c_of_the_group_lose_and_duplica
 
 
 class _Recorded:
-    """``stop_when`` of a session: every window published by ingest, and the recorder's bag (it
-    writes each message through to its file; recording the windows only) not grown for ``quiet_s``."""
+    """``stop_when`` of a session: every window published by ingest, and each in the recorder's bag
+    (it writes each message through to its file; recording the windows only)."""
 
-    def __init__(self, out: Path, quiet_s: float = 2.0) -> None:
-        self.out, self.quiet_s, self.size, self.since = out, quiet_s, -1, time.monotonic()
+    def __init__(self, out: Path) -> None:
+        self.out = out
 
     def __call__(self, lines) -> bool:
-        size = sum(p.stat().st_size for p in self.out.rglob("*.mcap"))
-        if size != self.size:
-            self.size, self.since = size, time.monotonic()
-        return lines.count("[ingest]: window") >= N_WINDOWS and time.monotonic() - self.since >= self.quiet_s
+        return lines.count("[ingest]: window") >= N_WINDOWS and len(
+            ids_written(self.out, RESULTS[:1])[RESULTS[0]]) >= N_WINDOWS
 
 
 def test_the_recorder_killed_as_it_closes_its_bag_at_a_ctrl_c_keeps_every_window_for_the_next_start(tmp_path):

@@ -108,21 +108,34 @@ def replay(bag: Path, *extra: str, timeout: float = 300.0) -> subprocess.Complet
                           capture_output=True, text=True, timeout=timeout)
 
 
-def windows_written(out: Path) -> int:
-    """Windows in a running recorder's bag so far: every message is on disk once written, and the
-    open split, cut short as it is, is read up to its last complete message."""
+def _written(out: Path):
+    """The messages in a running recorder's bag so far: every message is on disk once written, and
+    the open split, cut short as it is, is read up to its last complete message."""
     from shm_ros.io.errors import BagError
     from shm_ros.io.sources import open_source
 
-    count = 0
     # the recorder's splits: closed ones in ``out``, the one being written in ``out/out_<k>/``
     for split in sorted(p for p in [*out.glob("*"), *out.glob("*/*")] if p.suffix in (".mcap", ".db3")):
         try:
-            for m in open_source(split).messages():
-                count += m.topic == "/shm/windows"
+            yield from open_source(split).messages()
         except (BagError, OSError, ValueError):  # the end of what is written so far
             pass
-    return count
+
+
+def windows_written(out: Path) -> int:
+    """Windows in a running recorder's bag so far (closed splits and the open one)."""
+    return sum(m.topic == "/shm/windows" for m in _written(out))
+
+
+def ids_written(out: Path, topics: tuple[str, ...]) -> dict[str, set[str]]:
+    """The window ids of each of ``topics`` (window-keyed types) in a running recorder's bag so far."""
+    from shm_ros.ros.recorder_node import window_id_of
+
+    ids: dict[str, set[str]] = {t: set() for t in topics}
+    for m in _written(out):
+        if m.topic in ids:
+            ids[m.topic].add(window_id_of(m.data))
+    return ids
 
 
 def wait_for_windows(out: Path, n: int, timeout: float = 15.0) -> None:
@@ -133,7 +146,7 @@ def wait_for_windows(out: Path, n: int, timeout: float = 15.0) -> None:
     window; ``timeout`` is a bound well above a message's delivery time on a loaded machine."""
     end = time.monotonic() + timeout
     while windows_written(out) < n and time.monotonic() < end:
-        time.sleep(0.5)
+        time.sleep(0.2)
 
 
 def recorded_windows(bag: Path) -> list:
@@ -154,11 +167,11 @@ import rclpy
 from rcl_interfaces.srv import DescribeParameters, GetParameters, ListParameters
 from rclpy.parameter import parameter_value_to_python
 
-target = sys.argv[1]
+targets = json.loads(sys.argv[1])
 rclpy.init()
 node = rclpy.create_node("test_parameter_probe")
 
-def call(srv, name, request):
+def call(target, srv, name, request):
     client = node.create_client(srv, f"/{target}/{name}")
     if not client.wait_for_service(timeout_sec=120.0):
         sys.exit(f"no service /{target}/{name}")
@@ -168,24 +181,32 @@ def call(srv, name, request):
         sys.exit(f"/{target}/{name}: no answer")
     return future.result()
 
-names = list(call(ListParameters, "list_parameters", ListParameters.Request()).result.names)
-values = call(GetParameters, "get_parameters", GetParameters.Request(names=names)).values
-descriptors = call(DescribeParameters, "describe_parameters",
-                   DescribeParameters.Request(names=names)).descriptors
-assert len(values) == len(names) == len(descriptors), (len(values), len(names))
-print(json.dumps({n: {"value": parameter_value_to_python(v), "type": d.type,
-                      "dynamic": d.dynamic_typing, "description": d.description,
-                      "constraints": d.additional_constraints, "read_only": d.read_only}
-                  for n, v, d in zip(names, values, descriptors, strict=True)}))
+found = {}
+for target in targets:
+    names = list(call(target, ListParameters, "list_parameters", ListParameters.Request()).result.names)
+    values = call(target, GetParameters, "get_parameters", GetParameters.Request(names=names)).values
+    descriptors = call(target, DescribeParameters, "describe_parameters",
+                       DescribeParameters.Request(names=names)).descriptors
+    assert len(values) == len(names) == len(descriptors), (target, len(values), len(names))
+    found[target] = {n: {"value": parameter_value_to_python(v), "type": d.type,
+                         "dynamic": d.dynamic_typing, "description": d.description,
+                         "constraints": d.additional_constraints, "read_only": d.read_only}
+                     for n, v, d in zip(names, values, descriptors, strict=True)}
+print(json.dumps(found))
 """
 
 
 def node_parameters(name: str, timeout: float = 300.0) -> dict[str, dict]:
     """Every parameter of the running node ``/name`` as its services report them: value, type,
     dynamic typing, description, constraints, read-only (waits for the node's services)."""
+    return nodes_parameters([name], timeout)[name]
+
+
+def nodes_parameters(names: list[str], timeout: float = 300.0) -> dict[str, dict[str, dict]]:
+    """:func:`node_parameters` of each of the running nodes ``names``, asked by one probe process."""
     import json
 
-    run = subprocess.run([sys.executable, "-c", _PARAMETERS, name], capture_output=True, text=True,
+    run = subprocess.run([sys.executable, "-c", _PARAMETERS, json.dumps(names)], capture_output=True, text=True,
                          timeout=timeout)
     assert run.returncode == 0, run.stdout + run.stderr
     return json.loads(run.stdout.strip().splitlines()[-1])
