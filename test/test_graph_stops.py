@@ -116,9 +116,12 @@ class _Family:
         return self.seen
 
 
+def _replay_args(bag: Path, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "shm_ros.cli", "replay", str(bag), "--wait", "90", *extra]
+
+
 def _replay(bag: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "shm_ros.cli", "replay", str(bag), "--wait", "90", *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return subprocess.Popen(_replay_args(bag, *extra), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
 def _estimates_in_store(path: Path) -> int:
@@ -159,13 +162,27 @@ def _session(tmp_path: Path, bag: Path, env: dict[str, str], stop_when, stop_sig
     return sup.returncode, out.text(join_timeout=10), replay.returncode, replay_out, seen, replaying
 
 
-def _settle(count, quiet_s: float = 5.0, timeout_s: float = 60.0) -> None:
-    """Wait until ``count()`` has not changed for ``quiet_s`` (at most ``timeout_s``)."""
+def _settle(count, quiet_s: float = 5.0, timeout_s: float = 60.0, done=lambda: False,
+            done_quiet_s: float = 1.0) -> None:
+    """Wait until ``count()`` has not changed for ``quiet_s``, or for ``done_quiet_s`` once ``done()``
+    holds (at most ``timeout_s``)."""
     end, last, since = time.monotonic() + timeout_s, count(), time.monotonic()
     while time.monotonic() < end and time.monotonic() - since < quiet_s:
-        time.sleep(0.5)
+        time.sleep(0.2)
         if (now := count()) != last:
             last, since = now, time.monotonic()
+        elif time.monotonic() - since >= done_quiet_s and done():
+            return
+
+
+def _all_recorded(lines, out: Path) -> bool:
+    """Every window ingest published so far has identify's estimate, and the recorder's bag holds each
+    window, estimate and (once track has its three reference windows) tracked row."""
+    n = lines.count("[ingest]: window")
+    if lines.count("[identify]: window") < n:
+        return False
+    ids = ids_written(out, RESULTS)
+    return all(len(ids[t]) >= (n if t != RESULTS[2] or n >= 3 else 0) for t in RESULTS)
 
 
 def _announced_running(text: str) -> list[int]:
@@ -460,9 +477,11 @@ def test_a_replay_goes_on_after_an_ingest_restart_and_counts_what_was_lost(tmp_p
                        timeout=120)
         assert up, out.text()
         started = time.monotonic()
-        replay = subprocess.run(_replay(bag, "--rate", "2").args, capture_output=True, text=True, timeout=400)
+        replay = subprocess.run(_replay_args(bag, "--rate", "2"), capture_output=True, text=True, timeout=400)
         took = time.monotonic() - started
-        _settle(lambda: out.count("[identify]: window"))  # identify done with what reached it
+        # identify done with what reached it: quiet for 5 s, or sooner once every window ingest published
+        # has its estimate and all are in the recorder's bag, tracked too once track has its reference
+        _settle(lambda: out.count("[identify]: window"), done=lambda: _all_recorded(out, tmp_path / "out"))
         sup.send_signal(signal.SIGINT)
         sup.wait(timeout=90)
     finally:
