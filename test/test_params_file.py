@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 import yaml
-from ros_helpers.graph import diagnostics_seen, node_parameters, stop
+from ros_helpers.graph import diagnostics_seen, nodes_parameters, stop
 
 ROOT = Path(__file__).resolve().parents[1]
 PIPELINE = ROOT / "config" / "pipeline.yaml"
@@ -40,7 +40,7 @@ def test_params_file_gives_every_node_the_parameters_it_has_under_shm_ros_run(tm
                              cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                              start_new_session=True)
     try:
-        under_run = {name: node_parameters(name) for name in nodes}
+        under_run = nodes_parameters(list(nodes))
         # every node of the graph reports on /diagnostics, busy or idle
         status = diagnostics_seen([f"{name}: status" for name in nodes])
     finally:
@@ -50,20 +50,25 @@ def test_params_file_gives_every_node_the_parameters_it_has_under_shm_ros_run(tm
     assert "all nodes stopped" in out
     assert "0 windows published" in status["ingest: status"] and "recorded" in status["recorder: status"]
 
+    # each node on its own (not under `shm-ros run`), all of them at once: one start-up for the seven
+    shutil.rmtree(cwd / "out", ignore_errors=True)
+    procs = {name: subprocess.Popen([sys.executable, "-m", f"shm_ros.ros.{node_kind(name, 'test')}_node",
+                                     "--ros-args", "-r", f"__node:={name}", "--params-file", "pipeline.yaml"],
+                                    cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                    env=dict(os.environ))
+             for name in nodes}
+    try:
+        alone = nodes_parameters(list(nodes))
+    finally:
+        for proc in procs.values():  # all asked to stop first, then each waited for
+            proc.send_signal(signal.SIGINT)
+        stopped = {name: stop(proc) for name, proc in procs.items()}
     for name, given in nodes.items():
-        shutil.rmtree(cwd / "out", ignore_errors=True)
-        proc = subprocess.Popen([sys.executable, "-m", f"shm_ros.ros.{node_kind(name, 'test')}_node", "--ros-args",
-                                 "-r", f"__node:={name}", "--params-file", "pipeline.yaml"],
-                                cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                env=dict(os.environ))
-        try:
-            alone = node_parameters(name)
-        finally:
-            code, log = stop(proc)
+        code, log = stopped[name]
         assert code == 0, log[-3000:]
-        assert alone == under_run[name], name
+        assert alone[name] == under_run[name], name
         for key, value in _flat(given).items():  # what the file says is what the node has
-            assert alone[key]["value"] == value, (name, key)
+            assert alone[name][key]["value"] == value, (name, key)
 
 
 def _flat(d: dict, prefix: str = "") -> dict:
