@@ -24,10 +24,6 @@ else:
     os.environ.setdefault("ROS_DOMAIN_ID", str(100 + 2 * (os.getpid() % 50)))
     os.environ["SHM_TEST_DOMAIN_BASE"] = os.environ["ROS_DOMAIN_ID"]
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-# A reliable writer's heartbeat every 0.1 s instead of Fast DDS's 3 s (test/ros_helpers/fastdds_profile.xml):
-# ingest publishes a window once the readers acknowledged the one before, which they do when the
-# heartbeat asks, so a flow-controlled replay of N windows took 3 N s of waiting. Real DDS all the same.
-os.environ.setdefault("FASTDDS_DEFAULT_PROFILES_FILE", str(ROOT / "test" / "ros_helpers" / "fastdds_profile.xml"))
 os.environ.setdefault("MPLBACKEND", "Agg")
 # The science works on many small matrices, where a multi-threaded BLAS only contends (and on a
 # shared 2-core machine can be 25x slower); node processes started by tests inherit this too.
