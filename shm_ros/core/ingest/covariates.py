@@ -23,10 +23,18 @@ def rms_accel(samples: np.ndarray, channel_names: Sequence[str], channel_status:
     (gravity and a slow drift removed); the median over those channels. None when no channel has
     three finite samples."""
     x = np.asarray(samples, dtype=np.float64)
+    usable = [c for c, name in enumerate(channel_names)
+              if name != input_channel and (channel_status is None or channel_status[c] not in _UNUSABLE)]
+    if not usable or x.shape[0] < 3:
+        return None
+    block = x[:, usable]
+    if np.isfinite(block.sum()):  # every sample finite: all channels at once
+        tc = np.arange(x.shape[0], dtype=np.float64) - 0.5 * (x.shape[0] - 1)
+        yc = block - block.mean(axis=0)
+        resid = yc - np.outer(tc, (tc @ yc) / (tc @ tc))
+        return float(np.median(np.sqrt(np.mean(resid * resid, axis=0))))
     per_channel = []
-    for c, name in enumerate(channel_names):
-        if name == input_channel or (channel_status is not None and channel_status[c] in _UNUSABLE):
-            continue
+    for c in usable:
         y = x[:, c]
         ok = np.isfinite(y)
         if ok.sum() < 3:
