@@ -5,7 +5,7 @@ coordinate ascent. Where two effects trade misfit along a ridge (a knee whose co
 mostly after a step on the same span: a steeper knee and a deeper step fit the later windows almost
 as well as the truth) each refit moves only a little along the ridge, and the passes stop short of
 its top: on such a campaign the backfitted pair sat 20 nats below the joint maximum, with the knee's
-slope 65 % too steep and the step 55 % too deep. Here every accepted effect's parameters move at
+slope 67 % too steep and the step 55 % too deep. Here every accepted effect's parameters move at
 once: a pattern search (:func:`.fit.pattern_search`) in the joint prior box from the backfitted point,
 on the exact joint change of the model (every effect's factors multiplied per group, as
 :class:`.jobs.OnTop` combines them), on every window.
