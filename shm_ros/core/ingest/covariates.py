@@ -27,12 +27,14 @@ def rms_accel(samples: np.ndarray, channel_names: Sequence[str], channel_status:
               if name != input_channel and (channel_status is None or channel_status[c] not in _UNUSABLE)]
     if not usable or x.shape[0] < 3:
         return None
-    block = x[:, usable]
+    block = x if len(usable) == x.shape[1] else x[:, usable]
     if np.isfinite(block.sum()):  # every sample finite: all channels at once
-        tc = np.arange(x.shape[0], dtype=np.float64) - 0.5 * (x.shape[0] - 1)
+        n = x.shape[0]
+        tc = np.arange(n, dtype=np.float64) - 0.5 * (n - 1)
         yc = block - block.mean(axis=0)
-        resid = yc - np.outer(tc, (tc @ yc) / (tc @ tc))
-        return float(np.median(np.sqrt(np.mean(resid * resid, axis=0))))
+        # residual sum of squares about the line: sum(yc^2) - (tc . yc)^2 / (tc . tc)
+        ss = np.einsum("ij,ij->j", yc, yc) - np.square(tc @ yc) / (tc @ tc)
+        return float(np.median(np.sqrt(np.maximum(ss, 0.0) / n)))
     per_channel = []
     for c in usable:
         y = x[:, c]
