@@ -3,6 +3,7 @@ already accepted, and the :class:`~.types.CandidateResult` of a fit."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import datetime, timezone
 
 import numpy as np
@@ -16,6 +17,8 @@ from .likelihood import CandidateLikelihood
 from .scoring import damping_scores, judged_windows, scores
 from .surrogate import Surrogate
 from .types import CandidateResult
+
+Span = tuple[float, float] | None  # seconds since the first window within which an effect starts
 
 
 def iso_time(epoch: float, t: float | None) -> str | None:
@@ -141,7 +144,10 @@ class OnTop(Candidate):
 
 
 def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch: float,
-           z_all: np.ndarray | None = None) -> CandidateResult:
+           z_all: np.ndarray | None = None, placed: Sequence[tuple[str, Span]] = ()) -> CandidateResult:
+    """The fit's result: parameters, evidence gain and scores. ``placed``: (label, time span) of the
+    effects ``job`` is fitted on top of; the held-out windows the training windows cannot fix for
+    its own start or for theirs are left out of its held-out check (:func:`judged_on`)."""
     c = job.cand
     d_all, _ = job.deltas(fr.theta_map)
     delta = None if d_all is None else d_all[0]
@@ -176,10 +182,27 @@ def result(job: Job, fr: FitResult, r_all: np.ndarray, train: np.ndarray, epoch:
     t0 = c.time(fr.theta_map)
     if t0 is not None:
         res.extra["change_window"] = int(np.searchsorted(job.cand.context.times_s, t0))
-    judged = judged_windows(c.context.times_s, train, c.time_span(fr.theta_map, fr.intervals))
+    judged, starts = judged_on(c.context.times_s, train, [("", c.time_span(fr.theta_map, fr.intervals)), *placed])
     if judged.sum() < (~train).sum():
-        res.extra["held_out_check"] = held_out_check(job, fr.theta_map, r_all, z_all, train, judged)
+        res.extra["held_out_check"] = {**held_out_check(job, fr.theta_map, r_all, z_all, train, judged),
+                                       "starts": starts}
     return res
+
+
+def judged_on(times_s: np.ndarray, train: np.ndarray, spans: Sequence[tuple[str, Span]]) -> tuple[np.ndarray, str]:
+    """The held-out windows that judge a candidate (:func:`.scoring.judged_windows` for each start),
+    and whose starts leave windows out (``spans``: (label, span); label "" for the candidate's own).
+    On top of an accepted change that the training windows place only within a held-out block, the
+    reference model's prediction of that block is a guess as much as the candidate's own start
+    would be: with it misplaced, an effect the reference lacks can cancel part of its misfit there
+    (a knee's cold spell in the block of a step's start), which judges the guess, not the candidate."""
+    judged, whose = ~np.asarray(train, bool), []
+    for label, span in spans:
+        j = judged & judged_windows(times_s, train, span)
+        if (j != judged).any():
+            whose.append(f"the start of {label}" if label else "its start")
+        judged = j
+    return judged, " and ".join(whose)
 
 
 def held_out_check(job: Job, theta: np.ndarray, r_all: np.ndarray, z_all: np.ndarray | None, train: np.ndarray,

@@ -32,12 +32,14 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
                  ) -> tuple[list[CandidateResult], FitScores, FitScores, tuple | None, list]:
     """Greedy forward selection: other candidates are refitted on top of the effects accepted so far
     (held at their MAP); the best one is accepted when its gain over them clears the same
-    ``threshold``, it improves the held-out windows further and its key parameter excludes the null;
+    ``threshold``, it improves the held-out windows further (those the training windows fix for its
+    start and for the accepted effects' starts) and its key parameter excludes the null;
     repeated up to ``MAX_EFFECTS`` effects, with the ``POOL`` candidates most supported alone. Every
     refit joins ``tried`` (the report's table of candidates), accepted or not. Candidates tied with an
     accepted one, or of the same name and group, are not tried again."""
     best = accepted[0]
     fixed = [(jobs[best.label][0].cand, jobs[best.label][1].theta_map)]
+    placed = [_placed(best.label, jobs[best.label][0].cand, jobs[best.label][1])]
     base_gain = float(jobs[best.label][1].gain_map)
     done = {best.label, *best.tied_with}
     fit_after = best.fit_after or FitScores(float("nan"))
@@ -58,7 +60,7 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
             try:
                 with numerical(f"{c.label} on top of {len(fixed)} effect(s)"):
                     job, fr = fit_on_top(job0.cand, fixed, sur, lik, train, config.seed + 100 + i, config)
-                    res = result(job, fr, r_all, train, epoch, z_all)
+                    res = result(job, fr, r_all, train, epoch, z_all, placed)
             except NumericalFailure as exc:  # named numerical failures only: this refit failed
                 tried.append(failed_result(c.name, c.label, c.where, exc, c.explanation))
                 continue
@@ -110,12 +112,21 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
         out.append(res)
         tried.append(res)
         fixed.append((job.new_cand, fr.theta_map))
+        placed.append(_placed(res.label, job.new_cand, fr))
         last = (job, fr.theta_map)
         base_gain = float(fr.gain_map)
         fit_after, held_after = res.fit_after or fit_after, res.held_out_after or held_after
         same = {(c.name, c.where) for c in [best, *out]}
         pool = [c for c in pool if c.label != res.label and (c.name, c.where) not in same]
     return out, fit_after, held_after, last, fixed
+
+
+def _placed(label: str, cand: Candidate, fr: FitResult) -> tuple[str, tuple[float, float] | None]:
+    """An accepted effect's label and the span its start is placed in (None: it does not start at a
+    moment): the held-out windows the training windows cannot fix for it are left out of the
+    held-out check of every candidate fitted on top of it, as they are of its own
+    (:func:`.jobs.judged_on`)."""
+    return label, cand.time_span(fr.theta_map, fr.intervals)
 
 
 SAME_COURSE = 0.9  # |correlation| of two effects' courses in time above which they are one

@@ -63,7 +63,7 @@ def held_out_pair(c: CandidateResult, reference: FitScores) -> tuple[str, float,
     the nominal model's, or the effects' it is fitted on top of), and where. A candidate that starts
     at a moment the training windows cannot place among some held-out windows (``extra
     ["held_out_check"]``, :func:`.jobs.held_out_check`) is judged, and its reference with it, on the
-    other held-out windows alone."""
+    other held-out windows alone; so is one fitted on top of such a change (:func:`.jobs.judged_on`)."""
     metric = held_out_metric(c)
     chk = c.extra.get("held_out_check")
     after, before = (chk["after"], chk["before"]) if chk else (c.held_out_after, reference)
@@ -73,7 +73,7 @@ def held_out_pair(c: CandidateResult, reference: FitScores) -> tuple[str, float,
     if chk:
         a, b = chk["left_out"]
         where = (f" on {chk['windows']} of {chk['of']} held-out windows (windows {a}-{b}, among which the training "
-                 "windows cannot place its start, left out)")
+                 f"windows cannot place {chk.get('starts') or 'its start'}, left out)")
     return metric, math.inf if held is None else held, math.inf if ref is None else ref, where
 
 
