@@ -3,7 +3,8 @@
 A change inside a held-out block is bracketed by the training windows only to that block: its
 likelihood is flat across it, so where its fitted time falls there is arbitrary and its prediction
 of the block's windows a guess. Those windows are left out of its held-out check, for it and for the
-model it is compared with alike; the other held-out windows judge it. Held-out blocks of a campaign
+model it is compared with alike, and of the check of an effect fitted on top of it; the other
+held-out windows judge it. Held-out blocks of a campaign
 of days are a third of a day, so that they go round the times of day and other held-out blocks
 follow a change inside one.
 """
@@ -12,13 +13,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from shm_ros.core.explain.candidates.base import Context
+from shm_ros.core.explain.candidates.base import Context, Modification
 from shm_ros.core.explain.candidates.step import Step
+from shm_ros.core.explain.candidates.temperature_bilinear import TemperatureBilinear
 from shm_ros.core.explain.config import ExplainConfig
 from shm_ros.core.explain.explain import split
-from shm_ros.core.explain.jobs import OnTop
+from shm_ros.core.explain.fit import Evidence, FitResult
+from shm_ros.core.explain.jobs import OnTop, OnTopJob, result
 from shm_ros.core.explain.scoring import judged_windows, scores
-from shm_ros.core.explain.select import decide
+from shm_ros.core.explain.select import decide, held_out_pair
 from shm_ros.core.explain.types import CandidateResult, FitScores
 
 PER_DAY = 144  # ten-minute windows
@@ -94,3 +97,42 @@ def test_decide_judges_a_change_on_the_windows_the_training_windows_fix():
     assert np.isclose(scores(r, truth, train, judged)[1].frequency_rmse_pct, check["after"].frequency_rmse_pct)
     # without a judged subset a candidate is judged on every held-out window against the reference
     assert not worse.accepted and worse.reasons[1].startswith("failed: held-out")
+
+
+class _Sur:
+    """Three modes moved by the group's factor in fixed proportions."""
+
+    def delta(self, mod):
+        return np.log(mod.groups["EI"])[..., None] * np.array([1.0, 0.8, 0.5])
+
+
+class _Lik:
+    noise_guess = 0.003
+
+
+def test_an_effect_on_top_of_a_change_is_judged_without_the_block_of_its_start():
+    """A freezing knee on top of a step whose start the training windows place only within held-out
+    block 528-575 (fitted at window 565, the truth at 540), and a cold spell over the windows between
+    the two: there the knee the step-only model lacks makes up most of its misplaced start, so the
+    true knee fits those windows worse, and all held-out windows together worse; on the held-out
+    windows the training windows fix it fits better, and those judge it."""
+    t, train, _ = _table(0)
+    W = len(t)
+    temp = 6.0 + 3.0 * np.sin(2 * np.pi * t / 86400.0)
+    temp[540:566] = temp[600:640] = temp[760:768] = -4.0  # the first cold spell in the block
+    knee, step = TemperatureBilinear("EI", Context(t, {"temperature_c": temp})), Step("EI", Context(t, {}))
+    theta_knee, theta_step = np.array([-0.02, 0.0, 0.0]), np.array([-0.1, t[565]])
+    truth = Step("EI", Context(t, {})).modify(np.array([-0.1, t[540]])[None]).groups["EI"] * knee.modify(
+        theta_knee[None]).groups["EI"]
+    r = _Sur().delta(Modification({"EI": truth}))[0] + 0.003 * np.random.default_rng(1).standard_normal((W, 3))
+    job = OnTopJob(OnTop(knee, [(step, theta_step)]), _Sur(), _Lik(), train)
+    fr = FitResult(theta_knee, 0.0, Evidence(50.0, 0.1, np.zeros((1, 3)), np.ones(1), 1), None, None, "",
+                   {"below_per_c": (-0.022, -0.018)}, {}, 1)
+    _, step_held = scores(r, job.reference_deltas()[0][0], train)
+    alone = result(job, fr, r, train, 0.0)  # judged on every held-out window
+    _, held, ref, _ = held_out_pair(alone, step_held)
+    assert held > ref, (held, ref)  # the premise: the misplaced start decides
+    placed = result(job, fr, r, train, 0.0, placed=[("step/EI", (t[528], t[575]))])
+    _, held, ref, where = held_out_pair(placed, step_held)
+    assert held < ref, (held, ref)
+    assert "on 144 of 192 held-out windows (windows 528-575" in where and "the start of step/EI" in where, where
