@@ -15,7 +15,7 @@ from .candidates.base import Candidate
 from .config import ExplainConfig
 from .failures import failed_result, numerical
 from .fit import Box, FitResult, evidence_check
-from .jobs import Job, OnTop, OnTopJob, fit_on_top, iso_time, result
+from .jobs import Job, OnTop, OnTopJob, Span, fit_on_top, iso_time, result
 from .joint import joint_refine
 from .likelihood import CandidateLikelihood
 from .shapes import shape_terms_of
@@ -121,7 +121,7 @@ def more_effects(accepted, tried, jobs, proposals, context, sur, lik, train, r_a
     return out, fit_after, held_after, last, fixed
 
 
-def _placed(label: str, cand: Candidate, fr: FitResult) -> tuple[str, tuple[float, float] | None]:
+def _placed(label: str, cand: Candidate, fr: FitResult) -> tuple[str, Span]:
     """An accepted effect's label and the span its start is placed in (None: it does not start at a
     moment): the held-out windows the training windows cannot fix for it are left out of the
     held-out check of every candidate fitted on top of it, as they are of its own
