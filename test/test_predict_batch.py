@@ -75,3 +75,19 @@ def test_phi_series_meets_closed_form():
             ref = quad(lambda s, f=f: f(s).real, 0, 1, epsabs=0, epsrel=1e-13)[0] \
                 + 1j * quad(lambda s, f=f: f(s).imag, 0, 1, epsabs=0, epsrel=1e-13)[0]
             assert abs(p - ref) <= 1e-12 * abs(ref), (zk, p, ref)
+
+
+def test_records_built_together_equal_each_record_alone(case):
+    """:func:`record_responses` builds every record's state spaces in one batch (each distinct row
+    once): the same responses, bit for bit, as :func:`batch_responses` record by record, with rows
+    shared between records, rows of one record only, and records of other lengths and steps."""
+    model, th, u, dt, outs, _ = case
+    records = [(u, dt), (u[:, : u.shape[1] // 2], dt), (u[:, ::2], 2 * dt)]
+    thetas = [th, th[[4, 0, 4, 2]], np.vstack([th[:2], th[:2] * 1.01])]
+    got: list[list[tuple[int, np.ndarray]]] = [[] for _ in records]
+    for k, a, Y in batch.record_responses(model, thetas, records, outs, chunk=3):
+        got[k].append((a, Y))
+    for (uk, dk), t, parts in zip(records, thetas, got, strict=True):
+        want = list(batch.batch_responses(model, t, uk, dk, outs, chunk=3))
+        assert [a for a, _ in parts] == [a for a, _ in want]
+        assert all(np.array_equal(Y, W) for (_, Y), (_, W) in zip(parts, want, strict=True))

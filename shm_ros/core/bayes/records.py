@@ -117,10 +117,12 @@ class JointTimeDomainLikelihood:
     def record_ss(self, thetas: np.ndarray) -> np.ndarray:
         """(records, B, channels) innovation sums of squares of each record."""
         thetas = np.atleast_2d(np.asarray(thetas, dtype=float))
+        from shm_ros.core.response.batch import record_responses
+
         ss = np.zeros((len(self.parts), thetas.shape[0], len(self.outputs)))
-        for i, part in enumerate(self.parts):
-            for a, Y in self._responses(thetas, part.record):
-                ss[i, a:a + Y.shape[0]] += part.innovation_ss_batch(Y)
+        recs = [(p.record.inputs, p.record.dt) for p in self.parts]
+        for i, a, Y in record_responses(self.model, [thetas] * len(self.parts), recs, self.outputs, chunk=self.chunk):
+            ss[i, a:a + Y.shape[0]] += self.parts[i].innovation_ss_batch(Y)
         return ss
 
     def prepare_at_map(self, theta: np.ndarray) -> bool:

@@ -36,7 +36,7 @@ from shm_ros.core.bayes.timedomain import ar_fit
 from shm_ros.core.logexp import logsumexp
 from shm_ros.core.predict.signals import nrms_pct
 from shm_ros.core.priors import JointPrior
-from shm_ros.core.response.batch import batch_responses
+from shm_ros.core.response.batch import record_responses
 
 from .candidates.base import Candidate
 from .failures import require_finite
@@ -148,11 +148,11 @@ class EventPosterior:
     def _responses(self, v: np.ndarray, events: np.ndarray):
         """Yield (event, first row, Y (B, outputs, N)) for the rows ``v`` (in unit coordinates)."""
         if self.segments is None:
-            for e in events:
-                part = self.lik.parts[e]
-                for a, Y in batch_responses(self.fm, self.rows(v, int(e)), part.record.inputs, part.record.dt,
-                                            self.lik.outputs, chunk=self.chunk):
-                    yield int(e), a, Y
+            ev = [int(e) for e in events]
+            recs = [(self.lik.parts[e].record.inputs, self.lik.parts[e].record.dt) for e in ev]
+            for k, a, Y in record_responses(self.fm, [self.rows(v, e) for e in ev], recs, self.lik.outputs,
+                                            chunk=self.chunk):
+                yield ev[k], a, Y
             return
         seg = self.segments
         col = self.nb + self.varies
@@ -268,16 +268,18 @@ def spectral_starts(post: EventPosterior, rng: np.random.Generator, n: int = 160
     th = np.clip(th, THETA_BOUNDS[0] * 1.05, THETA_BOUNDS[1] * 0.95)
     u = np.column_stack([th, np.zeros((n, post.dim - post.nb))])
     mis = np.zeros(n)
-    for e in post.idx:
-        rec = post.lik.parts[e].record
+    recs = [post.lik.parts[int(e)].record for e in post.idx]
+    spectra = []
+    for rec in recs:
         width = max(1, int(round(0.2 * rec.outputs.shape[0] * rec.dt)))  # 0.2 Hz
         Y = uniform_filter1d(np.abs(np.fft.rfft(rec.outputs, axis=0)), width, axis=0)
-        band = Y > 1e-2 * Y.max(axis=0)
-        for a, R in batch_responses(post.fm, post.rows(u, int(e)), rec.inputs, rec.dt, post.lik.outputs,
-                                    chunk=post.chunk):
-            P = uniform_filter1d(np.abs(np.fft.rfft(R, axis=2)), width, axis=2)  # (B, c, F)
-            r = np.log(np.maximum(P, 1e-300)) - np.log(np.maximum(Y.T, 1e-300))[None]
-            mis[a:a + R.shape[0]] += np.sum(np.where(band.T[None], r ** 2, 0.0), axis=(1, 2))
+        spectra.append((width, Y, Y > 1e-2 * Y.max(axis=0)))
+    for k, a, R in record_responses(post.fm, [post.rows(u, int(e)) for e in post.idx],
+                                    [(rec.inputs, rec.dt) for rec in recs], post.lik.outputs, chunk=post.chunk):
+        width, Y, band = spectra[k]
+        P = uniform_filter1d(np.abs(np.fft.rfft(R, axis=2)), width, axis=2)  # (B, c, F)
+        r = np.log(np.maximum(P, 1e-300)) - np.log(np.maximum(Y.T, 1e-300))[None]
+        mis[a:a + R.shape[0]] += np.sum(np.where(band.T[None], r ** 2, 0.0), axis=(1, 2))
     return [u[0], *(u[i] for i in np.argsort(mis)[:keep] if i != 0)]  # row 0: the file's values
 
 

@@ -67,6 +67,28 @@ def batch_responses(model: AffineModel, thetas: np.ndarray, u: np.ndarray, dt: f
             yield b, f.result()
 
 
+def record_responses(model: AffineModel, thetas: Sequence[np.ndarray], records: Sequence[tuple[np.ndarray, float]],
+                     outputs: Sequence[Output], chunk: int = 32) -> Iterator[tuple[int, int, np.ndarray]]:
+    """Yield ``(record, first draw index, Y)`` for the draws ``thetas[r]`` (n_r, d) of each record
+    ``records[r] = (u, dt)``, record by record, in chunks of ``chunk`` draws, as
+    :func:`batch_responses` per record. The state spaces of every record's draws are built in one
+    batch, each distinct parameter row once: several records at the same parameters (a calibration
+    on several events) or at rows that differ per record (an effect that changes between events) cost
+    one assembly instead of one per record, which on small models is most of a response's cost."""
+    rows = [np.atleast_2d(np.asarray(t, dtype=float)) for t in thetas]
+    if not rows:
+        return
+    unique, back = np.unique(np.vstack(rows), axis=0, return_inverse=True)
+    systems = build_state_spaces(model, unique, outputs, list(model.inputs))
+    starts = np.cumsum([0] + [r.shape[0] for r in rows])
+    step = max(1, int(chunk))
+    for k, (u, dt) in enumerate(records):
+        u = np.atleast_2d(np.asarray(u, dtype=float))
+        mine = back.ravel()[starts[k]:starts[k + 1]]
+        for a in range(0, mine.size, step):
+            yield k, a, _run_chunk([systems[i] for i in mine[a:a + step]], u, dt)
+
+
 def single_blas_thread() -> contextlib.AbstractContextManager:
     """One BLAS thread (``threadpoolctl``) while in the context; the numbers are the same either way."""
     try:
