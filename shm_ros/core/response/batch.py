@@ -16,6 +16,10 @@ Chunks may run on ``threads`` threads (the products, eigenproblems and filters r
 should hold BLAS to one thread (``single_blas_thread``, as :func:`.predict.predict_event` does):
 the matrices are small, and a BLAS thread pool only waits on them (on a loaded machine, a hundred
 times slower). Results do not depend on ``threads`` or on the chunk size.
+
+Several records (events) at once (:func:`record_responses`): the eigen-decompositions do not depend
+on the input or the sample interval, so every record's draws are assembled and decomposed in one
+batch, each distinct parameter row once (:class:`_Modal`), and only the filters run per record.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import contextlib
 from collections import deque
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -79,14 +84,14 @@ def record_responses(model: AffineModel, thetas: Sequence[np.ndarray], records: 
     if not rows:
         return
     unique, back = np.unique(np.vstack(rows), axis=0, return_inverse=True)
-    systems = build_state_spaces(model, unique, outputs, list(model.inputs))
+    modal = _Modal.of(build_state_spaces(model, unique, outputs, list(model.inputs)))
     starts = np.cumsum([0] + [r.shape[0] for r in rows])
     step = max(1, int(chunk))
     for k, (u, dt) in enumerate(records):
         u = np.atleast_2d(np.asarray(u, dtype=float))
         mine = back.ravel()[starts[k]:starts[k + 1]]
         for a in range(0, mine.size, step):
-            yield k, a, _run_chunk([systems[i] for i in mine[a:a + step]], u, dt)
+            yield k, a, modal.respond(mine[a:a + step], u, dt)
 
 
 def single_blas_thread() -> contextlib.AbstractContextManager:
@@ -121,53 +126,88 @@ def phi12(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p1, p2
 
 
+@dataclass
+class _Modal:
+    """Systems in modal coordinates, independent of the sample interval and of the input: per system
+    (leading axis B) its direct term, whether its eigenbasis is well conditioned (else the fallback),
+    and, for those, the kept poles (one of each conjugate pair first, ``w`` 2 for a pair, 1 for a real
+    pole, 0 for the dropped rest), their input weights ``V^-1 B`` and output rows ``C V w``."""
+
+    systems: list[StateSpace]
+    D: np.ndarray  # (B, o, m)
+    good: np.ndarray  # (B,) bool
+    lam: np.ndarray  # (B, nk) complex
+    w: np.ndarray  # (B, nk)
+    bt: np.ndarray  # (B, nk, m) complex
+    CV: np.ndarray  # (B, o, nk) complex
+
+    @classmethod
+    def of(cls, systems: list[StateSpace]) -> _Modal:
+        B = len(systems)
+        D = np.stack([s.D for s in systems])
+        A = np.stack([s.A for s in systems])
+        n, m, o = A.shape[1], D.shape[2], D.shape[1]
+        if n == 0:
+            return cls(systems, D, np.zeros(B, bool), np.zeros((B, 0), complex), np.zeros((B, 0)),
+                       np.zeros((B, 0, m), complex), np.zeros((B, o, 0), complex))
+        lam, V = np.linalg.eig(A)
+        good = np.linalg.cond(V) < _MAX_COND
+        Bm = np.stack([s.B for s in systems])
+        C = np.stack([s.C for s in systems])
+        # a real system's poles are real or conjugate pairs, whose modal responses are conjugate too:
+        # filter one pole of each pair and count it twice
+        scale = np.maximum(1.0, np.max(np.abs(lam), axis=1, keepdims=True))
+        real = np.abs(lam.imag) <= 1e-9 * scale
+        weight = np.where(real, 1.0, np.where(lam.imag > 0, 2.0, 0.0))
+        order = np.argsort(weight == 0.0, axis=1, kind="stable")  # kept poles first
+        keep = order[:, :int(np.max(np.sum(weight > 0, axis=1)))]
+        w = np.take_along_axis(weight, keep, 1)
+        bt = np.zeros((B, keep.shape[1], m), complex)
+        CV = np.zeros((B, o, keep.shape[1]), complex)
+        if good.any():
+            g = np.flatnonzero(good)
+            bt[g] = np.take_along_axis(np.linalg.solve(V[g], Bm[g].astype(complex)), keep[g][:, :, None], 1)
+            CV[g] = np.take_along_axis(C[g].astype(complex) @ V[g], keep[g][:, None, :], 2) * w[g][:, None, :]
+        return cls(systems, D, good, np.take_along_axis(lam, keep, 1), w, bt, CV)
+
+    def respond(self, rows: np.ndarray, u: np.ndarray, dt: float) -> np.ndarray:
+        """Outputs (len(rows), o, N) from rest of the systems ``rows`` under ``u`` (m, N) sampled at
+        ``dt``: the exact first-order-hold step of every kept pole (module docstring)."""
+        rows = np.asarray(rows, dtype=int)
+        m, N = u.shape
+        out = self.D[rows] @ u  # direct terms, (b, o, N)
+        if self.lam.shape[1] == 0 or N < 2:
+            return out
+        good = self.good[rows]
+        for b in np.flatnonzero(~good):
+            out[b] = simulate(discretize_foh(self.systems[rows[b]], dt), u)
+        idx = np.flatnonzero(good)
+        if idx.size == 0:
+            return out
+        r = rows[idx]
+        nk = int(np.max(np.sum(self.w[r] > 0, axis=1)))  # the most kept poles of these systems
+        w_k, lam_k, bt, CV = self.w[r, :nk], self.lam[r, :nk], self.bt[r, :nk], self.CV[r][:, :, :nk]
+        z = lam_k * dt
+        p1, p2 = phi12(z)
+        pole = np.exp(z)
+        beta = (dt * p2)[:, :, None] * bt  # weight of u[k+1]
+        alpha = (dt * (p1 - p2))[:, :, None] * bt  # weight of u[k]
+        # one filter per system, kept pole and input (rows in that order: (b, j) major, input i minor)
+        bj = np.nonzero(w_k)
+        re, im = first_order_filters(np.repeat(pole[bj], m), alpha[bj].ravel(), beta[bj].ravel(), u,
+                                     np.tile(np.arange(m), bj[0].size))
+        Qre = np.zeros((idx.size, nk, m, N))
+        Qim = np.zeros((idx.size, nk, m, N))
+        Qre[bj], Qim[bj] = re.reshape(-1, m, N), im.reshape(-1, m, N)
+        coef = np.repeat(CV, m, axis=2)  # (b, o, nk m): the same output row for every input
+        y = coef.real @ Qre.reshape(idx.size, nk * m, N)
+        y -= coef.imag @ Qim.reshape(idx.size, nk * m, N)
+        if idx.size == rows.size:
+            out += y
+        else:
+            out[idx] += y
+        return out
+
+
 def _run_chunk(systems: list[StateSpace], u: np.ndarray, dt: float) -> np.ndarray:
-    B = len(systems)
-    m, N = u.shape
-    out = np.stack([s.D for s in systems]) @ u  # direct terms, (B, o, N)
-    A = np.stack([s.A for s in systems])
-    n = A.shape[1]
-    if n == 0 or N < 2:
-        return out
-    lam, V = np.linalg.eig(A)
-    good = np.linalg.cond(V) < _MAX_COND
-    for b in np.flatnonzero(~good):
-        out[b] = simulate(discretize_foh(systems[b], dt), u)
-    idx = np.flatnonzero(good)
-    if idx.size == 0:
-        return out
-    lam, V = lam[idx], V[idx]
-    Bm = np.stack([systems[b].B for b in idx])
-    C = np.stack([systems[b].C for b in idx])
-    # a real system's poles are real or conjugate pairs, whose modal responses are conjugate too:
-    # filter one pole of each pair and count it twice
-    scale = np.maximum(1.0, np.max(np.abs(lam), axis=1, keepdims=True))
-    real = np.abs(lam.imag) <= 1e-9 * scale
-    weight = np.where(real, 1.0, np.where(lam.imag > 0, 2.0, 0.0))
-    order = np.argsort(weight == 0.0, axis=1, kind="stable")  # kept poles first
-    nk = int(np.max(np.sum(weight > 0, axis=1)))
-    keep = order[:, :nk]
-    lam_k = np.take_along_axis(lam, keep, 1)  # (b, nk)
-    w_k = np.take_along_axis(weight, keep, 1)
-    bt = np.take_along_axis(np.linalg.solve(V, Bm.astype(complex)), keep[:, :, None], 1)  # (b, nk, m)
-    z = lam_k * dt
-    p1, p2 = phi12(z)
-    pole = np.exp(z)
-    beta = (dt * p2)[:, :, None] * bt  # weight of u[k+1]
-    alpha = (dt * (p1 - p2))[:, :, None] * bt  # weight of u[k]
-    CV = np.take_along_axis(C.astype(complex) @ V, keep[:, None, :], 2) * w_k[:, None, :]  # (b, o, nk)
-    # one filter per draw, kept pole and input (rows in that order: (b, j) major, input i minor)
-    bj = np.nonzero(w_k)
-    re, im = first_order_filters(np.repeat(pole[bj], m), alpha[bj].ravel(), beta[bj].ravel(), u,
-                                 np.tile(np.arange(m), bj[0].size))
-    Qre = np.zeros((idx.size, nk, m, N))
-    Qim = np.zeros((idx.size, nk, m, N))
-    Qre[bj], Qim[bj] = re.reshape(-1, m, N), im.reshape(-1, m, N)
-    coef = np.repeat(CV, m, axis=2)  # (b, o, nk m): the same output row for every input
-    y = coef.real @ Qre.reshape(idx.size, nk * m, N)
-    y -= coef.imag @ Qim.reshape(idx.size, nk * m, N)
-    if idx.size == B:
-        out += y
-    else:
-        out[idx] += y
-    return out
+    return _Modal.of(systems).respond(np.arange(len(systems)), np.atleast_2d(u), dt)
